@@ -1,0 +1,1 @@
+"""Hydra's config tree for kraby-study, importable so a built wheel carries it (pkg://kraby_conf)."""

@@ -1,0 +1,80 @@
+"""Compose the typed config from the packaged tree, the user's own tree and command-line overrides."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from pathlib import Path
+
+from hydra import compose, initialize_config_module
+from hydra.core.global_hydra import GlobalHydra
+from hydra.errors import HydraException
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+from kraby_study.config import ConfigError, register_schema, validate
+
+CONFIG_MODULE = "kraby_conf"
+USER_CONF_DIR = "conf"
+"""A folder of that name in the working directory extends the packaged tree (same groups)."""
+
+
+def _lines_of(err: BaseException) -> list[str]:
+    """The informative lines of one exception: no key dumps, no search path, no templates."""
+    lines: list[str] = []
+    options: list[str] = []
+    in_options = False
+    for raw in str(err).splitlines():
+        line = raw.strip()
+        if raw.startswith("\t") and in_options:
+            options.append(line)
+            continue
+        in_options = line.startswith("Available options")
+        if (not line or in_options or "$VALUE" in line
+                or line.startswith(("full_key:", "object_type", "reference_type",
+                                    "Config search path", "provider=", "To append"))):
+            continue
+        lines.append(re.sub(r"^In '[^']*': ", "", line))
+    if options:
+        lines.append("available: " + ", ".join(options))
+    return lines
+
+
+def _one_line(err: BaseException) -> str:
+    """Hydra and OmegaConf messages span lines and repeat context: keep what names the problem."""
+    parts: list[str] = []
+    current: BaseException | None = err
+    while current is not None:
+        for line in _lines_of(current):
+            if line not in parts:
+                parts.append(line)
+        current = current.__cause__ or current.__context__
+    return re.sub(r"\s+", " ", "; ".join(parts) or type(err).__name__)
+
+
+def _search_path_override(cwd: Path) -> list[str]:
+    user_dir = (cwd / USER_CONF_DIR).resolve()
+    if not user_dir.is_dir():
+        return []
+    packaged = Path(__import__(CONFIG_MODULE).__file__).resolve().parent
+    if user_dir == packaged:
+        return []
+    return [f"hydra.searchpath=[file://{user_dir}]"]
+
+
+def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
+    """Compose conf/config.yaml with overrides; raise ConfigError with a one-line message."""
+    register_schema()
+    GlobalHydra.instance().clear()
+    all_overrides = [*_search_path_override(Path.cwd()), *overrides]
+    try:
+        with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3"):
+            cfg = compose(config_name="config", overrides=all_overrides)
+    except (HydraException, OmegaConfBaseException, ValueError) as err:
+        raise ConfigError(_one_line(err)) from None
+    finally:
+        GlobalHydra.instance().clear()
+    OmegaConf.set_readonly(cfg, False)
+    if check:
+        validate(cfg)
+    return cfg

@@ -1,0 +1,128 @@
+"""Schedule trials on worker processes and record what they return.
+
+The runner is the same for sweeps, searches and single runs: a TrialSource hands out claimed
+trials and records their results (in the parent process: the single writer), a WorkerPool runs
+them. A worker that dies has its trial run again; Ctrl-C stops everything, keeping what is
+complete and queueing the interrupted trials for the next run.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Protocol
+
+from kraby_study.plan import TrialSpec
+from kraby_study.progress import Progress
+from kraby_study.trial import TrialResult
+from kraby_study.workers import WorkerPool
+
+MAX_WORKER_DEATHS = 3
+"""A trial whose worker dies this many times is recorded as failed instead of run again."""
+
+
+class TrialSource(Protocol):
+    """Where trials come from and where their results go."""
+
+    def next_trial(self) -> tuple[int, TrialSpec] | None:
+        """Claim the next trial to run, or None when there is nothing left to start."""
+
+    def label(self, spec: TrialSpec) -> str:
+        """How the progress display names a trial."""
+
+    def checkpoint(self, trial_id: int, step: int, value: float) -> bool:
+        """Record an intermediate value; False prunes the trial."""
+
+    def record(self, trial_id: int, spec: TrialSpec, result: TrialResult) -> str:
+        """Store a finished trial; returns a short outcome for the progress display."""
+
+    def interrupted(self, trial_id: int, spec: TrialSpec, reason: str) -> None:
+        """Give back a trial that will not finish in this command."""
+
+    def heartbeat(self, trial_ids: list[int]) -> None:
+        """Tell the store these trials are alive."""
+
+
+@dataclass
+class RunSummary:
+    """What one command did."""
+
+    complete: int = 0
+    failed: int = 0
+    pruned: int = 0
+    interrupted: bool = False
+
+
+def run_trials(source: TrialSource, workers: int, progress: Progress,
+               heartbeat_seconds: float = 5.0) -> RunSummary:
+    """Run every trial the source hands out on ``workers`` processes."""
+    summary = RunSummary()
+    pool = WorkerPool(workers)
+    deaths: dict[int, int] = {}
+    last_beat = 0.0
+    exhausted = False
+    try:
+        while True:
+            while not exhausted and pool.idle() > 0:
+                claimed = source.next_trial()
+                if claimed is None:
+                    exhausted = True
+                    break
+                trial_id, spec = claimed
+                pool.submit(trial_id, spec)
+                progress.start(source.label(spec), spec.steps)
+            running = pool.running()
+            if not running:
+                break
+            if time.monotonic() - last_beat >= heartbeat_seconds:
+                source.heartbeat(list(running))
+                last_beat = time.monotonic()
+            for event in pool.events(timeout=0.5):
+                spec = running.get(event.trial_id)
+                if spec is None:
+                    continue
+                if event.kind == "progress":
+                    progress.step(source.label(spec), int(event.payload))
+                elif event.kind == "checkpoint":
+                    step, value = event.payload
+                    pool.reply(event, source.checkpoint(event.trial_id, step, value))
+                elif event.kind == "result":
+                    result: TrialResult = event.payload
+                    outcome = source.record(event.trial_id, spec, result)
+                    _count(summary, result.status)
+                    progress.finish(source.label(spec), outcome)
+                elif event.kind == "died":
+                    _, code = event.payload
+                    deaths[event.trial_id] = deaths.get(event.trial_id, 0) + 1
+                    label = source.label(spec)
+                    if deaths[event.trial_id] >= MAX_WORKER_DEATHS:
+                        result = TrialResult(key=spec.key, status="failed",
+                                             failure=f"error: its worker died {MAX_WORKER_DEATHS} "
+                                             f"times (last exit code {code})")
+                        progress.finish(label, source.record(event.trial_id, spec, result))
+                        _count(summary, "failed")
+                    else:
+                        # Same trial, new worker: the trial stays claimed, so nothing is lost.
+                        progress.finish(label, f"interrupted (worker exit code {code}), rerun")
+                        pool.submit(event.trial_id, spec)
+                        progress.start(label, spec.steps)
+    except KeyboardInterrupt:
+        summary.interrupted = True
+        running = pool.running()
+        pool.close(terminate=True)
+        for trial_id, spec in running.items():
+            source.interrupted(trial_id, spec, "interrupted: stopped by the user")
+            progress.finish(source.label(spec), "interrupted, queued for the next run")
+    finally:
+        pool.close()
+        progress.close()
+    return summary
+
+
+def _count(summary: RunSummary, status: str) -> None:
+    if status == "complete":
+        summary.complete += 1
+    elif status == "pruned":
+        summary.pruned += 1
+    else:
+        summary.failed += 1

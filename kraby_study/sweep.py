@@ -1,0 +1,118 @@
+"""Run a planned sweep (or a single training run): queue its trials in the store, run, record."""
+
+from __future__ import annotations
+
+
+from typing import TextIO
+
+import optuna
+from optuna.trial import TrialState
+
+from kraby_study.ledger import attempts_by_key, is_final_failure, value_label, was_interrupted
+from kraby_study.plan import StudyPlan, TrialSpec
+from kraby_study.progress import Progress
+from kraby_study.runner import RunSummary, run_trials
+from kraby_study.store import PLANNED, Store, record_result
+from kraby_study.trial import TrialResult
+
+
+def param_name(plan: StudyPlan) -> str | None:
+    """The Optuna parameter name of a sweep's value (the setting's last part)."""
+    if plan.definition.get("kind") != "sweep":
+        return None
+    return plan.parameter.split(".")[-1]
+
+
+def ensure_queued(store: Store, study: optuna.Study, plan: StudyPlan) -> int:
+    """Queue every planned run that has no trial yet; returns how many were queued."""
+    with store.plan_lock(study):
+        latest = attempts_by_key(study.get_trials(deepcopy=False))
+        existing = {key for key, trial in latest.items() if not was_interrupted(trial)}
+        name = param_name(plan)
+        queued = 0
+        for spec in plan.specs:
+            if spec.key in existing:
+                continue
+            params = {name: spec.value} if name else {}
+            study.enqueue_trial(params=params, user_attrs={"key": spec.key, "seed": spec.seed})
+            queued += 1
+        planned = {t.user_attrs.get("key") for t in study.get_trials(deepcopy=False)}
+        study.set_user_attr(PLANNED, max(len(plan.specs), len(planned - {None})))
+    return queued
+
+
+class SweepSource:
+    """Hands out a sweep's queued trials and records their results."""
+
+    def __init__(self, store: Store, study: optuna.Study, plan: StudyPlan) -> None:
+        self.store = store
+        self.study = study
+        self.plan = plan
+        self.specs = {spec.key: spec for spec in plan.specs}
+        self.name = param_name(plan)
+
+    def next_trial(self) -> tuple[int, TrialSpec] | None:
+        frozen = self.store.claim(self.study, set(self.specs))
+        if frozen is None:
+            return None
+        spec = self.specs[frozen.user_attrs["key"]]
+        if self.name is not None:
+            optuna.Trial(self.study, frozen._trial_id).suggest_categorical(
+                self.name, self.plan.values)
+        self.store.set_attrs(frozen._trial_id, {
+            "settings": spec.settings, "steps": spec.steps, "model_path": spec.model_path})
+        return frozen._trial_id, spec
+
+    def label(self, spec: TrialSpec) -> str:
+        if self.name is None:
+            return f"seed {spec.seed}"
+        return f"{self.name}={value_label(spec.value)} seed {spec.seed}"
+
+    def checkpoint(self, trial_id: int, step: int, value: float) -> bool:
+        return True
+
+    def record(self, trial_id: int, spec: TrialSpec, result: TrialResult) -> str:
+        record_result(self.store, self.study, trial_id, result)
+        if result.status == "complete":
+            return f"complete, score {result.final_score:.4g} ({result.wall_time:.0f} s)"
+        return f"failed ({result.failure})"
+
+    def interrupted(self, trial_id: int, spec: TrialSpec, reason: str) -> None:
+        self.store.give_back(self.study, trial_id, reason)
+
+    def heartbeat(self, trial_ids: list[int]) -> None:
+        for trial_id in trial_ids:
+            self.store.heartbeat(trial_id)
+
+
+def plan_counts(study: optuna.Study, plan: StudyPlan) -> tuple[int, int]:
+    """(complete, failed) among the plan's keys, counting the attempt that counts."""
+    latest = attempts_by_key(study.get_trials(deepcopy=False))
+    keys = [latest[s.key] for s in plan.specs if s.key in latest]
+    complete = sum(1 for t in keys if t.state == TrialState.COMPLETE)
+    failed = sum(1 for t in keys if is_final_failure(t))
+    return complete, failed
+
+
+def run_plan(store: Store, plan: StudyPlan, workers: int, stream: TextIO,
+             live: bool | None = None) -> tuple[RunSummary, int, int]:
+    """Queue, run and record a plan's trials; returns this command's summary and the totals."""
+    kind = str(plan.definition.get("kind"))
+    study = store.open_study(plan.name, kind, plan.definition, plan.fingerprint)
+    rerun = store.fail_orphans(study)
+    if rerun:
+        print(f"{rerun} trial(s) left running by a stopped command will run again",
+              file=stream)
+    ensure_queued(store, study, plan)
+    complete, failed = plan_counts(study, plan)
+    pending = len(plan.specs) - complete - failed
+    progress = Progress(plan.name, len(plan.specs), complete + failed, stream, live)
+    print(f"study {plan.name}: {len(plan.specs)} trials, {complete} complete, {failed} failed, "
+          f"{pending} to run on {min(workers, max(pending, 1))} worker(s)", file=stream,
+          flush=True)
+    summary = run_trials(SweepSource(store, study, plan), min(workers, max(pending, 1)),
+                         progress)
+    complete, failed = plan_counts(study, plan)
+    return summary, complete, failed
+
+

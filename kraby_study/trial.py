@@ -1,0 +1,206 @@
+"""One training run: TrialSpec -> stable-baselines3 PPO on the batched leg world -> TrialResult.
+
+A trial never touches the database; the runner records what it returns.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from kraby_study.plan import TrialSpec
+
+FINAL_FRACTION = 0.1
+"""The final score averages the episodes that end in this last fraction of training."""
+
+CheckpointHook = Callable[[int, float], bool]
+"""Called with (env steps, mean episode reward since the last checkpoint); False stops the run."""
+ProgressHook = Callable[[int], None]
+"""Called now and then with the env steps done so far."""
+
+
+@dataclass(frozen=True)
+class CurvePoint:
+    """Mean reward of the episodes that ended in one bin of environment steps."""
+
+    step: int
+    """Environment steps at the end of the bin."""
+    mean_reward: float
+    """Mean episode reward (sum over the episode's steps) of the bin's episodes."""
+    wall_time: float
+    """Seconds since training started, when the bin's last episode ended."""
+    episodes: int
+    """Episodes that ended in the bin."""
+
+
+@dataclass
+class TrialResult:
+    """What a run gives back: its curve, timings, final score and how it ended."""
+
+    key: str
+    status: str
+    """complete, failed or pruned."""
+    curve: list[CurvePoint] = field(default_factory=list)
+    final_score: float | None = None
+    env_steps: int = 0
+    wall_time: float = 0.0
+    started: str = ""
+    ended: str = ""
+    failure: str | None = None
+    """Why a failed run failed (diverged: ... for NaN losses or parameters)."""
+    pruned_at: int | None = None
+    """Environment steps at which a pruner stopped the run."""
+    checkpoints: list[tuple[int, float]] = field(default_factory=list)
+
+
+def bin_curve(episodes: list[tuple[int, float, float]], every: int) -> list[CurvePoint]:
+    """Average (end step, reward, wall time) episodes into bins of ``every`` env steps."""
+    bins: dict[int, list[tuple[int, float, float]]] = {}
+    for episode in episodes:
+        bins.setdefault((episode[0] - 1) // every, []).append(episode)
+    return [
+        CurvePoint(step=(index + 1) * every,
+                   mean_reward=float(np.mean([e[1] for e in members])),
+                   wall_time=max(e[2] for e in members), episodes=len(members))
+        for index, members in sorted(bins.items())
+    ]
+
+
+def final_score(episodes: list[tuple[int, float, float]], total_steps: int) -> float | None:
+    """Mean episode reward over the last 10 % of training (None if no episode ended there)."""
+    start = total_steps * (1.0 - FINAL_FRACTION)
+    late = [e[1] for e in episodes if e[0] > start]
+    return float(np.mean(late)) if late else None
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def _has_nan(model: Any) -> bool:
+    import torch
+
+    return any(not bool(torch.isfinite(p).all()) for p in model.policy.parameters())
+
+
+def _is_divergence(err: BaseException) -> bool:
+    text = str(err).lower()
+    return "nan" in text or "invalid values" in text or "inf" in text.split()
+
+
+def build_model(spec: TrialSpec, env: Any) -> Any:
+    """The PPO learner of a spec on a given vectorised environment."""
+    import torch
+    from stable_baselines3 import PPO
+
+    ppo = spec.settings["ppo"]
+    activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[ppo["activation"]]
+    arch = list(ppo["net_arch"])
+    return PPO(
+        "MlpPolicy", env, n_steps=ppo["n_steps"], batch_size=ppo["batch_size"],
+        n_epochs=ppo["n_epochs"], gamma=ppo["gamma"], gae_lambda=ppo["gae_lambda"],
+        clip_range=ppo["clip_range"], ent_coef=ppo["ent_coef"], vf_coef=ppo["vf_coef"],
+        max_grad_norm=ppo["max_grad_norm"], learning_rate=ppo["learning_rate"],
+        policy_kwargs={"net_arch": {"pi": arch, "vf": arch}, "activation_fn": activation},
+        seed=spec.seed, device="cpu", verbose=0)
+
+
+def make_env(spec: TrialSpec) -> Any:
+    """The batched world of a spec: n_envs legs in one physics client."""
+    from kraby_envs import make_batched
+
+    env = dict(spec.settings["env"])
+    max_steps = int(env.pop("max_episode_steps"))
+    return make_batched(n_envs=int(spec.settings["ppo"]["n_envs"]), seed=spec.seed,
+                        max_episode_steps=max_steps, **env)
+
+
+def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
+              on_progress: ProgressHook | None = None) -> TrialResult:
+    """Train PPO as the spec says; divergence and errors come back as a failed result."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    episodes: list[tuple[int, float, float]] = []
+    checkpoints: list[tuple[int, float]] = []
+    state: dict[str, Any] = {"pruned_at": None}
+    started = _now()
+    t0 = time.perf_counter()
+
+    class Recorder(BaseCallback):
+        """Collects finished episodes; reports checkpoints and progress; stops when pruned."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.next_checkpoint = spec.checkpoint_every or 0
+            self.window_start = 0
+            self.last_progress = 0.0
+
+        def _on_step(self) -> bool:
+            now = time.perf_counter() - t0
+            for info in self.locals["infos"]:
+                episode = info.get("episode")
+                if episode is not None:
+                    episodes.append((self.num_timesteps, float(episode["r"]), now))
+            if on_progress is not None and now - self.last_progress >= 1.0:
+                self.last_progress = now
+                on_progress(self.num_timesteps)
+            if spec.checkpoint_every and self.num_timesteps >= self.next_checkpoint:
+                return self._checkpoint()
+            return True
+
+        def _checkpoint(self) -> bool:
+            step = self.num_timesteps
+            recent = [e[1] for e in episodes[self.window_start:]]
+            self.window_start = len(episodes)
+            while self.next_checkpoint <= step:
+                self.next_checkpoint += int(spec.checkpoint_every or 1)
+            if not recent:
+                return True
+            value = float(np.mean(recent))
+            checkpoints.append((step, value))
+            if on_checkpoint is not None and not on_checkpoint(step, value):
+                state["pruned_at"] = step
+                return False
+            return True
+
+    env = make_env(spec)
+    model = None
+    failure: str | None = None
+    try:
+        model = build_model(spec, env)
+        model.learn(total_timesteps=spec.steps, callback=Recorder())
+        if _has_nan(model):
+            failure = "diverged: the policy's parameters became NaN"
+    except (ValueError, RuntimeError, FloatingPointError) as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        kind = "diverged" if _is_divergence(err) else "error"
+        failure = f"{kind}: {type(err).__name__}: {first[:300]}"
+    finally:
+        env.close()
+    wall = time.perf_counter() - t0
+    env_steps = int(model.num_timesteps) if model is not None else 0
+    result = TrialResult(key=spec.key, status="complete", curve=bin_curve(episodes,
+                         spec.curve_every), env_steps=env_steps, wall_time=wall,
+                         started=started, ended=_now(), checkpoints=checkpoints)
+    if failure is not None:
+        result.status, result.failure = "failed", failure
+        return result
+    if state["pruned_at"] is not None:
+        result.status, result.pruned_at = "pruned", int(state["pruned_at"])
+        return result
+    score = final_score(episodes, env_steps)
+    if score is None or not math.isfinite(score):
+        result.status, result.failure = "failed", "error: no episode ended in the last 10 %"
+        return result
+    result.final_score = score
+    if spec.model_path and model is not None:
+        Path(spec.model_path).parent.mkdir(parents=True, exist_ok=True)
+        model.save(spec.model_path)
+    return result

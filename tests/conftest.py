@@ -1,0 +1,74 @@
+"""Shared helpers: tiny study settings, a CLI runner, and a look into the store."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import optuna
+import pytest
+
+from kraby_study.cli import main
+
+# Tiny nets and budgets: a trial takes about a second.
+TINY = ["budget=smoke", "budget.steps=512", "budget.curve_every=64", "ppo.n_envs=4",
+        "ppo.n_steps=32", "ppo.n_epochs=2", "ppo.net_arch=[8]", "save_models=false"]
+
+optuna.logging.set_verbosity(optuna.logging.WARNING)
+
+
+@pytest.fixture
+def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A fresh working directory: the default store lands in it."""
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def run_cli(*args: str) -> int:
+    """Run the CLI in this process; returns its exit code."""
+    return main(list(args))
+
+
+def spawn_cli(*args: str, cwd: Path) -> subprocess.Popen[str]:
+    """Start the CLI as a separate process (for kill tests)."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "kraby_study.cli", *args], cwd=cwd,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env)
+
+
+def sqlite_url(path: Path) -> str:
+    """The storage URL of a SQLite file."""
+    return f"sqlite:///{path}"
+
+
+def file_digest(path: Path) -> str:
+    """Hash of a file's bytes ('' when missing)."""
+    return hashlib.sha256(path.read_bytes()).hexdigest() if path.exists() else ""
+
+
+def load(path: Path, name: str) -> optuna.Study:
+    """A stored study."""
+    return optuna.load_study(study_name=name, storage=sqlite_url(path))
+
+
+def children(pid: int, workers_only: bool = True) -> list[int]:
+    """Direct child processes of a process (Linux): its trial workers by default."""
+    out: list[int] = []
+    task = Path(f"/proc/{pid}/task")
+    for thread in task.iterdir() if task.exists() else []:
+        out.extend(int(c) for c in (thread / "children").read_text().split())
+    if workers_only:
+        out = [c for c in out if b"spawn_main" in _cmdline(c)
+               and b"resource_tracker" not in _cmdline(c)]
+    return out
+
+
+def _cmdline(pid: int) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""

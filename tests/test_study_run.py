@@ -1,0 +1,255 @@
+"""`kraby-study run`, `train` and `list` end to end on a SQLite store."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import time
+from pathlib import Path
+
+import pytest
+from conftest import (
+    TINY,
+    children,
+    file_digest,
+    load,
+    run_cli,
+    spawn_cli,
+    sqlite_url,
+)
+from optuna.trial import TrialState
+
+from kraby_study.ledger import attempts_by_key
+
+
+def _study_file(root: Path, name: str, parameter: str, values: str, extra: str = "") -> None:
+    folder = root / "conf" / "study"
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{name}.yaml").write_text(
+        f"# @package _global_\nstudy:\n  name: {name}\n  parameter: {parameter}\n"
+        f"  values: {values}\n{extra}")
+
+
+def _complete_keys(db: Path, name: str) -> list[str]:
+    trials = load(db, name).get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+    return sorted(t.user_attrs["key"] for t in trials)
+
+
+def test_smoke_study_end_to_end(workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("run", "study=clip_range", "workers=2", *TINY) == 0
+    db = workdir / "studies" / "kraby.db"
+    study = load(db, "clip_range")
+    trials = study.get_trials(deepcopy=False)
+    assert len(trials) == 8 and all(t.state == TrialState.COMPLETE for t in trials)
+    assert sorted({t.params["clip_range"] for t in trials}) == [0.1, 0.2, 0.3, 0.4]
+    assert sorted(t.user_attrs["seed"] for t in trials) == [0, 0, 0, 0, 1, 1, 1, 1]
+    for trial in trials:
+        attrs = trial.user_attrs
+        assert attrs["settings"]["ppo"]["clip_range"] == trial.params["clip_range"]
+        assert attrs["env_steps"] == 512 and attrs["wall_time"] > 0
+        assert attrs["final_score"] == trial.value < 0
+        assert trial.datetime_start is not None and trial.datetime_complete is not None
+    out = capsys.readouterr().out
+    assert "clip_range: 8/8 complete, 0 failed" in out
+    # The curves are queryable, binned every 64 steps: episodes of 32 steps x 4 legs end
+    # every 128 steps, so every other bin holds the 4 episodes that ended in it.
+    from kraby_study.store import opened
+    with opened(sqlite_url(db), create=False, writer=False) as store:
+        points = store.curves(study)
+    by_trial: dict[int, list[int]] = {}
+    for p in points:
+        by_trial.setdefault(p["trial_id"], []).append(p["step"])
+    assert len(by_trial) == 8
+    assert all(sorted(steps) == [128, 256, 384, 512] for steps in by_trial.values())
+    assert all(p["episodes"] == 4 for p in points)
+    # Rerunning changes nothing: complete trials are never rerun.
+    digest_trials = [(t.number, t.value) for t in trials]
+    assert run_cli("run", "study=clip_range", "workers=2", *TINY) == 0
+    assert "0 to run" in capsys.readouterr().out
+    assert [(t.number, t.value) for t in load(db, "clip_range").get_trials()] == digest_trials
+    # list shows the study's progress and best value.
+    assert run_cli("list") == 0
+    listing = capsys.readouterr().out
+    assert "clip_range" in listing and "8/8" in listing and "clip_range=" in listing
+
+
+def test_more_seeds_extend_a_study(workdir: Path) -> None:
+    assert run_cli("run", "study=clip_range", "budget.seeds=1", "workers=1", *TINY) == 0
+    db = workdir / "studies" / "kraby.db"
+    assert len(_complete_keys(db, "clip_range")) == 4
+    assert run_cli("run", "study=clip_range", "budget.seeds=2", "workers=1", *TINY) == 0
+    assert len(_complete_keys(db, "clip_range")) == 8
+
+
+@pytest.fixture(scope="module")
+def one_seed_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A store holding a finished one-seed clip_range study (built once for the module)."""
+    root = tmp_path_factory.mktemp("store")
+    db = root / "kraby.db"
+    assert run_cli("run", "study=clip_range", "budget.seeds=1", "workers=1",
+                   f"storage={sqlite_url(db)}", *TINY) == 0
+    return db
+
+
+@pytest.fixture
+def stored(workdir: Path, one_seed_store: Path) -> Path:
+    """A copy of the one-seed store at the default place of the working directory."""
+    db = workdir / "studies" / "kraby.db"
+    db.parent.mkdir()
+    shutil.copy(one_seed_store, db)
+    return db
+
+
+def test_changed_definition_is_refused_and_store_untouched(
+        stored: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    db = stored
+    before = file_digest(db)
+    capsys.readouterr()
+    assert run_cli("run", "study=clip_range", "budget.seeds=1", "workers=1", *TINY,
+                   "ppo.gamma=0.5") == 2
+    err = capsys.readouterr().err
+    assert "defined differently" in err and "gamma" in err and err.count("\n") == 1
+    assert file_digest(db) == before
+
+
+@pytest.mark.parametrize("bad", [
+    ["ppo.ent_coeff=0.1"], ["ppo.n_steps=abc"], ["ppo.learning_rate=-1"], ["ppo.gamma=1.5"],
+    ["ppo.batch_size=100"], ["workers=0"], ["study=unknown"], ["budget=nope"],
+])
+def test_bad_input_exits_non_zero_and_leaves_the_store_byte_for_byte(
+        stored: Path, capsys: pytest.CaptureFixture[str], bad: list[str]) -> None:
+    db = stored
+    before = file_digest(db)
+    capsys.readouterr()
+    args = [a for a in ["study=clip_range", *TINY] if a.split("=")[0] not in
+            {b.split("=")[0] for b in bad}]
+    assert run_cli("run", *args, *bad) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("kraby-study: error: ") and err.count("\n") == 1
+    assert file_digest(db) == before
+
+
+def test_bad_input_creates_no_store(workdir: Path) -> None:
+    assert run_cli("run", "study=clip_range", "workers=0", *TINY) == 2
+    assert not (workdir / "studies").exists()
+
+
+def test_diverging_trial_is_recorded_and_the_study_goes_on(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _study_file(workdir, "lr_blowup", "ppo.learning_rate", "[0.001, 1.0e+12]")
+    assert run_cli("run", "study=lr_blowup", "budget.seeds=1", "workers=1", *TINY) == 0
+    study = load(workdir / "studies" / "kraby.db", "lr_blowup")
+    by_lr = {t.params["learning_rate"]: t for t in study.get_trials()}
+    assert by_lr[0.001].state == TrialState.COMPLETE
+    assert by_lr[1e12].state == TrialState.FAIL
+    assert by_lr[1e12].user_attrs["failure"].startswith("diverged")
+    assert "1/2 complete, 1 failed" in capsys.readouterr().out
+
+
+def test_train_stores_one_run_and_saves_its_model(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = [a for a in TINY if not a.startswith("save_models")]
+    assert run_cli("train", "seed=3", *args) == 0
+    out = capsys.readouterr().out
+    assert "final score" in out
+    model = Path(out.split("model: ")[1].strip())
+    assert model.is_file() and model.suffix == ".zip"
+    from stable_baselines3 import PPO
+    assert PPO.load(model, device="cpu").policy is not None
+
+
+def test_same_seed_gives_the_same_curve(workdir: Path) -> None:
+    from kraby_study.store import opened
+
+    curves = []
+    for name in ("a.db", "b.db"):
+        url = sqlite_url(workdir / name)
+        assert run_cli("train", "seed=7", f"storage={url}", *TINY) == 0
+        with opened(url, create=False, writer=False) as store:
+            study = store.load(store.study_names()[0])
+            curves.append([(p["step"], p["mean_reward"]) for p in store.curves(study)])
+    assert curves[0] == curves[1] and len(curves[0]) == 4
+
+
+def test_a_second_command_on_a_busy_sqlite_store_is_refused(workdir: Path) -> None:
+    from kraby_study.store import Store, StoreError
+
+    url = sqlite_url(workdir / "k.db")
+    first = Store(url)
+    try:
+        with pytest.raises(StoreError, match="in use by another kraby-study command"):
+            Store(url)
+    finally:
+        first.close()
+    Store(url).close()
+
+
+def _wait_for(predicate, timeout: float = 120.0) -> None:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.1)
+    raise AssertionError("timed out")
+
+
+def _complete_count(db: Path, name: str) -> int:
+    try:
+        return len(_complete_keys(db, name))
+    except Exception:
+        return 0
+
+
+def _running_trials(db: Path, name: str) -> int:
+    try:
+        return len(load(db, name).get_trials(deepcopy=False, states=(TrialState.RUNNING,)))
+    except Exception:
+        return 0
+
+
+SLOWER = [a if not a.startswith("budget.steps") else "budget.steps=4096" for a in TINY]
+
+
+@pytest.mark.slow
+def test_killing_a_worker_mid_study_loses_and_duplicates_nothing(workdir: Path) -> None:
+    db = workdir / "studies" / "kraby.db"
+    proc = spawn_cli("run", "study=clip_range", "workers=2", *SLOWER, cwd=workdir)
+    _wait_for(lambda: _running_trials(db, "clip_range") == 2)
+    time.sleep(1.0)
+    workers = children(proc.pid)
+    assert workers, "no worker processes found"
+    os.kill(workers[0], signal.SIGKILL)
+    out, _ = proc.communicate(timeout=300)
+    assert proc.returncode == 0, out
+    assert "interrupted (worker exit code -9), rerun" in out
+    trials = load(db, "clip_range").get_trials()
+    assert len(trials) == 8 and all(t.state == TrialState.COMPLETE for t in trials)
+    assert _complete_keys(db, "clip_range") == sorted(
+        f"v{v}-s{s}" for v in range(4) for s in range(2))
+
+
+@pytest.mark.slow
+def test_resume_after_the_command_is_killed(workdir: Path) -> None:
+    db = workdir / "studies" / "kraby.db"
+    proc = spawn_cli("run", "study=clip_range", "workers=2", *SLOWER, cwd=workdir)
+    _wait_for(lambda: _complete_count(db, "clip_range") >= 2)
+    _wait_for(lambda: _running_trials(db, "clip_range") >= 1)
+    for pid in [proc.pid, *children(proc.pid, workers_only=False)]:
+        os.kill(pid, signal.SIGKILL)
+    proc.wait()
+    done_before = _complete_keys(db, "clip_range")
+    assert 2 <= len(done_before) < 8
+    proc = spawn_cli("run", "study=clip_range", "workers=2", *SLOWER, cwd=workdir)
+    out, _ = proc.communicate(timeout=300)
+    assert proc.returncode == 0, out
+    assert "left running by a stopped command will run again" in out
+    study = load(db, "clip_range")
+    assert _complete_keys(db, "clip_range") == sorted(
+        f"v{v}-s{s}" for v in range(4) for s in range(2))
+    latest = attempts_by_key(study.get_trials())
+    assert all(t.state == TrialState.COMPLETE for t in latest.values())
+    retried = [t for t in study.get_trials() if t.state == TrialState.FAIL]
+    assert retried and all(t.user_attrs["failure"].startswith("interrupted") for t in retried)
+    assert sorted(t.number for t in retried) == sorted(
+        t.user_attrs["retry_of"] for t in study.get_trials() if "retry_of" in t.user_attrs)
