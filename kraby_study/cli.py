@@ -104,23 +104,128 @@ def cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _whole(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid whole number: {text!r}") from None
+
+
+def search_overrides(args: argparse.Namespace) -> list[str]:
+    """The optuna command's flags as Hydra overrides, placed before the user's own."""
+    flags = [("trials", "search.trials"), ("workers", "workers"), ("storage", "storage"),
+             ("study_name", "search.name"), ("sampler", "search.sampler"),
+             ("pruner", "search.pruner"), ("seed", "search.seed")]
+    overrides = [f"{key}={getattr(args, attr)}" for attr, key in flags
+                 if getattr(args, attr) is not None]
+    if not any(o.startswith("budget=") for o in args.overrides):
+        overrides.insert(0, "budget=quick")
+    return overrides + list(args.overrides)
+
+
+def cmd_optuna(args: argparse.Namespace) -> int:
+    """An Optuna search over conf/search/<space>.yaml, into the same store."""
+    from kraby_study.ledger import study_progress
+    from kraby_study.search import run_search, validate_search
+    from kraby_study.store import opened
+
+    cfg = _compose(search_overrides(args))
+    validate_search(cfg)
+    with opened(cfg.storage) as store:
+        summary, study = run_search(store, cfg, worker_count(cfg), sys.stdout)
+        state = study_progress(study)
+    print(f"search {state.name}: {state.complete} complete, {state.pruned} pruned, "
+          f"{state.failed} failed of {state.total}; best {state.best}")
+    return 130 if summary.interrupted else 0
+
+
+def cmd_best(args: argparse.Namespace) -> int:
+    """Print a study's best settings and write them as a ppo config file."""
+    from pathlib import Path
+
+    from kraby_study.best import find_best, write_config
+    from kraby_study.compose import USER_CONF_DIR
+    from kraby_study.store import opened
+
+    overrides = list(args.overrides)
+    if args.storage:
+        overrides.insert(0, f"storage={args.storage}")
+    cfg = _compose(overrides)
+    name = args.study_name or str(cfg.search.name)
+    config_name = args.name or f"best_{name}"
+    if not config_name.replace("_", "").replace("-", "").isalnum():
+        raise ConfigError(f"--name {config_name!r}: use letters, digits, _ and -")
+    with opened(cfg.storage, create=False, writer=False) as store:
+        best = find_best(store.load(name))
+    path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
+    write_config(best, path)
+    print(f"best: {best.description}")
+    print(f"wrote {path}: use it with `kraby-study train ppo={config_name}` or "
+          f"`kraby-study run ppo={config_name} study=...`")
+    return 0
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser; only commands that exist are listed."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="kraby-study", description="Declarative PPO hyperparameter studies on the "
         "simulated Kraby hexapod leg, stored in SQLite or PostgreSQL.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                                parser_class=_Parser)
     commands: list[tuple[str, Callable[[argparse.Namespace], int], str]] = [
         ("run", cmd_run, "run a documented sweep (study=NAME): values x seeds, resumable"),
         ("train", cmd_train, "one training run (ppo=tuned by default), model saved"),
         ("list", cmd_list, "the studies in the store with their progress"),
+        ("optuna", cmd_optuna, "an Optuna search (TPE, pruning) over conf/search/ppo.yaml"),
+        ("best", cmd_best, "print a study's best settings and write them as conf/ppo/NAME.yaml"),
     ]
+    parsers = {}
     for name, func, text in commands:
         command = sub.add_parser(name, help=text, description=text, epilog=EPILOG,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
         command.add_argument("overrides", nargs="*", metavar="KEY=VALUE", help=OVERRIDES_HELP)
         command.set_defaults(func=func)
+        parsers[name] = command
+    search = parsers["optuna"]
+    search.add_argument("--trials", type=_positive_int, help="total trials of the study: "
+                        "rerunning tops it up to this number, so --trials 50 twice gives 50, "
+                        "not 100 (default 50)")
+    search.add_argument("--workers", type=_positive_int,
+                        help="worker processes (default: one per core)")
+    search.add_argument("--storage", help="database URL (default sqlite:///studies/kraby.db)")
+    search.add_argument("--study-name", help="name of the search in the store (default "
+                        "ppo_search)")
+    search.add_argument("--sampler", choices=["tpe", "random"], help="default tpe (seeded)")
+    search.add_argument("--pruner", choices=["median", "hyperband", "none"],
+                        help="stops bad trials at env-step checkpoints (default median)")
+    search.add_argument("--seed", type=_whole, help="sampler seed, stored with the study "
+                        "(default 0)")
+    search.epilog = ("each trial trains budget.seeds seeds of budget.steps env steps (budget=quick "
+                     "unless you choose one) and reports to the pruner at search.checkpoints "
+                     "env-step checkpoints per seed; the score is the mean over its seeds.\n\n"
+                     + EPILOG)
+    best = parsers["best"]
+    best.add_argument("--study-name", help="the study (default: the search's name, ppo_search)")
+    best.add_argument("--name", help="config name to write (default best_<study>)")
+    best.add_argument("--storage", help="database URL (default sqlite:///studies/kraby.db)")
     return parser
 
 

@@ -1,4 +1,4 @@
-"""Compose the typed config from the packaged tree, the user's own tree and command-line overrides."""
+"""Compose the typed config: packaged tree, the user's own tree, command-line overrides."""
 
 from __future__ import annotations
 

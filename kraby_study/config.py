@@ -98,6 +98,52 @@ class BudgetConfig:
 
 
 @dataclass
+class ParamSpace:
+    """The range of one searched setting."""
+
+    path: str = MISSING
+    """Dotted setting it sets (ppo.gamma, env.observation); ppo.nminibatches sets the batch size
+    to n_steps x n_envs / nminibatches, so the batch always divides the rollout."""
+    type: str = MISSING
+    """float, int or categorical."""
+    low: float | None = None
+    """Lower bound (float and int)."""
+    high: float | None = None
+    """Upper bound, included (float and int)."""
+    log: bool = False
+    """Sample on a log scale (bounds must be > 0)."""
+    choices: list[Any] | None = None
+    """The values of a categorical parameter."""
+
+
+@dataclass
+class SearchConfig:
+    """An Optuna search: the space, the sampler and pruner, and what is maximised."""
+
+    name: str = "search"
+    """Name of the study in the store."""
+    trials: int = 50
+    """Total trials of the study, over every invocation (a rerun tops it up to this number)."""
+    sampler: str = "tpe"
+    """tpe or random."""
+    pruner: str = "median"
+    """median, hyperband or none."""
+    seed: int = 0
+    """Seed of the sampler, stored with the study."""
+    startup_trials: int = 5
+    """Trials sampled at random, and left unpruned, before TPE and the median pruner start."""
+    checkpoints: int = 8
+    """Intermediate values per training run, at equal env-step intervals (the pruner's steps)."""
+    objective: str = "final_reward"
+    """final_reward: mean episode reward over the last 10 % of training; evaluation: mean
+    reward of the deterministic policy on a fixed set of targets (reset options)."""
+    eval_episodes: int = 16
+    """Fixed targets of the evaluation objective."""
+    params: dict[str, ParamSpace] = field(default_factory=dict)
+    """The space: Optuna parameter name -> range."""
+
+
+@dataclass
 class KrabyConfig:
     """Everything a command needs: composed from conf/config.yaml and the command line."""
 
@@ -105,6 +151,7 @@ class KrabyConfig:
     ppo: PPOConfig = field(default_factory=PPOConfig)
     budget: BudgetConfig = field(default_factory=BudgetConfig)
     study: StudyConfig | None = None
+    search: SearchConfig = field(default_factory=SearchConfig)
     storage: str = "sqlite:///studies/kraby.db"
     """Database URL: a SQLite file (created on demand) or postgresql+psycopg://user@host/db."""
     workers: int | None = None
@@ -114,7 +161,7 @@ class KrabyConfig:
     save_models: bool = True
     """Keep each trial's final model (SB3 zip) beside the store."""
     models_dir: str | None = None
-    """Where models go; null means a folder named after the SQLite file (studies/models otherwise)."""
+    """Where models go; null: a folder named after the SQLite file (else studies/models)."""
     out: str = "reports"
     """Output folder of ``report``."""
 

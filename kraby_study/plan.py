@@ -49,6 +49,12 @@ class TrialSpec:
     """Report progress to a pruner every this many environment steps (searches only)."""
     params: dict[str, Any] = field(default_factory=dict)
     """Searched parameters by name (searches only)."""
+    repeats: int = 1
+    """Training runs with seeds seed, seed + 1, ...; the score is their mean (searches)."""
+    objective: str = "final_reward"
+    """final_reward (mean reward over the last 10 % of training) or evaluation."""
+    eval_episodes: int = 16
+    """Fixed targets of the evaluation objective."""
 
 
 @dataclass(frozen=True)

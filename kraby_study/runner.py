@@ -70,7 +70,7 @@ def run_trials(source: TrialSource, workers: int, progress: Progress,
                     break
                 trial_id, spec = claimed
                 pool.submit(trial_id, spec)
-                progress.start(source.label(spec), spec.steps)
+                progress.start(source.label(spec), spec.steps * spec.repeats)
             running = pool.running()
             if not running:
                 break
@@ -105,7 +105,7 @@ def run_trials(source: TrialSource, workers: int, progress: Progress,
                         # Same trial, new worker: the trial stays claimed, so nothing is lost.
                         progress.finish(label, f"interrupted (worker exit code {code}), rerun")
                         pool.submit(event.trial_id, spec)
-                        progress.start(label, spec.steps)
+                        progress.start(label, spec.steps * spec.repeats)
     except KeyboardInterrupt:
         summary.interrupted = True
         running = pool.running()

@@ -141,11 +141,12 @@ class Store:
         except KeyError:
             raise StoreError(f"no study named {name!r} in {self.url}") from None
 
-    def open_study(self, name: str, kind: str, definition: dict[str, Any],
-                   fingerprint: str) -> optuna.Study:
+    def open_study(self, name: str, kind: str, definition: dict[str, Any], fingerprint: str,
+                   sampler: optuna.samplers.BaseSampler | None = None,
+                   pruner: optuna.pruners.BasePruner | None = None) -> optuna.Study:
         """Create a study, or load it after checking it was defined the same way."""
-        study = optuna.create_study(study_name=name, storage=self.storage,
-                                    direction="maximize", load_if_exists=True)
+        study = optuna.create_study(study_name=name, storage=self.storage, sampler=sampler,
+                                    pruner=pruner, direction="maximize", load_if_exists=True)
         stored = study.user_attrs.get(FINGERPRINT)
         if stored is None:
             study.set_user_attr(KIND, kind)

@@ -95,7 +95,7 @@ def _is_divergence(err: BaseException) -> bool:
     return "nan" in text or "invalid values" in text or "inf" in text.split()
 
 
-def build_model(spec: TrialSpec, env: Any) -> Any:
+def build_model(spec: TrialSpec, env: Any, seed: int) -> Any:
     """The PPO learner of a spec on a given vectorised environment."""
     import torch
     from stable_baselines3 import PPO
@@ -109,28 +109,37 @@ def build_model(spec: TrialSpec, env: Any) -> Any:
         clip_range=ppo["clip_range"], ent_coef=ppo["ent_coef"], vf_coef=ppo["vf_coef"],
         max_grad_norm=ppo["max_grad_norm"], learning_rate=ppo["learning_rate"],
         policy_kwargs={"net_arch": {"pi": arch, "vf": arch}, "activation_fn": activation},
-        seed=spec.seed, device="cpu", verbose=0)
+        seed=seed, device="cpu", verbose=0)
 
 
-def make_env(spec: TrialSpec) -> Any:
+def make_env(spec: TrialSpec, seed: int) -> Any:
     """The batched world of a spec: n_envs legs in one physics client."""
     from kraby_envs import make_batched
 
     env = dict(spec.settings["env"])
     max_steps = int(env.pop("max_episode_steps"))
-    return make_batched(n_envs=int(spec.settings["ppo"]["n_envs"]), seed=spec.seed,
+    return make_batched(n_envs=int(spec.settings["ppo"]["n_envs"]), seed=seed,
                         max_episode_steps=max_steps, **env)
 
 
-def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
-              on_progress: ProgressHook | None = None) -> TrialResult:
-    """Train PPO as the spec says; divergence and errors come back as a failed result."""
+@dataclass
+class _Run:
+    """One training run of a trial (one seed)."""
+
+    episodes: list[tuple[int, float, float]] = field(default_factory=list)
+    env_steps: int = 0
+    failure: str | None = None
+    pruned_at: int | None = None
+    score: float | None = None
+    model: Any = None
+
+
+def _train(spec: TrialSpec, seed: int, offset: int, on_checkpoint: CheckpointHook | None,
+           on_progress: ProgressHook | None, checkpoints: list[tuple[int, float]]) -> _Run:
+    """Train one seed; checkpoint and progress steps count from ``offset`` (earlier seeds)."""
     from stable_baselines3.common.callbacks import BaseCallback
 
-    episodes: list[tuple[int, float, float]] = []
-    checkpoints: list[tuple[int, float]] = []
-    state: dict[str, Any] = {"pruned_at": None}
-    started = _now()
+    run = _Run()
     t0 = time.perf_counter()
 
     class Recorder(BaseCallback):
@@ -147,60 +156,103 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
             for info in self.locals["infos"]:
                 episode = info.get("episode")
                 if episode is not None:
-                    episodes.append((self.num_timesteps, float(episode["r"]), now))
+                    run.episodes.append((self.num_timesteps, float(episode["r"]), now))
             if on_progress is not None and now - self.last_progress >= 1.0:
                 self.last_progress = now
-                on_progress(self.num_timesteps)
+                on_progress(offset + self.num_timesteps)
             if spec.checkpoint_every and self.num_timesteps >= self.next_checkpoint:
                 return self._checkpoint()
             return True
 
         def _checkpoint(self) -> bool:
             step = self.num_timesteps
-            recent = [e[1] for e in episodes[self.window_start:]]
-            self.window_start = len(episodes)
+            recent = [e[1] for e in run.episodes[self.window_start:]]
+            self.window_start = len(run.episodes)
             while self.next_checkpoint <= step:
                 self.next_checkpoint += int(spec.checkpoint_every or 1)
             if not recent:
                 return True
+            # Report at the boundary crossed, so every trial reports at the same steps.
+            every = int(spec.checkpoint_every or 1)
+            boundary = offset + (step // every) * every
             value = float(np.mean(recent))
-            checkpoints.append((step, value))
-            if on_checkpoint is not None and not on_checkpoint(step, value):
-                state["pruned_at"] = step
+            checkpoints.append((boundary, value))
+            if on_checkpoint is not None and not on_checkpoint(boundary, value):
+                run.pruned_at = boundary
                 return False
             return True
 
-    env = make_env(spec)
-    model = None
-    failure: str | None = None
+    env = make_env(spec, seed)
     try:
-        model = build_model(spec, env)
-        model.learn(total_timesteps=spec.steps, callback=Recorder())
-        if _has_nan(model):
-            failure = "diverged: the policy's parameters became NaN"
+        run.model = build_model(spec, env, seed)
+        run.model.learn(total_timesteps=spec.steps, callback=Recorder())
+        if _has_nan(run.model):
+            run.failure = "diverged: the policy's parameters became NaN"
     except (ValueError, RuntimeError, FloatingPointError) as err:
         first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
         kind = "diverged" if _is_divergence(err) else "error"
-        failure = f"{kind}: {type(err).__name__}: {first[:300]}"
+        run.failure = f"{kind}: {type(err).__name__}: {first[:300]}"
     finally:
         env.close()
-    wall = time.perf_counter() - t0
-    env_steps = int(model.num_timesteps) if model is not None else 0
-    result = TrialResult(key=spec.key, status="complete", curve=bin_curve(episodes,
-                         spec.curve_every), env_steps=env_steps, wall_time=wall,
-                         started=started, ended=_now(), checkpoints=checkpoints)
-    if failure is not None:
-        result.status, result.failure = "failed", failure
-        return result
-    if state["pruned_at"] is not None:
-        result.status, result.pruned_at = "pruned", int(state["pruned_at"])
-        return result
-    score = final_score(episodes, env_steps)
-    if score is None or not math.isfinite(score):
-        result.status, result.failure = "failed", "error: no episode ended in the last 10 %"
-        return result
-    result.final_score = score
-    if spec.model_path and model is not None:
-        Path(spec.model_path).parent.mkdir(parents=True, exist_ok=True)
-        model.save(spec.model_path)
+    run.env_steps = int(run.model.num_timesteps) if run.model is not None else 0
+    if run.failure is None and run.pruned_at is None:
+        if spec.objective == "evaluation":
+            from kraby_study.evaluation import evaluate
+
+            run.score = evaluate(run.model, spec.settings["env"], spec.eval_episodes)
+        else:
+            run.score = final_score(run.episodes, run.env_steps)
+        if run.score is None or not math.isfinite(run.score):
+            run.failure = "error: no finite score (no episode ended in the last 10 %)"
+    return run
+
+
+def mean_curve(curves: list[list[CurvePoint]]) -> list[CurvePoint]:
+    """Average several runs' curves bin by bin (a trial of k seeds stores one curve)."""
+    if len(curves) == 1:
+        return curves[0]
+    by_step: dict[int, list[CurvePoint]] = {}
+    for curve in curves:
+        for point in curve:
+            by_step.setdefault(point.step, []).append(point)
+    return [CurvePoint(step=step, mean_reward=float(np.mean([p.mean_reward for p in pts])),
+                       wall_time=float(np.mean([p.wall_time for p in pts])),
+                       episodes=sum(p.episodes for p in pts))
+            for step, pts in sorted(by_step.items())]
+
+
+def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
+              on_progress: ProgressHook | None = None) -> TrialResult:
+    """Train PPO as the spec says; divergence and errors come back as a failed result.
+
+    A spec with repeats > 1 trains seeds seed .. seed + repeats - 1 one after the other; its
+    checkpoints count env steps across them, so a pruner can stop it after its first seed.
+    """
+    started = _now()
+    t0 = time.perf_counter()
+    checkpoints: list[tuple[int, float]] = []
+    runs: list[_Run] = []
+    for index in range(spec.repeats):
+        # Seed i's checkpoints count from i x the nominal budget: equal for every trial.
+        run = _train(spec, spec.seed + index, index * spec.steps, on_checkpoint, on_progress,
+                     checkpoints)
+        runs.append(run)
+        if run.failure is not None or run.pruned_at is not None:
+            break
+    last = runs[-1]
+    result = TrialResult(
+        key=spec.key, status="complete",
+        curve=mean_curve([bin_curve(r.episodes, spec.curve_every) for r in runs]),
+        env_steps=sum(r.env_steps for r in runs), wall_time=time.perf_counter() - t0,
+        started=started, ended=_now(), checkpoints=checkpoints)
+    if last.failure is not None:
+        result.status, result.failure = "failed", last.failure
+    elif last.pruned_at is not None:
+        result.status, result.pruned_at = "pruned", last.pruned_at
+    else:
+        result.final_score = float(np.mean([r.score for r in runs]))
+        if spec.model_path:
+            best = max(runs, key=lambda r: float(r.score or -math.inf))
+            Path(spec.model_path).parent.mkdir(parents=True, exist_ok=True)
+            best.model.save(spec.model_path)
     return result

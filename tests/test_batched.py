@@ -1,0 +1,171 @@
+"""Behaviour of the batched world of legs as an SB3 VecEnv."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import VecEnv
+
+from kraby_envs import KrabyBatchedVecEnv, KrabyOneLegEnv, make_batched
+from kraby_envs._bullet import p
+from kraby_envs.task import TARGET_CENTRE, TARGET_HALF_EXTENTS
+
+
+@pytest.fixture
+def venv():
+    environment = make_batched(n_envs=4, seed=11)
+    yield environment
+    environment.close()
+
+
+def random_actions(n_steps: int, n_envs: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(-1, 1, (n_steps, n_envs, 3)).astype(np.float32)
+
+
+@pytest.mark.parametrize("observation", ["default", "with_tip_to_target"])
+def test_each_leg_matches_a_single_env_over_several_episodes(observation):
+    # 8 legs and these seeds hit self-collisions, where contact order once made legs drift.
+    n_envs, seed, episodes = 8, 5, 3
+    venv = make_batched(n_envs=n_envs, seed=seed, observation=observation)
+    singles = [KrabyOneLegEnv(observation=observation) for _ in range(n_envs)]
+    batched_obs = venv.reset()
+    single_obs = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(singles)])
+    np.testing.assert_allclose(batched_obs, single_obs, atol=1e-4)
+    for t, actions in enumerate(random_actions(32 * episodes, n_envs)):
+        batched_obs, rewards, dones, infos = venv.step(actions)
+        results = [env.step(actions[i]) for i, env in enumerate(singles)]
+        single_obs = np.stack([r[0] for r in results])
+        np.testing.assert_allclose(rewards, [r[1] for r in results], rtol=1e-4, atol=1e-7)
+        assert dones.tolist() == [(t + 1) % 32 == 0] * n_envs
+        if dones.all():
+            terminal = np.stack([info["terminal_observation"] for info in infos])
+            np.testing.assert_allclose(terminal, single_obs, atol=1e-4)
+            # The single envs continue their own random streams, as the legs do.
+            single_obs = np.stack([env.reset()[0] for env in singles])
+        np.testing.assert_allclose(batched_obs, single_obs, atol=1e-4, err_msg=f"step {t}")
+    venv.close()
+    for env in singles:
+        env.close()
+
+
+def test_episode_info_as_vec_monitor_writes_it(venv):
+    assert isinstance(venv, VecEnv)
+    venv.reset()
+    returns = np.zeros(4, dtype=np.float32)
+    for t, actions in enumerate(random_actions(32, 4)):
+        _, rewards, dones, infos = venv.step(actions)
+        returns += rewards
+        assert all({"tip_position", "distance"} <= set(info) for info in infos)
+        if t < 31:
+            assert not dones.any() and not any("episode" in info for info in infos)
+    assert dones.all()
+    for i, info in enumerate(infos):
+        assert info["TimeLimit.truncated"] is True
+        assert info["terminal_observation"].shape == venv.observation_space.shape
+        episode = info["episode"]
+        assert set(episode) == {"r", "l", "t"}
+        assert episode["r"] == pytest.approx(returns[i]) and episode["l"] == 32
+        assert episode["t"] >= 0.0
+        assert -5.0 < episode["r"] < 0.0
+
+
+def test_sb3_ppo_logs_episodes_without_a_monitor():
+    venv = make_batched(n_envs=4, seed=0)
+    model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1,
+                policy_kwargs={"net_arch": [8]}, seed=0, device="cpu")
+    model.learn(total_timesteps=256)
+    assert len(model.ep_info_buffer) >= 4
+    assert all(info["l"] == 32 for info in model.ep_info_buffer)
+    venv.close()
+
+
+def test_seed_reseeds_the_next_reset(venv):
+    first = venv.reset()
+    again = venv.reset()
+    assert not np.allclose(first, again)
+    assert venv.seed(11) == [11, 12, 13, 14]
+    np.testing.assert_array_equal(venv.reset(), first)
+    other = make_batched(n_envs=4, seed=12)
+    np.testing.assert_array_equal(other.reset()[:3], first[1:])
+    other.close()
+
+
+def test_legs_never_touch_each_other():
+    venv = make_batched(n_envs=9, seed=0, delta=1.0)
+    venv.reset()
+    world = venv._world
+    legs = set(world._bodies)
+    for actions in random_actions(64, 9, seed=1):
+        venv.step(actions * 2.0)
+        for contact in p.getContactPoints(physicsClientId=world._client):
+            a, b = contact[1], contact[2]
+            assert a == b or not (a in legs and b in legs), "two legs touched"
+    venv.close()
+
+
+def test_reset_options_apply_per_leg(venv):
+    venv.set_options({"joint_angles": (0.1, 0.2, 0.3), "target": tuple(TARGET_CENTRE)})
+    observations = venv.reset()
+    np.testing.assert_allclose(observations[:, 0:6:2] * np.pi / 2, [[0.1, 0.2, 0.3]] * 4,
+                               atol=1e-6)
+    np.testing.assert_allclose(observations[:, 6:9], 0.0, atol=1e-6)
+
+
+def test_attributes_and_methods(venv):
+    assert venv.get_attr("delta") == [0.5] * 4
+    assert venv.get_attr("observation", indices=[1, 2]) == ["default"] * 2
+    assert venv.has_attr("max_velocity") and not venv.has_attr("no_such_thing")
+    venv.set_attr("delta", 0.0)
+    observations = venv.reset()
+    np.testing.assert_allclose(observations[:, 6:9], 0.0, atol=1e-6)
+    venv.env_method("set_config", delta=1.0)
+    venv.reset()
+    targets = venv._world.targets
+    assert np.all(np.abs(targets - TARGET_CENTRE) <= TARGET_HALF_EXTENTS + 1e-9)
+    with pytest.raises(ValueError, match="observation"):
+        venv.set_attr("observation", "with_tip")
+    with pytest.raises(ValueError, match="indices"):
+        venv.set_attr("delta", 0.3, indices=[0])
+    with pytest.raises(AttributeError):
+        venv.env_method("fly")
+    assert venv.env_is_wrapped(object) == [False] * 4
+
+
+def test_render_images():
+    venv = make_batched(n_envs=2, seed=0, render_mode="rgb_array",
+                        render_width=48, render_height=32)
+    venv.reset()
+    images = venv.get_images()
+    assert len(images) == 2
+    for image in images:
+        assert image.shape == (32, 48, 3) and image.dtype == np.uint8
+        assert np.any(np.any(image != image[0, 0], axis=2))
+    tiled = venv.render()
+    assert tiled.ndim == 3 and tiled.shape[2] == 3 and tiled.dtype == np.uint8
+    assert venv.env_method("render", indices=[1])[0].shape == (32, 48, 3)
+    venv.close()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        ({"n_envs": 0}, "n_envs"),
+        ({"n_envs": 2.5}, "n_envs"),
+        ({"max_episode_steps": 0}, "max_episode_steps"),
+        ({"seed": "zero"}, "seed"),
+        ({"leg_spacing": 0.2}, "leg_spacing"),
+        ({"delta": 3.0}, "delta"),
+        ({"observation": "pixels"}, "observation"),
+        ({"wings": 2}, "wings"),
+    ],
+)
+def test_bad_arguments_raise_value_error_naming_them(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        make_batched(**kwargs)
+
+
+def test_class_is_exported_and_closes_twice(venv):
+    assert isinstance(venv, KrabyBatchedVecEnv)
+    venv.close()
+    venv.close()
