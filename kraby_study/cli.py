@@ -232,7 +232,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    # Overrides may come after flags (optuna --trials 5 budget=quick): argparse leaves them over.
+    args, extras = parser.parse_known_args(argv)
+    unknown = [e for e in extras if e.startswith("-")]
+    if unknown:
+        parser.error(f"unrecognized arguments: {' '.join(unknown)}")
+    args.overrides = list(args.overrides) + extras
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)

@@ -1,0 +1,196 @@
+"""`kraby-study optuna` and `best`: smoke search, totals, pruning, best round trip, bad input."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import optuna
+import pytest
+from conftest import TINY, load, run_cli
+from optuna.trial import TrialState
+
+from kraby_study.compose import compose_config
+from kraby_study.search import SearchSource, validate_search
+
+TINY_SPACE = """\
+name: tiny
+sampler: tpe
+pruner: median
+seed: 0
+startup_trials: 2
+checkpoints: 4
+objective: final_reward
+eval_episodes: 4
+trials: 4
+params:
+  learning_rate: {path: ppo.learning_rate, type: float, low: 1.0e-4, high: 1.0e-2, log: true}
+  nminibatches: {path: ppo.nminibatches, type: categorical, choices: [1, 2]}
+  gamma: {path: ppo.gamma, type: float, low: 0.5, high: 0.99}
+"""
+
+# Targets over the whole box (delta 1) cost about 0.36 reward per episode more than targets at
+# its centre (delta 0) for any policy that has not learnt to reach: a controlled, large gap.
+DELTA_SPACE = """\
+name: delta
+sampler: random
+pruner: median
+seed: 13  # the random sampler draws delta 0, 1, 0, 1, 1, 1
+startup_trials: 1
+checkpoints: 4
+params:
+  delta: {path: env.delta, type: categorical, choices: [0.0, 1.0]}
+"""
+
+
+@pytest.fixture
+def spaces(workdir: Path) -> Path:
+    folder = workdir / "conf" / "search"
+    folder.mkdir(parents=True)
+    (folder / "tiny.yaml").write_text(TINY_SPACE)
+    (folder / "delta.yaml").write_text(DELTA_SPACE)
+    return workdir
+
+
+def test_default_space_holds_every_documented_value() -> None:
+    cfg = compose_config([])
+    validate_search(cfg)
+    params = {str(p.path): p for p in cfg.search.params.values()}
+    documented = {
+        "ppo.gamma": [0.2, 0.4, 0.6, 0.8, 0.9, 0.95, 0.98, 0.9999],
+        "ppo.clip_range": [0.1, 0.2, 0.3, 0.4],
+        "ppo.learning_rate": [1e-4, 1e-3, 1e-2, 1e-1, 1.0],
+        "ppo.gae_lambda": [0.8, 0.9, 0.92, 0.95, 0.98, 0.99, 1.0],
+        "ppo.ent_coef": [1e-8, 1e-6, 1e-4, 0.01, 0.1],
+        "ppo.n_epochs": [1, 5, 10, 20, 30, 50],
+        "ppo.n_steps": [32, 64, 128, 256, 512, 1024, 2048],
+    }
+    for path, values in documented.items():
+        p = params[path]
+        for value in values:
+            if p.type == "categorical":
+                assert value in p.choices, (path, value)
+            else:
+                assert p.low <= value <= p.high, (path, value)
+    assert params["ppo.learning_rate"].log and params["ppo.ent_coef"].log
+    assert set(params["env.observation"].choices) == {
+        "default", "with_tip", "with_tip_to_target", "sin_angles"}
+    # Documented batch sizes 32..4096 at n_steps 128 x 32 legs are nminibatches 128..1.
+    assert {1, 2, 4, 8, 16, 32, 64, 128} <= set(params["ppo.nminibatches"].choices)
+
+
+def test_smoke_search_and_the_total_over_invocations(
+        spaces: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["search=tiny", "--workers", "2", *TINY, "budget.seeds=1"]
+    assert run_cli("optuna", "--trials", "2", *args) == 0
+    db = spaces / "studies" / "kraby.db"
+    study = load(db, "tiny")
+    assert len(study.trials) == 2
+    assert study.user_attrs["sampler"] == "tpe" and study.user_attrs["sampler_seed"] == 0
+    trial = study.trials[0]
+    assert set(trial.params) == {"learning_rate", "nminibatches", "gamma"}
+    ppo = trial.user_attrs["settings"]["ppo"]
+    assert ppo["batch_size"] == 128 // trial.params["nminibatches"]
+    assert ppo["gamma"] == trial.params["gamma"]
+    assert len(trial.intermediate_values) >= 2
+    assert set(trial.intermediate_values) <= {128, 256, 384, 512}
+    # --trials is the study's total: 2, then 3 (one more), then 3 again (none).
+    assert run_cli("optuna", "--trials", "3", *args) == 0
+    assert len(load(db, "tiny").trials) == 3
+    capsys.readouterr()
+    assert run_cli("optuna", "--trials", "3", *args) == 0
+    assert "0 to run" in capsys.readouterr().out
+    assert len(load(db, "tiny").trials) == 3
+
+
+def test_median_pruner_stops_bad_trials_in_a_controlled_case(spaces: Path) -> None:
+    args = ["search=delta", "--trials", "6", "--workers", "1", *TINY,
+            "budget.seeds=2", "budget.steps=1024"]
+    assert run_cli("optuna", *args) == 0
+    study = load(spaces / "studies" / "kraby.db", "delta")
+    trials = study.get_trials()
+    pruned = [t for t in trials if t.state == TrialState.PRUNED]
+    complete = [t for t in trials if t.state == TrialState.COMPLETE]
+    assert complete and pruned
+    assert all(t.params["delta"] == 1.0 for t in pruned)
+    first_good = min(t.number for t in complete if t.params["delta"] == 0.0)
+    late_bad = [t for t in trials if t.params["delta"] == 1.0 and t.number > first_good]
+    assert late_bad and all(t.state == TrialState.PRUNED for t in late_bad)
+    for trial in pruned:
+        # Stopped during its first seed: a pruned trial spends less than one seed's budget.
+        assert trial.user_attrs["pruned_at"] <= 1024
+        assert trial.user_attrs["env_steps"] < 2 * 1024
+        assert max(trial.intermediate_values) == trial.user_attrs["pruned_at"]
+
+
+def test_checkpoint_prunes_a_trial_below_the_median_at_equal_steps(tmp_path: Path) -> None:
+    cfg = compose_config(["search.startup_trials=1", "budget=smoke",
+                          f"storage=sqlite:///{tmp_path}/k.db"])
+    study = optuna.create_study(direction="maximize",
+                                pruner=optuna.pruners.MedianPruner(n_startup_trials=1))
+    done = study.ask()
+    for step, value in ((512, -0.2), (1024, -0.1)):
+        done.report(value, step)
+    study.tell(done, -0.1)
+    source = SearchSource(store=None, study=study, cfg=cfg)  # type: ignore[arg-type]
+    good, bad = study.ask(), study.ask()
+    assert source.checkpoint(good._trial_id, 512, -0.15) is True
+    assert source.checkpoint(bad._trial_id, 512, -0.9) is False
+
+
+def test_best_round_trip(spaces: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("optuna", "--trials", "2", "search=tiny", "--workers", "1", *TINY,
+                   "budget.seeds=1") == 0
+    study = load(spaces / "studies" / "kraby.db", "tiny")
+    best = study.best_trial
+    capsys.readouterr()
+    assert run_cli("best", "--study-name", "tiny") == 0
+    out = capsys.readouterr().out
+    assert f"trial {best.number}" in out
+    written = spaces / "conf" / "ppo" / "best_tiny.yaml"
+    assert written.is_file()
+    cfg = compose_config(["ppo=best_tiny"])
+    assert dict(cfg.ppo) == best.user_attrs["settings"]["ppo"]
+    swept = compose_config(["ppo=best_tiny", "study=ent_coef"])
+    assert swept.ppo.gamma == 0.8  # the study's own settings still apply on top
+    assert compose_config(["ppo=best_tiny", "study=observation"]).ppo.gamma == best.params[
+        "gamma"]
+
+
+def test_best_of_a_sweep_writes_the_best_value(workdir: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("run", "study=observation", "budget.seeds=1", "workers=2", *TINY) == 0
+    capsys.readouterr()
+    assert run_cli("best", "--study-name", "observation", "--name", "obs") == 0
+    out = capsys.readouterr().out
+    assert out.startswith("best: observation=")
+    cfg = compose_config(["ppo=obs"])
+    assert cfg.env.observation in out
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--trials", "0"], "--trials"),
+    (["--trials", "abc"], "--trials"),
+    (["--sampler", "grid"], "--sampler"),
+    (["--pruner", "sometimes"], "--pruner"),
+    (["search.params.gamma.low=0.99", "search.params.gamma.high=0.5"], "above high"),
+    (["search.params.learning_rate.low=0"], "log range"),
+    (["search.params.nminibatches.choices=[3]"], "nminibatches 3"),
+])
+def test_bad_search_input_is_refused_before_anything_runs(
+        workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str],
+        message: str) -> None:
+    with pytest.raises(SystemExit) if argv[0].startswith("--") else _no_exit() as caught:
+        code = run_cli("optuna", *argv)
+    code = caught.value.code if isinstance(caught, pytest.ExceptionInfo) else code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (workdir / "studies").exists()
+
+
+class _no_exit:
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        return None
