@@ -14,6 +14,7 @@ from omegaconf import DictConfig
 
 from kraby_study.compose import compose_config
 from kraby_study.config import ConfigError, worker_count
+from kraby_study.runner import DatabaseLost
 from kraby_study.store import StoreError
 
 OVERRIDES_HELP = ("Hydra overrides, e.g. study=ent_coef budget=quick ppo.n_steps=64 workers=2 "
@@ -31,16 +32,30 @@ def _compose(overrides: Sequence[str]) -> DictConfig:
     return compose_config(list(overrides))
 
 
+def open_writer(cfg: DictConfig):  # noqa: ANN201 - a context manager of Store
+    """The store a command writes to, with the configured heartbeat timing."""
+    from kraby_study.store import opened
+
+    return opened(cfg.storage, heartbeat_interval=int(cfg.heartbeat_interval),
+                  heartbeat_grace=int(cfg.heartbeat_grace))
+
+
+def run_timing(cfg: DictConfig) -> dict[str, float]:
+    """Heartbeat period and database patience of a running command."""
+    return {"heartbeat_seconds": float(cfg.heartbeat_interval),
+            "retry_seconds": float(cfg.db_retry_seconds)}
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     """Run a study's sweep: every value x seed, resumable."""
     from kraby_study.plan import expand_study
-    from kraby_study.store import opened
     from kraby_study.sweep import run_plan
 
     cfg = _compose(args.overrides)
     plan = expand_study(cfg)
-    with opened(cfg.storage) as store:
-        summary, complete, failed = run_plan(store, plan, worker_count(cfg), sys.stdout)
+    with open_writer(cfg) as store:
+        summary, complete, failed = run_plan(store, plan, worker_count(cfg), sys.stdout,
+                                             **run_timing(cfg))
     total = len(plan.specs)
     print(f"study {plan.name}: {complete}/{total} complete, {failed} failed"
           + (f", {total - complete - failed} left (rerun the same command to continue)"
@@ -51,7 +66,6 @@ def cmd_run(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     """One training run, stored like a trial, its model saved."""
     from kraby_study.plan import single_run
-    from kraby_study.store import opened
     from kraby_study.sweep import run_plan
 
     overrides = list(args.overrides)
@@ -59,8 +73,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         overrides.insert(0, "ppo=tuned")
     cfg = _compose(overrides)
     plan = single_run(cfg)
-    with opened(cfg.storage) as store:
-        summary, _, _ = run_plan(store, plan, 1, sys.stdout)
+    with open_writer(cfg) as store:
+        summary, _, _ = run_plan(store, plan, 1, sys.stdout, **run_timing(cfg))
         trial = _latest(store, plan.name, plan.specs[0].key)
     if trial is None:
         return 130 if summary.interrupted else 1
@@ -137,11 +151,10 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     """An Optuna search over conf/search/<space>.yaml, into the same store."""
     from kraby_study.ledger import study_progress
     from kraby_study.search import run_search, validate_search
-    from kraby_study.store import opened
 
     cfg = _compose(search_overrides(args))
     validate_search(cfg)
-    with opened(cfg.storage) as store:
+    with open_writer(cfg) as store:
         summary, study = run_search(store, cfg, worker_count(cfg), sys.stdout)
         state = study_progress(study)
     print(f"search {state.name}: {state.complete} complete, {state.pruned} pruned, "
@@ -246,6 +259,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, StoreError) as err:
         print(f"kraby-study: error: {err}", file=sys.stderr)
         return 2
+    except DatabaseLost as err:
+        print(f"kraby-study: error: {err}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("kraby-study: interrupted", file=sys.stderr)
         return 130

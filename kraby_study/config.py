@@ -156,6 +156,12 @@ class KrabyConfig:
     """Database URL: a SQLite file (created on demand) or postgresql+psycopg://user@host/db."""
     workers: int | None = None
     """Worker processes; null means one per core."""
+    heartbeat_interval: int = 5
+    """PostgreSQL: seconds between heartbeats of a running trial."""
+    heartbeat_grace: int = 30
+    """PostgreSQL: a running trial silent this long is failed and queued again."""
+    db_retry_seconds: int = 60
+    """How long a command keeps retrying a database it lost before it gives up."""
     seed: int = 0
     """Seed of the first training run; run n of a study uses seed + n."""
     save_models: bool = True
@@ -279,6 +285,11 @@ def validate(cfg: DictConfig) -> None:
     validate_ppo(cfg.ppo)
     validate_budget(cfg.budget)
     validate_storage(cfg.storage)
+    for name in ("heartbeat_interval", "heartbeat_grace", "db_retry_seconds"):
+        _require(int(cfg[name]) >= 1, f"{name} must be at least 1, got {cfg[name]}")
+    _require(cfg.heartbeat_grace > cfg.heartbeat_interval,
+             f"heartbeat_grace ({cfg.heartbeat_grace}) must exceed heartbeat_interval "
+             f"({cfg.heartbeat_interval})")
     if cfg.workers is not None:
         _require(int(cfg.workers) >= 1, f"workers must be at least 1, got {cfg.workers}")
     _require(int(cfg.seed) >= 0, f"seed must be >= 0, got {cfg.seed}")

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol, TextIO
+
+from sqlalchemy import exc as sa_exc
 
 from kraby_study.plan import TrialSpec
 from kraby_study.progress import Progress
@@ -42,6 +44,9 @@ class TrialSource(Protocol):
     def heartbeat(self, trial_ids: list[int]) -> None:
         """Tell the store these trials are alive."""
 
+    def running_elsewhere(self) -> bool:
+        """Whether other commands still run trials that could come back (PostgreSQL)."""
+
 
 @dataclass
 class RunSummary:
@@ -53,27 +58,71 @@ class RunSummary:
     interrupted: bool = False
 
 
+class DatabaseLost(RuntimeError):
+    """The database stayed out of reach longer than the command was told to wait."""
+
+
+class Retrying:
+    """A TrialSource whose calls are retried while the database is out of reach."""
+
+    def __init__(self, source: TrialSource, patience: float, stream: TextIO) -> None:
+        self._source = source
+        self._patience = patience
+        self._stream = stream
+
+    def __getattr__(self, name: str) -> Any:
+        attr = getattr(self._source, name)
+        if not callable(attr) or name == "label":
+            return attr
+
+        def call(*args: Any) -> Any:
+            deadline = time.monotonic() + self._patience
+            delay = 0.5
+            while True:
+                try:
+                    return attr(*args)
+                except (sa_exc.OperationalError, sa_exc.InterfaceError) as err:
+                    if time.monotonic() >= deadline:
+                        reason = str(err.orig or err).strip().splitlines()[0]
+                        raise DatabaseLost(f"lost the database for {self._patience:.0f} s, "
+                                           f"giving up: {reason}") from None
+                    print(f"database out of reach ({name}), retrying in {delay:.1f} s",
+                          file=self._stream, flush=True)
+                    time.sleep(delay)
+                    delay = min(delay * 2, 10.0)
+
+        return call
+
+
 def run_trials(source: TrialSource, workers: int, progress: Progress,
-               heartbeat_seconds: float = 5.0) -> RunSummary:
-    """Run every trial the source hands out on ``workers`` processes."""
+               heartbeat_seconds: float = 5.0, poll_seconds: float = 2.0) -> RunSummary:
+    """Run every trial the source hands out on ``workers`` processes.
+
+    When nothing is left to claim but other commands still run trials of the study (several
+    machines on PostgreSQL), it keeps polling: a trial whose owner died comes back to the queue
+    once its heartbeat is stale, and this command runs it.
+    """
     summary = RunSummary()
     pool = WorkerPool(workers)
     deaths: dict[int, int] = {}
     last_beat = 0.0
-    exhausted = False
+    next_claim = 0.0
     try:
         while True:
-            while not exhausted and pool.idle() > 0:
+            while pool.idle() > 0 and time.monotonic() >= next_claim:
                 claimed = source.next_trial()
                 if claimed is None:
-                    exhausted = True
+                    next_claim = time.monotonic() + poll_seconds
                     break
                 trial_id, spec = claimed
                 pool.submit(trial_id, spec)
                 progress.start(source.label(spec), spec.steps * spec.repeats)
             running = pool.running()
             if not running:
-                break
+                if not source.running_elsewhere():
+                    break
+                time.sleep(max(0.0, next_claim - time.monotonic()))
+                continue
             if time.monotonic() - last_beat >= heartbeat_seconds:
                 source.heartbeat(list(running))
                 last_beat = time.monotonic()

@@ -12,7 +12,7 @@ from kraby_study.config import ConfigError, rollout_size, to_container, validate
 from kraby_study.ledger import superseded
 from kraby_study.plan import TrialSpec, fingerprint, model_path, resolved_settings, with_value
 from kraby_study.progress import Progress
-from kraby_study.runner import RunSummary, run_trials
+from kraby_study.runner import Retrying, RunSummary, run_trials
 from kraby_study.store import PLANNED, Store, record_result
 from kraby_study.trial import TrialResult
 
@@ -245,6 +245,15 @@ class SearchSource:
         for trial_id in trial_ids:
             self.store.heartbeat(trial_id)
 
+    def running_elsewhere(self) -> bool:
+        if self.store.exclusive:
+            return False
+        self.store.fail_orphans(self.study)
+        trials = self.study.get_trials(deepcopy=False)
+        replaced = superseded(trials)
+        return any(t.state in (optuna.trial.TrialState.RUNNING, optuna.trial.TrialState.WAITING)
+                   for t in trials if t.number not in replaced)
+
 
 def run_search(store: Store, cfg: DictConfig, workers: int, stream: TextIO,
                live: bool | None = None) -> tuple[RunSummary, optuna.Study]:
@@ -270,5 +279,6 @@ def run_search(store: Store, cfg: DictConfig, workers: int, stream: TextIO,
           f"{slots} worker(s); {cfg.budget.seeds} seed(s) x {cfg.budget.steps:,} steps each, "
           f"{cfg.search.sampler} sampler, {cfg.search.pruner} pruner", file=stream, flush=True)
     progress = Progress(study.study_name, source.total, done, stream, live)
-    summary = run_trials(source, slots, progress)
+    summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream),  # type: ignore[arg-type]
+                         slots, progress, heartbeat_seconds=float(cfg.heartbeat_interval))
     return summary, study

@@ -14,6 +14,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -32,8 +33,10 @@ FINGERPRINT = "kraby_fingerprint"
 PLANNED = "kraby_planned"
 RETRY_OF = "retry_of"
 INTERRUPTED = "interrupted"
-HEARTBEAT_SECONDS = 5
-GRACE_SECONDS = 30
+
+# Heartbeats and stale-trial failing are marked experimental by Optuna; they are what several
+# machines on one study rely on, so the warning would only alarm users.
+warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
 
 metadata = sa.MetaData()
 curve_points = sa.Table(
@@ -66,7 +69,8 @@ def requeue(study: optuna.Study, trial: FrozenTrial) -> None:
 class Store:
     """A study store at a database URL: Optuna's tables plus the learning curves."""
 
-    def __init__(self, url: str, *, create: bool = True, writer: bool = True) -> None:
+    def __init__(self, url: str, *, create: bool = True, writer: bool = True,
+                 heartbeat_interval: int = 5, heartbeat_grace: int = 30) -> None:
         self.url = url
         self.db_path = sqlite_path(url)
         self._lock_file: IO[str] | None = None
@@ -78,8 +82,9 @@ class Store:
                 self._lock()
         heartbeat: dict[str, Any] = {}
         if self.db_path is None:
-            heartbeat = {"heartbeat_interval": HEARTBEAT_SECONDS, "grace_period": GRACE_SECONDS,
-                         "failed_trial_callback": requeue}
+            heartbeat = {"heartbeat_interval": heartbeat_interval,
+                         "grace_period": heartbeat_grace,
+                         "heartbeat_stale_trial_callback": requeue}
         engine_kwargs: dict[str, Any] = (
             {"connect_args": {"timeout": 60}} if self.db_path is not None
             else {"pool_pre_ping": True})

@@ -10,7 +10,7 @@ from optuna.trial import TrialState
 from kraby_study.ledger import attempts_by_key, is_final_failure, value_label, was_interrupted
 from kraby_study.plan import StudyPlan, TrialSpec
 from kraby_study.progress import Progress
-from kraby_study.runner import RunSummary, run_trials
+from kraby_study.runner import Retrying, RunSummary, run_trials
 from kraby_study.store import PLANNED, Store, record_result
 from kraby_study.trial import TrialResult
 
@@ -83,6 +83,14 @@ class SweepSource:
         for trial_id in trial_ids:
             self.store.heartbeat(trial_id)
 
+    def running_elsewhere(self) -> bool:
+        if self.store.exclusive:
+            return False
+        self.store.fail_orphans(self.study)
+        latest = attempts_by_key(self.study.get_trials(deepcopy=False))
+        return any(latest[key].state in (TrialState.RUNNING, TrialState.WAITING)
+                   for key in self.specs if key in latest)
+
 
 def plan_counts(study: optuna.Study, plan: StudyPlan) -> tuple[int, int]:
     """(complete, failed) among the plan's keys, counting the attempt that counts."""
@@ -94,7 +102,8 @@ def plan_counts(study: optuna.Study, plan: StudyPlan) -> tuple[int, int]:
 
 
 def run_plan(store: Store, plan: StudyPlan, workers: int, stream: TextIO,
-             live: bool | None = None) -> tuple[RunSummary, int, int]:
+             live: bool | None = None, heartbeat_seconds: float = 5.0,
+             retry_seconds: float = 60.0) -> tuple[RunSummary, int, int]:
     """Queue, run and record a plan's trials; returns this command's summary and the totals."""
     kind = str(plan.definition.get("kind"))
     study = store.open_study(plan.name, kind, plan.definition, plan.fingerprint)
@@ -109,8 +118,9 @@ def run_plan(store: Store, plan: StudyPlan, workers: int, stream: TextIO,
     print(f"study {plan.name}: {len(plan.specs)} trials, {complete} complete, {failed} failed, "
           f"{pending} to run on {min(workers, max(pending, 1))} worker(s)", file=stream,
           flush=True)
-    summary = run_trials(SweepSource(store, study, plan), min(workers, max(pending, 1)),
-                         progress)
+    source = Retrying(SweepSource(store, study, plan), retry_seconds, stream)
+    summary = run_trials(source, min(workers, max(pending, 1)), progress,  # type: ignore[arg-type]
+                         heartbeat_seconds=heartbeat_seconds)
     complete, failed = plan_counts(study, plan)
     return summary, complete, failed
 

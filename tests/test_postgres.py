@@ -1,0 +1,173 @@
+"""Several commands on one PostgreSQL study; a killed one's trial comes back; a lost database.
+
+These need a server: set KRABY_TEST_POSTGRES_URL (CI starts one; see .ci/postgres.sh).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import optuna
+import pytest
+import sqlalchemy as sa
+from conftest import TINY, children, run_cli, spawn_cli
+from optuna.trial import TrialState
+
+from kraby_study.ledger import attempts_by_key, superseded
+from kraby_study.runner import DatabaseLost, Retrying
+
+SERVER = os.environ.get("KRABY_TEST_POSTGRES_URL")
+pytestmark = [pytest.mark.postgres,
+              pytest.mark.skipif(not SERVER, reason="KRABY_TEST_POSTGRES_URL is not set")]
+
+FAST_HEARTBEAT = ["heartbeat_interval=1", "heartbeat_grace=4"]
+LONGER = [a if not a.startswith("budget.steps") else "budget.steps=4096" for a in TINY]
+SPACE = """\
+name: pgsearch
+sampler: tpe
+pruner: none
+startup_trials: 2
+checkpoints: 4
+params:
+  learning_rate: {path: ppo.learning_rate, type: float, low: 1.0e-4, high: 1.0e-2, log: true}
+  gamma: {path: ppo.gamma, type: float, low: 0.5, high: 0.99}
+"""
+
+
+@pytest.fixture
+def pg_url() -> Iterator[str]:
+    """A fresh, empty database on the test server, dropped afterwards."""
+    assert SERVER is not None
+    name = f"kraby_{uuid.uuid4().hex[:10]}"
+    admin = sa.create_engine(SERVER, isolation_level="AUTOCOMMIT")
+    with admin.connect() as conn:
+        conn.execute(sa.text(f"CREATE DATABASE {name}"))
+    url = sa.engine.make_url(SERVER).set(database=name).render_as_string(hide_password=False)
+    try:
+        yield url
+    finally:
+        with admin.connect() as conn:
+            conn.execute(sa.text("SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
+                                 "WHERE datname = :n"), {"n": name})
+            conn.execute(sa.text(f"DROP DATABASE IF EXISTS {name}"))
+        admin.dispose()
+
+
+def _trials(url: str, name: str) -> list[optuna.trial.FrozenTrial]:
+    try:
+        return optuna.load_study(study_name=name, storage=url).get_trials(deepcopy=False)
+    except KeyError:
+        return []
+
+
+def _wait_for(predicate, timeout: float = 180.0) -> None:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.2)
+    raise AssertionError("timed out")
+
+
+def _kill_tree(proc) -> None:  # type: ignore[no-untyped-def]
+    for pid in [proc.pid, *children(proc.pid, workers_only=False)]:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    proc.wait()
+
+
+def _three_commands_one_killed(args: list[str], cwd: Path, url: str, name: str) -> list[str]:
+    procs = [spawn_cli(*args, cwd=cwd) for _ in range(3)]
+    _wait_for(lambda: sum(t.state == TrialState.RUNNING for t in _trials(url, name)) >= 3)
+    time.sleep(0.5)
+    _kill_tree(procs[0])
+    outputs = []
+    for proc in procs[1:]:
+        out, _ = proc.communicate(timeout=600)
+        assert proc.returncode == 0, out
+        outputs.append(out)
+    return outputs
+
+
+@pytest.mark.slow
+def test_three_commands_share_one_sweep_and_a_killed_trial_runs_again(
+        workdir: Path, pg_url: str) -> None:
+    args = ["run", "study=clip_range", "workers=1", f"storage={pg_url}", *LONGER,
+            *FAST_HEARTBEAT]
+    _three_commands_one_killed(args, workdir, pg_url, "clip_range")
+    trials = _trials(pg_url, "clip_range")
+    complete = sorted(t.user_attrs["key"] for t in trials if t.state == TrialState.COMPLETE)
+    assert complete == sorted(f"v{v}-s{s}" for v in range(4) for s in range(2))
+    latest = attempts_by_key(trials)
+    assert all(t.state == TrialState.COMPLETE for t in latest.values())
+    failed = [t for t in trials if t.state == TrialState.FAIL]
+    assert len(failed) == 1, "exactly the killed command's trial failed"
+    assert superseded(trials) == {failed[0].number}
+    assert not [t for t in trials if t.state in (TrialState.RUNNING, TrialState.WAITING)]
+
+
+@pytest.mark.slow
+def test_three_commands_share_one_search_and_respect_its_total(
+        workdir: Path, pg_url: str) -> None:
+    (workdir / "conf" / "search").mkdir(parents=True)
+    (workdir / "conf" / "search" / "pg.yaml").write_text(SPACE)
+    args = ["optuna", "--trials", "6", "search=pg", "--workers", "1", f"--storage={pg_url}",
+            *LONGER, "budget.seeds=1", *FAST_HEARTBEAT]
+    _three_commands_one_killed(args, workdir, pg_url, "pgsearch")
+    trials = _trials(pg_url, "pgsearch")
+    replaced = superseded(trials)
+    counted = [t for t in trials if t.number not in replaced]
+    assert len(counted) == 6
+    assert all(t.state == TrialState.COMPLETE for t in counted)
+    failed = [t for t in trials if t.state == TrialState.FAIL]
+    assert len(failed) == 1 and replaced == {failed[0].number}
+    retry = next(t for t in trials if t.user_attrs.get("retry_of") == failed[0].number)
+    assert retry.params == failed[0].params
+
+
+def test_a_sweep_on_postgresql_runs_and_lists(workdir: Path, pg_url: str,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("run", "study=clip_range", "budget.seeds=1", "workers=2",
+                   f"storage={pg_url}", *TINY) == 0
+    trials = _trials(pg_url, "clip_range")
+    assert len(trials) == 4 and all(t.state == TrialState.COMPLETE for t in trials)
+    capsys.readouterr()
+    assert run_cli("list", f"storage={pg_url}") == 0
+    assert "4/4" in capsys.readouterr().out
+
+
+def test_an_unreachable_server_is_one_line_and_non_zero(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    url = "postgresql+psycopg://nobody@127.0.0.1:9/nothing"
+    assert run_cli("run", "study=clip_range", f"storage={url}", *TINY) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("kraby-study: error: cannot open the store") and err.count("\n") == 1
+
+
+class _Flaky:
+    def __init__(self, failures: int) -> None:
+        self.failures = failures
+        self.calls = 0
+
+    def next_trial(self) -> str:
+        self.calls += 1
+        if self.calls <= self.failures:
+            raise sa.exc.OperationalError("SELECT 1", {}, Exception("server closed the "
+                                                                    "connection"))
+        return "claimed"
+
+
+def test_a_lost_database_is_retried_then_given_up(capsys: pytest.CaptureFixture[str]) -> None:
+    flaky = _Flaky(failures=2)
+    assert Retrying(flaky, patience=30, stream=os.sys.stdout).next_trial() == "claimed"
+    assert flaky.calls == 3
+    assert "retrying" in capsys.readouterr().out
+    with pytest.raises(DatabaseLost, match="lost the database for 1 s"):
+        Retrying(_Flaky(failures=10**6), patience=1, stream=os.sys.stdout).next_trial()
