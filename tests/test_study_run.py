@@ -253,3 +253,27 @@ def test_resume_after_the_command_is_killed(workdir: Path) -> None:
     assert retried and all(t.user_attrs["failure"].startswith("interrupted") for t in retried)
     assert sorted(t.number for t in retried) == sorted(
         t.user_attrs["retry_of"] for t in study.get_trials() if "retry_of" in t.user_attrs)
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_cleanly_and_the_rerun_completes(workdir: Path) -> None:
+    import subprocess
+    import sys
+
+    db = workdir / "studies" / "kraby.db"
+    proc = subprocess.Popen([sys.executable, "-m", "kraby_study.cli", "run", "study=clip_range",
+                             "workers=2", *SLOWER], cwd=workdir, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    _wait_for(lambda: _complete_count(db, "clip_range") >= 1)
+    _wait_for(lambda: _running_trials(db, "clip_range") >= 1)
+    os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C sends: the whole group
+    out, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 130, out
+    assert "interrupted, queued for the next run" in out
+    assert _running_trials(db, "clip_range") == 0
+    kept = _complete_keys(db, "clip_range")
+    assert kept
+    assert run_cli("run", "study=clip_range", "workers=2", *SLOWER) == 0
+    final = _complete_keys(db, "clip_range")
+    assert set(kept) <= set(final)
+    assert final == sorted(f"v{v}-s{s}" for v in range(4) for s in range(2))
