@@ -188,6 +188,21 @@ def cmd_best(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_report(args: argparse.Namespace) -> int:
+    """Redraw the figures and tables of the stored studies."""
+    from kraby_study.report import run_report
+
+    # study=NAME names a stored study here (a search or a renamed sweep too), not the Hydra
+    # group of study files, so it is taken out before composing.
+    names = [o.split("=", 1)[1] for o in args.overrides if o.startswith("study=")]
+    overrides = [o for o in args.overrides if not o.startswith("study=")]
+    if len(names) > 1:
+        raise ConfigError("report takes one study=NAME (or none for every study)")
+    cfg = _compose(overrides)
+    return run_report(cfg.storage, cfg.out, study=names[0] if names else None,
+                      fmt=args.format, stream=sys.stdout, policy=not args.no_policy)
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors."""
 
@@ -209,6 +224,8 @@ def build_parser() -> argparse.ArgumentParser:
         ("list", cmd_list, "the studies in the store with their progress"),
         ("optuna", cmd_optuna, "an Optuna search (TPE, pruning) over conf/search/ppo.yaml"),
         ("best", cmd_best, "print a study's best settings and write them as conf/ppo/NAME.yaml"),
+        ("report", cmd_report, "redraw every figure and table of the stored studies into out= "
+         "(default reports/): study=NAME for one"),
     ]
     parsers = {}
     for name, func, text in commands:
@@ -239,6 +256,11 @@ def build_parser() -> argparse.ArgumentParser:
     best.add_argument("--study-name", help="the study (default: the search's name, ppo_search)")
     best.add_argument("--name", help="config name to write (default best_<study>)")
     best.add_argument("--storage", help="database URL (default sqlite:///studies/kraby.db)")
+    report = parsers["report"]
+    report.add_argument("--format", choices=["png", "svg"], default="png",
+                        help="figure format (default png)")
+    report.add_argument("--no-policy", action="store_true",
+                        help="skip the animated GIF of the best policy")
     return parser
 
 

@@ -1,0 +1,85 @@
+"""Time ``write_report`` on a large synthetic store (a measurement, not a test).
+
+The store holds sweeps of 10 values x 10 seeds plus one Optuna search, ``--trials`` trials in
+all, each with ``--points`` learning-curve points, written through Optuna and
+``kraby_study.store`` like real runs (no training). Goal: under 30 s for 500 trials x 250 points.
+Usage::
+
+    python benchmarks/bench_report.py [--trials 500] [--points 250] [--format png] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import optuna
+
+from kraby_study.report import write_report
+from kraby_study.report.synthetic import add_search, add_sweep, sweep_runs
+from kraby_study.store import Store
+
+SWEEPS = [
+    ("ent_coef", "ppo.ent_coef", [1e-8, 1e-6, 1e-4, 1e-3, 3e-3, 0.01, 0.03, 0.1, 0.3, 1.0]),
+    ("gamma", "ppo.gamma", [0.2, 0.4, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95, 0.98, 0.9999]),
+    ("n_steps", "ppo.n_steps", [8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096]),
+    ("gae_lambda", "ppo.gae_lambda", [0.8, 0.85, 0.9, 0.92, 0.95, 0.97, 0.98, 0.99, 0.995, 1.0]),
+    ("learning_rate", "ppo.learning_rate",
+     [1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 0.1, 1.0]),
+]
+SEEDS = 10
+STEPS = 250_000
+
+
+def build_store(url: str, trials: int, points: int) -> int:
+    """Write sweeps of 100 runs while they fit, then a search with the remaining trials."""
+    rng = np.random.default_rng(0)
+    written = 0
+    with_store = Store(url)
+    try:
+        for name, parameter, values in SWEEPS:
+            if trials - written < len(values) * SEEDS + 20:
+                break
+            runs = sweep_runs(values, SEEDS, points, STEPS, rng, failed=2)
+            add_sweep(with_store, name, parameter, values, runs, steps=STEPS,
+                      curve_every=STEPS // points)
+            written += len(runs)
+        if trials > written:
+            add_search(with_store, "search", trials - written, rng, steps=STEPS, points=points)
+            written = trials
+    finally:
+        with_store.close()
+    return written
+
+
+def main() -> None:
+    """Build the store, report it, print the timings."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=500)
+    parser.add_argument("--points", type=int, default=250)
+    parser.add_argument("--format", default="png", choices=["png", "svg"])
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="write the store and report here instead of a temporary folder")
+    args = parser.parse_args()
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    with tempfile.TemporaryDirectory() as tmp:
+        root = args.keep or Path(tmp)
+        root.mkdir(parents=True, exist_ok=True)
+        url = f"sqlite:///{root / 'bench.db'}"
+        start = time.perf_counter()
+        trials = build_store(url, args.trials, args.points)
+        built = time.perf_counter() - start
+        start = time.perf_counter()
+        index = write_report(url, root / "report", fmt=args.format)
+        seconds = time.perf_counter() - start
+    print(f"store: {trials} trials x {args.points} curve points, "
+          f"{len(index.studies)} studies (built in {built:.1f} s)")
+    print(f"write_report: {seconds:.2f} s for {len(index.files)} files "
+          f"({'under' if seconds < 30 else 'OVER'} the 30 s goal)")
+
+
+if __name__ == "__main__":
+    main()

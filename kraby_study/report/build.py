@@ -1,0 +1,212 @@
+"""``write_report``: every study of a store -> figures, tables, ``index.md`` and ``index.html``.
+
+The store is read first (one query per table per study) and closed before anything is drawn.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+from typing import Any, TextIO
+
+from sqlalchemy.engine import make_url
+
+from kraby_study.config import ConfigError, sqlite_path
+from kraby_study.report import search_output, sweep_output
+from kraby_study.report.document import (
+    Block,
+    Heading,
+    Image,
+    Links,
+    Table,
+    Text,
+    to_html,
+    to_markdown,
+)
+from kraby_study.report.results import ReportIndex, StudyReport
+from kraby_study.report.search import build_search
+from kraby_study.report.source import (
+    StudyData,
+    check_format,
+    load_study,
+    report_store,
+    select_studies,
+)
+from kraby_study.report.stats import INTERVAL_NAME, TEST_NAME
+from kraby_study.report.sweep import build_sweep
+
+TITLE = "kraby-study report"
+Candidates = list[tuple[str, dict[str, Any], str]]
+
+
+def folder_name(name: str, taken: set[str]) -> str:
+    """A file-system-safe, unique folder name for a study."""
+    base = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "study"
+    candidate, counter = base, 2
+    while candidate in taken:
+        candidate, counter = f"{base}_{counter}", counter + 1
+    taken.add(candidate)
+    return candidate
+
+
+def find_model(path: str, url: str) -> Path | None:
+    """A saved model file: as stored, or relative to the store's folder (for relative paths
+    recorded by a command run from another directory)."""
+    model = Path(path)
+    if model.is_file():
+        return model
+    db = sqlite_path(url)
+    if model.is_absolute() or db is None:
+        return None
+    for base in (db.parent, db.parent.parent):
+        for candidate in (base / model, base / Path(*model.parts[-3:])):
+            if candidate.is_file():
+                return candidate
+    return None
+
+
+def add_policy(report: StudyReport, candidates: Candidates, url: str, rel: str) -> None:
+    """Animate the best saved policy of a study, or say why there is none."""
+    if not candidates:
+        report.notes.append("no saved model (save_models=false?): no policy animation")
+        return
+    for path, settings, description in candidates:
+        model = find_model(path, url)
+        if model is None:
+            continue
+        from kraby_study.report.policy import render_policy
+
+        target = report.folder / "policy.gif"
+        try:
+            render_policy(str(model), settings, target)
+        except Exception as err:  # noqa: BLE001 - a broken model must not cost the whole report
+            first = (str(err).strip().splitlines() or [type(err).__name__])[0]
+            report.notes.append(f"policy animation failed for {model}: {first}")
+            return
+        report.files.append(target)
+        image = Image(f"{rel}/policy.gif", "trained policy",
+                      f"The best trained policy, {description}, reaching 3 fixed targets "
+                      "(deterministic actions, real time).")
+        links = [i for i, b in enumerate(report.blocks) if isinstance(b, Links)]
+        report.blocks.insert(links[-1] if links else len(report.blocks), image)
+        return
+    report.notes.append(f"saved model not found ({candidates[0][0]}): no policy animation")
+
+
+def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
+                 policy: bool) -> StudyReport:
+    """The files and index section of one study."""
+    candidates: Candidates
+    if data.kind in ("sweep", "train"):
+        sweep = build_sweep(data)
+        report = sweep_output.write_sweep(sweep, folder, rel, fmt)
+        candidates = sweep_output.policy_candidates(sweep)
+    elif len(data.study.directions) > 1:
+        folder.mkdir(parents=True, exist_ok=True)
+        report = StudyReport(name=data.name, kind=data.kind, folder=folder,
+                             status=f"{len(data.trials)} trials", finished=True)
+        report.notes.append("multi-objective study: not drawn (kraby-study reports single "
+                            "objectives)")
+        report.blocks = [Heading(data.name, 2)]
+        candidates = []
+    else:
+        search = build_search(data)
+        report = search_output.write_search(search, folder, rel, fmt)
+        candidates = search_output.policy_candidates(search)
+    if policy and (data.kind != "optuna" or candidates):
+        add_policy(report, candidates, url, rel)
+    if report.notes:
+        report.blocks.insert(min(2, len(report.blocks)),
+                             Text("Note: " + "; ".join(report.notes) + "."))
+    return report
+
+
+def _shown_url(url: str) -> str:
+    return make_url(url).render_as_string(hide_password=True)
+
+
+def _overview(reports: list[StudyReport]) -> Table:
+    rows = [[r.name, r.kind, r.status if r.finished else f"partly finished: {r.status}",
+             f"{r.folder.name}/"] for r in reports]
+    return Table(["study", "kind", "status", "folder"], rows)
+
+
+def index_blocks(url: str, reports: list[StudyReport]) -> list[Block]:
+    """The index page: what the numbers mean, an overview, then every study's section."""
+    blocks: list[Block] = [
+        Heading(TITLE, 1),
+        Text(f"Store: {_shown_url(url)}. {len(reports)} stud{'y' if len(reports) == 1 else 'ies'}"
+             " reported."),
+        Text("Final score: mean episode reward over the last 10 % of a run's training "
+             "(reward = minus the squared tip-target distance in m^2, summed over the episode). "
+             f"Intervals and bands: {INTERVAL_NAME}. Values marked '\u2248 best': {TEST_NAME} "
+             "(no correction for multiple comparisons). Figures use complete runs only; failed "
+             "runs are listed."),
+        _overview(reports),
+    ]
+    for report in reports:
+        blocks += report.blocks
+    return blocks
+
+
+def write_report(url: str, out: Path | str, study: str | None = None, fmt: str = "png",
+                 policy: bool = True) -> ReportIndex:
+    """Report every study of a store (or one) into ``out``.
+
+    Args:
+        url: Database URL of the store (SQLite file or PostgreSQL); never created.
+        out: Output folder: ``out/<study>/`` per study, ``out/index.md`` and ``out/index.html``.
+        study: Report only this study.
+        fmt: Figure format, png or svg (animations are GIFs either way).
+        policy: Animate the best saved policy of each study (needs PyBullet and SB3).
+
+    Returns:
+        What was written.
+
+    Raises:
+        ConfigError: A bad format, database URL or output folder; one-line message.
+        StoreError: A missing, empty or unreadable store, a store without studies, or an
+            unknown study name; one-line message.
+    """
+    start = time.perf_counter()
+    fmt = check_format(fmt)
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"report folder {out} is a file")
+    with report_store(url) as store:
+        studies = [load_study(store, name) for name in select_studies(store, study)]
+    out.mkdir(parents=True, exist_ok=True)
+    taken: set[str] = set()
+    reports = []
+    for data in studies:
+        rel = folder_name(data.name, taken)
+        reports.append(report_study(data, out / rel, rel, fmt, url, policy))
+    blocks = index_blocks(url, reports)
+    markdown, html = out / "index.md", out / "index.html"
+    markdown.write_text(to_markdown(blocks), encoding="utf-8")
+    html.write_text(to_html(blocks, TITLE), encoding="utf-8")
+    return ReportIndex(out=out, markdown=markdown, html=html, studies=reports,
+                       seconds=time.perf_counter() - start)
+
+
+def run_report(url: str, out: Path | str, study: str | None = None, fmt: str = "png",
+               stream: TextIO | None = None, policy: bool = True) -> int:
+    """``kraby-study report``: write the report and say where it is; returns the exit code.
+
+    Raises:
+        ConfigError: As :func:`write_report`.
+        StoreError: As :func:`write_report`.
+    """
+    index = write_report(url, out, study=study, fmt=fmt, policy=policy)
+    if stream is not None:
+        for report in index.studies:
+            line = f"{report.name} ({report.kind}): {report.status}"
+            if not report.finished:
+                line += " [partly finished]"
+            print(line, file=stream)
+            for note in report.notes:
+                print(f"  note: {note}", file=stream)
+        print(f"report: {len(index.studies)} stud{'y' if len(index.studies) == 1 else 'ies'}, "
+              f"{len(index.files)} files in {index.seconds:.1f} s -> {index.html}", file=stream)
+    return 0

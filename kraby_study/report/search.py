@@ -1,0 +1,197 @@
+"""An Optuna search (or any Optuna study) as tables: trials, parameters, importances.
+
+Works on any single-objective study with complete, pruned and failed trials; kraby searches
+add env-step checkpoints (``pruned_at``) and timings in user attributes.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import optuna
+import pandas as pd
+from optuna.distributions import (
+    BaseDistribution,
+    CategoricalDistribution,
+    FloatDistribution,
+    IntDistribution,
+)
+from optuna.study import StudyDirection
+from optuna.trial import FrozenTrial
+
+from kraby_study.report.source import StudyData
+from kraby_study.report.sweep import outcome
+
+TOP = 10
+"""Rows of the top-trials table."""
+
+
+@dataclass
+class Search:
+    """Everything the figures and tables of one search need.
+
+    Attributes:
+        data: The stored study.
+        maximize: Whether higher objective values are better.
+        trials: One row per counted trial: number, outcome, value, env_steps, wall_time,
+            pruned_at, failure, then one column per parameter.
+        params: Parameter names, in first-seen order.
+        distributions: A distribution per parameter (from the trials that used it).
+        importances: Parameter importances (PED-ANOVA), or None with ``importance_note`` saying why.
+    """
+
+    data: StudyData
+    maximize: bool
+    trials: pd.DataFrame
+    params: list[str]
+    distributions: dict[str, BaseDistribution]
+    importances: dict[str, float] | None
+    importance_note: str
+
+    @property
+    def complete(self) -> list[FrozenTrial]:
+        """Complete trials with a value."""
+        return [t for t in self.data.trials if outcome(t) == "complete" and t.value is not None]
+
+    @property
+    def best(self) -> FrozenTrial | None:
+        """The best complete trial."""
+        done = self.complete
+        if not done:
+            return None
+        pick = max if self.maximize else min
+        return pick(done, key=lambda t: float(t.value))
+
+    def counts(self) -> dict[str, int]:
+        """Trials complete, pruned, failed and pending (planned trials not started are pending)."""
+        outcomes = self.trials["outcome"].value_counts()
+        counts = {name: int(outcomes.get(name, 0))
+                  for name in ("complete", "pruned", "failed", "pending")}
+        planned = max(self.data.planned or 0, len(self.trials))
+        counts["pending"] += planned - len(self.trials)
+        counts["planned"] = planned
+        return counts
+
+    @property
+    def finished(self) -> bool:
+        """No trial is still to come."""
+        return self.counts()["pending"] == 0
+
+    def status(self) -> str:
+        """E.g. '50/50 trials done: 31 complete, 17 pruned, 2 failed'."""
+        c = self.counts()
+        done = c["complete"] + c["pruned"] + c["failed"]
+        text = (f"{done}/{c['planned']} trials done: {c['complete']} complete, "
+                f"{c['pruned']} pruned, {c['failed']} failed")
+        return text + (f", {c['pending']} pending" if c["pending"] else "")
+
+
+def param_columns(trials: list[FrozenTrial]) -> tuple[list[str], dict[str, BaseDistribution]]:
+    """Parameter names in first-seen order, and a distribution for each."""
+    names: list[str] = []
+    distributions: dict[str, BaseDistribution] = {}
+    for trial in trials:
+        for name, distribution in trial.distributions.items():
+            if name not in distributions:
+                names.append(name)
+                distributions[name] = distribution
+    return names, distributions
+
+
+def importances(study: optuna.Study, trials: list[FrozenTrial],
+                params: list[str]) -> tuple[dict[str, float] | None, str]:
+    """PED-ANOVA importances of the parameters (Optuna's default evaluator, no scikit-learn),
+    or None and the reason they cannot be computed."""
+    done = [t for t in trials if outcome(t) == "complete" and t.value is not None]
+    if len(done) < 2:
+        return None, f"parameter importances need at least 2 complete trials ({len(done)} so far)"
+    varying = [p for p in params if len({repr(t.params.get(p)) for t in done}) > 1]
+    if not varying:
+        return None, "no parameter varies across the complete trials"
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            result = optuna.importance.get_param_importances(
+                study, evaluator=optuna.importance.PedAnovaImportanceEvaluator(),
+                params=varying)
+    except (RuntimeError, ValueError) as err:
+        return None, f"parameter importances could not be computed ({err})"
+    return {k: float(v) for k, v in result.items()}, ""
+
+
+def trial_rows(trials: list[FrozenTrial], params: list[str]) -> pd.DataFrame:
+    """One row per trial with its outcome, value, costs and parameters."""
+    rows = []
+    for trial in trials:
+        attrs = trial.user_attrs
+        state = outcome(trial)
+        steps = attrs.get("env_steps")
+        if steps is None and trial.intermediate_values:
+            steps = max(trial.intermediate_values)
+        rows.append({
+            "number": trial.number, "outcome": state,
+            "value": float(trial.value) if state == "complete" and trial.value is not None
+            else math.nan,
+            "env_steps": steps, "wall_time": attrs.get("wall_time", _duration(trial)),
+            "pruned_at": attrs.get("pruned_at", max(trial.intermediate_values)
+                                   if state == "pruned" and trial.intermediate_values else None),
+            "failure": attrs.get("failure", "") if state in ("failed",) else "",
+            **{name: trial.params.get(name) for name in params},
+        })
+    frame = pd.DataFrame(rows, columns=["number", "outcome", "value", "env_steps", "wall_time",
+                                        "pruned_at", "failure", *params])
+    for column in ("env_steps", "wall_time", "pruned_at"):
+        frame[column] = pd.to_numeric(frame[column], errors="coerce").astype(float)
+    return frame
+
+
+def _duration(trial: FrozenTrial) -> float | None:
+    if trial.datetime_start is None or trial.datetime_complete is None:
+        return None
+    return (trial.datetime_complete - trial.datetime_start).total_seconds()
+
+
+def build_search(data: StudyData) -> Search:
+    """The tables of a search study."""
+    maximize = data.study.directions[0] == StudyDirection.MAXIMIZE
+    params, distributions = param_columns(data.trials)
+    imp, note = importances(data.study, data.trials, params)
+    return Search(data=data, maximize=maximize, trials=trial_rows(data.trials, params),
+                  params=params, distributions=distributions, importances=imp,
+                  importance_note=note)
+
+
+def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:
+    """The best complete trials, best first, with a rank column."""
+    done = search.trials[search.trials["outcome"] == "complete"]
+    done = done.sort_values("value", ascending=not search.maximize, kind="stable").head(count)
+    return done.drop(columns=["outcome", "pruned_at", "failure"]).assign(
+        rank=range(1, len(done) + 1))[["rank", "number", "value", *search.params, "env_steps",
+                                       "wall_time"]]
+
+
+def format_param(value: Any, distribution: BaseDistribution | None) -> str:
+    """A parameter value for a table cell."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    if isinstance(distribution, CategoricalDistribution) or isinstance(value, str):
+        return str(value)
+    if isinstance(distribution, IntDistribution):
+        return str(int(value))
+    if isinstance(distribution, FloatDistribution) and distribution.log:
+        return f"{float(value):.3g}"
+    return f"{float(value):.4g}" if isinstance(value, float) else str(value)
+
+
+def is_log(distribution: BaseDistribution | None) -> bool:
+    """Whether a parameter is searched on a log scale."""
+    return isinstance(distribution, FloatDistribution | IntDistribution) and distribution.log
+
+
+def numeric_array(values: pd.Series) -> np.ndarray:
+    """A column as floats (NaN for missing)."""
+    return pd.to_numeric(values, errors="coerce").to_numpy(dtype=float)

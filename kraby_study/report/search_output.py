@@ -1,0 +1,150 @@
+"""A search's files (figures, CSV and Markdown tables) and its section of the index."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from kraby_study.report import search_plots
+from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text
+from kraby_study.report.document import to_markdown as blocks_to_markdown
+from kraby_study.report.results import StudyReport
+from kraby_study.report.search import Search, format_param, top_trials
+from kraby_study.report.style import number, styled
+
+TITLES = {"history": "optimization history", "importances": "parameter importances",
+          "slices": "slice plots", "intermediate": "intermediate values",
+          "parallel": "parallel coordinates"}
+CAPTIONS = {
+    "history": "Objective of every complete trial, and the best value so far; pruned and failed "
+               "trials marked along the bottom.",
+    "importances": "PED-ANOVA parameter importances (Optuna's default evaluator): how much "
+                   "each parameter matters for reaching the top 10 % of complete trials.",
+    "slices": "Objective against each parameter, one point per complete trial, coloured by "
+              "trial number.",
+    "intermediate": "Values reported at checkpoints; pruned trials stop where the pruner "
+                    "stopped them (x).",
+    "parallel": "Every complete trial as a line through its parameters and its objective.",
+}
+
+
+def _cell(value: Any) -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "-"
+    return number(float(value))
+
+
+def top_table(search: Search) -> Table:
+    """The top trials as formatted cells, best first."""
+    top = top_trials(search)
+    header = ["rank", "trial", "objective", *search.params, "env steps", "time (s)"]
+    rows = []
+    for _, row in top.iterrows():
+        rows.append([str(row["rank"]), str(row["number"]), _cell(row["value"]),
+                     *[format_param(row[p], search.distributions.get(p)) for p in search.params],
+                     f"{int(row['env_steps']):,}" if np.isfinite(row["env_steps"]) else "-",
+                     f"{row['wall_time']:.0f}" if np.isfinite(row["wall_time"]) else "-"])
+    marks = ["best"] + [""] * (len(rows) - 1) if rows else []
+    return Table(header, rows, marks=marks)
+
+
+def failed_items(search: Search) -> list[str]:
+    """One line per failed trial: number, parameters, reason."""
+    failed = search.trials[search.trials["outcome"] == "failed"]
+    items = []
+    for _, row in failed.iterrows():
+        params = ", ".join(f"{p}={format_param(row[p], search.distributions.get(p))}"
+                           for p in search.params)
+        items.append(f"trial {row['number']} ({params}): {row['failure'] or 'failed'}")
+    return items
+
+
+def _tables(search: Search, folder: Path) -> list[Path]:
+    paths = []
+    frames: list[tuple[str, pd.DataFrame]] = [("trials.csv", search.trials),
+                                              ("top_trials.csv", top_trials(search))]
+    if not search.data.curves.empty:
+        ids = {t._trial_id: t.number for t in search.data.trials}
+        curves = search.data.curves.assign(trial=search.data.curves["trial_id"].map(ids))
+        frames.append(("curves.csv", curves.drop(columns=["trial_id"])[
+            ["trial", "step", "mean_reward", "wall_time", "episodes"]]))
+    if search.importances:
+        frames.append(("importances.csv", pd.DataFrame(
+            sorted(search.importances.items(), key=lambda kv: -kv[1]),
+            columns=["parameter", "importance"])))
+    for name, frame in frames:
+        path = folder / name
+        frame.to_csv(path, index=False, float_format="%.6g")
+        paths.append(path)
+    return paths
+
+
+def verdict(search: Search) -> str:
+    """One sentence on the best trial."""
+    best = search.best
+    if best is None:
+        return "No trial is complete yet."
+    params = ", ".join(f"{p}={format_param(best.params.get(p), search.distributions.get(p))}"
+                       for p in search.params if p in best.params)
+    return f"Best: trial {best.number}, objective {number(float(best.value))} ({params})."
+
+
+def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyReport:
+    """Draw a search's figures and write its tables into ``folder``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    report = StudyReport(name=search.data.name, kind=search.data.kind, folder=folder,
+                         status=search.status(), finished=search.finished)
+    has_complete = bool(search.complete)
+    figures: list[tuple[str, Any]] = []
+    if has_complete:
+        figures.append(("history", search_plots.history))
+        if search.importances:
+            figures.append(("importances", search_plots.importances))
+        if search.params:
+            figures += [("slices", search_plots.slices), ("parallel", search_plots.parallel)]
+    else:
+        report.notes.append("no complete trial yet: no history, slices or parallel coordinates")
+    if any(t.intermediate_values for t in search.data.trials):
+        figures.append(("intermediate", search_plots.intermediate))
+    if not search.importances:
+        report.notes.append(search.importance_note)
+    images: list[Block] = []
+    with styled():
+        for stem, draw in figures:
+            path = draw(search, folder / f"{stem}.{fmt}")
+            report.files.append(path)
+            images.append(Image(f"{rel}/{path.name}", TITLES[stem], CAPTIONS[stem]))
+    tables = _tables(search, folder)
+    kind = "Optuna search" if search.data.kind == "search" else "Optuna study"
+    direction = "maximised" if search.maximize else "minimised"
+    section: list[Block] = [
+        Heading(search.data.name, 2),
+        Text(f"{kind} over {len(search.params)} parameter(s), objective {direction}. "
+             f"Status: {search.status()}."),
+        Text(verdict(search)), Text(f"Top {len(top_trials(search))} complete trials:"),
+        top_table(search)]
+    failed = failed_items(search)
+    if failed:
+        section += [Text(f"Failed trials ({len(failed)}):"), Items(failed)]
+    top_md = folder / "top_trials.md"
+    top_md.write_text(blocks_to_markdown([Heading(f"{search.data.name}: top trials", 1),
+                                          *section[1:]]), encoding="utf-8")
+    report.files += tables + [top_md]
+    report.blocks = section + images + [
+        Links("Tables", [(p.name, f"{rel}/{p.name}") for p in [top_md, *tables]])]
+    return report
+
+
+def policy_candidates(search: Search) -> list[tuple[str, dict[str, Any], str]]:
+    """Saved models of complete trials, best first: (path, settings, description)."""
+    done = sorted(search.complete, key=lambda t: float(t.value), reverse=search.maximize)
+    out = []
+    for trial in done:
+        path = trial.user_attrs.get("model_path")
+        if isinstance(path, str) and path:
+            out.append((path, dict(trial.user_attrs.get("settings") or {}),
+                        f"trial {trial.number} (objective {number(float(trial.value))})"))
+    return out

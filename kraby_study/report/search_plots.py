@@ -1,0 +1,237 @@
+"""The figures of a search: optimization history, parameter importances, slices,
+intermediate values (pruned trials cut short) and parallel coordinates.
+
+Drawn with matplotlib directly rather than ``optuna.visualization.matplotlib``, which changes
+matplotlib's global style and is experimental; the content is the same.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection
+from matplotlib.colors import Normalize
+from matplotlib.lines import Line2D
+from optuna.distributions import BaseDistribution, CategoricalDistribution
+
+from kraby_study.report.search import Search, is_log, numeric_array
+from kraby_study.report.style import (
+    BEST_COLOUR,
+    FAILED_COLOUR,
+    SINGLE,
+    STEPS_FORMATTER,
+    WIDE,
+    new_figure,
+    save,
+)
+
+CMAP = "viridis"
+PRUNED_COLOUR = "#e67e22"
+
+
+def _objective_label(search: Search) -> str:
+    if search.data.kind == "search":
+        return "objective (final score)"
+    return "objective value"
+
+
+def _title(search: Search, what: str) -> str:
+    title = f"{search.data.name}: {what}"
+    if not search.finished:
+        title += f"\npartly finished: {search.status()}"
+    return title
+
+
+def history(search: Search, path: Path) -> Path:
+    """Objective of every complete trial by trial number, and the best value so far."""
+    fig, (ax,) = new_figure(SINGLE)
+    frame = search.trials
+    done = frame[frame["outcome"] == "complete"]
+    ax.scatter(done["number"], done["value"], s=18, color="#3b6ea8", alpha=0.75, linewidths=0,
+               label=f"complete trial ({len(done)})", zorder=3)
+    if len(done):
+        ordered = done.sort_values("number")
+        running = (ordered["value"].cummax() if search.maximize else ordered["value"].cummin())
+        ax.step(ordered["number"], running, where="post", color=BEST_COLOUR, label="best so far",
+                zorder=4)
+    for state, colour, marker in (("pruned", PRUNED_COLOUR, "|"), ("failed", FAILED_COLOUR, "x")):
+        rows = frame[frame["outcome"] == state]
+        if len(rows):
+            ax.scatter(rows["number"], np.full(len(rows), 0.015),
+                       transform=ax.get_xaxis_transform(), marker=marker, s=30, color=colour,
+                       label=f"{state} trial ({len(rows)})", zorder=2)
+    ax.set_xlabel("trial number")
+    ax.set_ylabel(_objective_label(search))
+    ax.margins(y=0.08)
+    fig.legend(loc="outside lower center", ncols=4, frameon=False)
+    fig.suptitle(_title(search, "optimization history"))
+    return save(fig, path)
+
+
+def importances(search: Search, path: Path) -> Path:
+    """Horizontal bars of the PED-ANOVA importances, most important on top."""
+    assert search.importances is not None
+    items = sorted(search.importances.items(), key=lambda kv: kv[1])
+    fig, (ax,) = new_figure((SINGLE[0], 1.2 + 0.45 * len(items)))
+    ax.barh([k for k, _ in items], [v for _, v in items], color="#3b6ea8")
+    for index, (_, value) in enumerate(items):
+        ax.text(value, index, f" {value:.2f}", va="center", fontsize=9)
+    ax.set_xlabel("importance (PED-ANOVA, normalised to sum 1)")
+    ax.set_xlim(0, max(1e-9, max(v for _, v in items)) * 1.18)
+    ax.grid(axis="y", visible=False)
+    fig.suptitle(_title(search, "parameter importances"))
+    return save(fig, path)
+
+
+def _positions(values: np.ndarray | list[object],
+               distribution: BaseDistribution | None) -> tuple[np.ndarray, list[str] | None]:
+    if isinstance(distribution, CategoricalDistribution):
+        choices = [str(c) for c in distribution.choices]
+        return np.array([choices.index(str(v)) if str(v) in choices else np.nan
+                         for v in values], dtype=float), choices
+    return np.asarray(values, dtype=float), None
+
+
+def slices(search: Search, path: Path) -> Path:
+    """Objective against each parameter, coloured by trial number."""
+    done = search.trials[search.trials["outcome"] == "complete"]
+    count = len(search.params)
+    ncols = min(3, count)
+    nrows = math.ceil(count / ncols)
+    fig, _ = new_figure((min(3.4 * ncols + 1.2, 12.0), 2.9 * nrows + 0.8))
+    fig.clear()
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
+    norm = Normalize(vmin=0, vmax=max(1, int(search.trials["number"].max() or 1)))
+    mappable = None
+    for index, name in enumerate(search.params):
+        ax: Axes = axes[index // ncols][index % ncols]
+        distribution = search.distributions.get(name)
+        x, choices = _positions(done[name].tolist(), distribution)
+        if choices is not None:
+            x = x + np.random.default_rng(index).uniform(-0.15, 0.15, len(x))
+            ax.set_xticks(range(len(choices)), choices)
+            ax.set_xlim(-0.5, len(choices) - 0.5)
+        elif is_log(distribution):
+            ax.set_xscale("log")
+        mappable = ax.scatter(x, done["value"], c=done["number"], cmap=CMAP, norm=norm, s=16,
+                              alpha=0.8, linewidths=0)
+        ax.set_xlabel(name)
+        if index % ncols == 0:
+            ax.set_ylabel(_objective_label(search))
+    for index in range(count, nrows * ncols):
+        axes[index // ncols][index % ncols].set_visible(False)
+    if mappable is not None:
+        fig.colorbar(mappable, ax=axes, label="trial number", shrink=0.9)
+    fig.suptitle(_title(search, "objective against each parameter"))
+    return save(fig, path)
+
+
+def intermediate(search: Search, path: Path) -> Path:
+    """Reported values against steps; pruned trials end where they were stopped."""
+    fig, (ax,) = new_figure(SINGLE)
+    best = search.best
+    groups: dict[str, list[np.ndarray]] = {"complete": [], "pruned": []}
+    ends = []
+    states = dict(zip(search.trials["number"], search.trials["outcome"], strict=True))
+    for trial in search.data.trials:
+        state = states[trial.number]
+        if state not in groups or not trial.intermediate_values:
+            continue
+        steps = sorted(trial.intermediate_values)
+        line = np.array([[s, trial.intermediate_values[s]] for s in steps], dtype=float)
+        groups[state].append(line)
+        if state == "pruned":
+            ends.append(line[-1])
+    ax.add_collection(LineCollection(groups["complete"], colors="#3b6ea8", alpha=0.35,
+                                     linewidths=1.0))
+    ax.add_collection(LineCollection(groups["pruned"], colors=PRUNED_COLOUR, alpha=0.6,
+                                     linewidths=1.0))
+    if ends:
+        end = np.array(ends)
+        ax.scatter(end[:, 0], end[:, 1], marker="x", color=PRUNED_COLOUR, s=22, zorder=3)
+    handles = [Line2D([], [], color="#3b6ea8", alpha=0.6,
+                      label=f"complete ({len(groups['complete'])})"),
+               Line2D([], [], color=PRUNED_COLOUR, marker="x",
+                      label=f"pruned ({len(groups['pruned'])}), x = stopped")]
+    if best is not None and best.intermediate_values:
+        steps = sorted(best.intermediate_values)
+        ax.plot(steps, [best.intermediate_values[s] for s in steps], color=BEST_COLOUR,
+                linewidth=2.2, zorder=4)
+        handles.append(Line2D([], [], color=BEST_COLOUR, linewidth=2.2,
+                              label=f"best trial ({best.number})"))
+    ax.autoscale_view()
+    if search.data.kind == "search":
+        ax.set_xlabel("environment steps")
+        ax.xaxis.set_major_formatter(STEPS_FORMATTER)
+        ax.set_ylabel("mean episode reward at checkpoint")
+    else:
+        ax.set_xlabel("step")
+        ax.set_ylabel("intermediate value")
+    ax.legend(handles=handles, loc="best", frameon=False)
+    fig.suptitle(_title(search, "intermediate values"))
+    return save(fig, path)
+
+
+def _normalised(search: Search, name: str, values: list[object]) -> tuple[np.ndarray, list[str]]:
+    distribution = search.distributions.get(name)
+    x, choices = _positions(values, distribution)
+    if choices is not None:
+        return x / max(1, len(choices) - 1), choices
+    low, high = getattr(distribution, "low", np.nanmin(x)), getattr(distribution, "high",
+                                                                     np.nanmax(x))
+    if is_log(distribution):
+        x, low, high = np.log10(x), math.log10(low), math.log10(high)
+        labels = [f"{10 ** low:.3g}", f"{10 ** high:.3g}"]
+    else:
+        labels = [f"{low:.4g}", f"{high:.4g}"]
+    span = (high - low) or 1.0
+    return (x - low) / span, labels
+
+
+def parallel(search: Search, path: Path) -> Path:
+    """Each complete trial as a line across the parameter axes and the objective."""
+    done = search.trials[search.trials["outcome"] == "complete"].sort_values(
+        "value", ascending=search.maximize)
+    names = [*search.params, "objective"]
+    fig, (ax,) = new_figure((min(12.0, max(WIDE[0] * 0.8, 1.1 * len(names) + 1.5)), WIDE[1]))
+    columns, labels = [], []
+    for name in search.params:
+        column, label = _normalised(search, name, done[name].tolist())
+        columns.append(column)
+        labels.append(label)
+    objective = numeric_array(done["value"])
+    low, high = (np.nanmin(objective), np.nanmax(objective)) if len(objective) else (0.0, 1.0)
+    columns.append((objective - low) / ((high - low) or 1.0))
+    labels.append([f"{low:.3g}", f"{high:.3g}"])
+    ys = np.column_stack(columns) if columns else np.zeros((0, 0))
+    xs = np.arange(len(names), dtype=float)
+    segments = [np.column_stack([xs, row]) for row in ys]
+    norm = Normalize(vmin=low, vmax=high if high > low else low + 1)
+    lines = LineCollection(segments, cmap=CMAP, norm=norm, linewidths=1.1, alpha=0.75)
+    lines.set_array(objective)
+    ax.add_collection(lines)
+    for x, label in zip(xs, labels, strict=True):
+        ax.axvline(x, color="black", linewidth=0.8)
+        box = {"facecolor": "white", "edgecolor": "none", "pad": 1.0}
+        if len(label) == 2:
+            ax.text(x, -0.04, label[0], ha="center", va="top", fontsize=8.5, bbox=box)
+            ax.text(x, 1.04, label[1], ha="center", va="bottom", fontsize=8.5, bbox=box)
+        else:
+            for index, text in enumerate(label):
+                short = text if len(text) <= 13 else text[:12] + "\u2026"  # keep off next axis
+                ax.text(x + 0.04, index / max(1, len(label) - 1), short, fontsize=8.5,
+                        va="center", bbox=box)
+    ax.set_xticks(xs, names, fontsize=9 if len(names) > 7 else None)
+    ax.set_xlim(-0.3, len(names) - 0.7)
+    ax.set_ylim(-0.12, 1.12)
+    ax.set_yticks([])
+    ax.grid(False)
+    for side in ("left", "bottom"):
+        ax.spines[side].set_visible(False)
+    ax.tick_params(axis="x", length=0, pad=14)
+    fig.colorbar(lines, ax=ax, label=_objective_label(search), shrink=0.9)
+    fig.suptitle(_title(search, f"parallel coordinates of {len(done)} complete trials"))
+    return save(fig, path)

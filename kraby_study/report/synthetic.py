@@ -1,0 +1,180 @@
+"""Synthetic stores shaped like real ones, for the report's tests, benchmark and previews.
+
+Trials are written through Optuna (``add_trial``) with the user attributes a real run leaves,
+and their curves in one bulk insert, so a store of hundreds of runs takes seconds to make.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import optuna
+from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
+from optuna.trial import TrialState, create_trial
+
+from kraby_study.store import DEFINITION, KIND, PLANNED, Store, curve_points
+
+SETTINGS: dict[str, Any] = {
+    "env": {"observation": "default", "delta": 0.5, "time_step": 0.05 / 12, "frameskip": 12,
+            "max_episode_steps": 32},
+    "ppo": {"n_envs": 32, "n_steps": 32, "batch_size": 1024, "n_epochs": 30, "gamma": 0.8,
+            "gae_lambda": 0.95, "clip_range": 0.2, "ent_coef": 0.01, "vf_coef": 0.5,
+            "max_grad_norm": 0.5, "learning_rate": 0.01, "net_arch": [64, 64],
+            "activation": "tanh"},
+}
+
+
+@dataclass
+class Run:
+    """One run of a synthetic sweep.
+
+    Attributes:
+        value: The swept value.
+        seed: The run's seed.
+        status: complete, failed or pending (queued, not run yet).
+        final_score: Final score of a complete run.
+        wall_time: Training time (s).
+        failure: Reason of a failed run.
+        curve: (step, mean_reward, wall_time) points; empty for none.
+        model_path: Saved model, if any.
+    """
+
+    value: Any
+    seed: int
+    status: str = "complete"
+    final_score: float | None = None
+    wall_time: float = 10.0
+    failure: str | None = None
+    curve: list[tuple[int, float, float]] = field(default_factory=list)
+    model_path: str | None = None
+
+
+def learning_curve(final: float, steps: int, points: int, wall_time: float,
+                   rng: np.random.Generator, start: float = -4.0) -> list[tuple[int, float, float]]:
+    """An exponential approach from ``start`` to ``final`` with noise, evenly binned."""
+    every = max(1, steps // points)
+    grid = np.arange(1, points + 1) * every
+    shape = 1.0 - np.exp(-grid / (0.25 * steps))
+    reward = start + (final - start) * shape + rng.normal(0.0, 0.04 * abs(final - start) + 1e-3,
+                                                         points)
+    clock = wall_time * grid / grid[-1]
+    return [(int(s), float(r), float(c)) for s, r, c in zip(grid, reward, clock, strict=True)]
+
+
+def add_sweep(store: Store, name: str, parameter: str, values: Sequence[Any],
+              runs: Sequence[Run], steps: int = 250_000, curve_every: int = 1000) -> optuna.Study:
+    """A sweep study holding the given runs, with the attributes the runner stores."""
+    study = optuna.create_study(study_name=name, storage=store.storage, direction="maximize")
+    definition = {"kind": "sweep", "parameter": parameter, "values": list(values),
+                  "settings": SETTINGS, "steps": steps, "curve_every": curve_every}
+    study.set_user_attr(KIND, "sweep")
+    study.set_user_attr(DEFINITION, definition)
+    study.set_user_attr(PLANNED, len(runs))
+    short = parameter.split(".")[-1]
+    distribution = CategoricalDistribution(list(values))
+    curves: dict[int, list[tuple[int, float, float]]] = {}
+    for number, run in enumerate(runs):
+        key = f"v{list(values).index(run.value)}-s{run.seed}"
+        if run.status == "pending":
+            study.enqueue_trial({short: run.value}, user_attrs={"key": key, "seed": run.seed})
+            continue
+        settings = {"env": dict(SETTINGS["env"]), "ppo": dict(SETTINGS["ppo"])}
+        settings[parameter.split(".")[0]][short] = run.value
+        attrs: dict[str, Any] = {
+            "key": key, "seed": run.seed, "settings": settings, "steps": steps,
+            "model_path": run.model_path, "status": run.status, "env_steps": steps,
+            "wall_time": run.wall_time, "started": "2025-01-01T00:00:00+00:00",
+            "ended": "2025-01-01T00:10:00+00:00"}
+        if run.status == "complete":
+            attrs["final_score"] = run.final_score
+            state, value = TrialState.COMPLETE, run.final_score
+        else:
+            attrs["failure"] = run.failure or "diverged: the policy's parameters became NaN"
+            state, value = TrialState.FAIL, None
+        study.add_trial(create_trial(state=state, value=value, params={short: run.value},
+                                     distributions={short: distribution}, user_attrs=attrs))
+        curves[number] = run.curve
+    write_curves(store, study, curves)
+    return study
+
+
+def write_curves(store: Store, study: optuna.Study,
+                 curves: dict[int, list[tuple[int, float, float]]]) -> None:
+    """Insert the curves of trials (by trial number) in one statement."""
+    ids = {t.number: t._trial_id for t in study.get_trials(deepcopy=False)}
+    rows = [{"study_id": study._study_id, "trial_id": ids[number], "step": step,
+             "mean_reward": reward, "wall_time": clock, "episodes": 32}
+            for number, points in curves.items() for step, reward, clock in points]
+    if rows:
+        with store.engine.begin() as connection:
+            connection.execute(curve_points.insert(), rows)
+
+
+def sweep_runs(values: Sequence[Any], seeds: int, points: int, steps: int,
+               rng: np.random.Generator, failed: int = 0) -> list[Run]:
+    """Runs of a plausible sweep: the middle values do best; ``failed`` runs diverged."""
+    runs = []
+    middle = (len(values) - 1) / 2
+    for index, value in enumerate(values):
+        level = -0.4 - 0.12 * (index - middle) ** 2
+        for seed in range(seeds):
+            final = level + rng.normal(0.0, 0.08)
+            wall = 60.0 * (1.0 + 0.3 * index) * rng.uniform(0.9, 1.1)
+            runs.append(Run(value=value, seed=seed, final_score=final, wall_time=wall,
+                            curve=learning_curve(final, steps, points, wall, rng)))
+    for run in runs[len(runs) - failed:]:
+        run.status, run.final_score = "failed", None
+        run.failure = "diverged: ValueError: invalid values (nan) in the policy's output"
+    return runs
+
+
+def add_search(store: Store, name: str, trials: int, rng: np.random.Generator,
+               steps: int = 250_000, checkpoints: int = 10, points: int = 250) -> optuna.Study:
+    """A search study: TPE-free random parameters, intermediate values, pruned and failed trials."""
+    study = optuna.create_study(study_name=name, storage=store.storage, direction="maximize",
+                                pruner=optuna.pruners.NopPruner())
+    study.set_user_attr(KIND, "search")
+    study.set_user_attr(PLANNED, trials)
+    distributions = {
+        "learning_rate": FloatDistribution(1e-4, 1.0, log=True),
+        "gamma": FloatDistribution(0.2, 0.9999),
+        "n_epochs": IntDistribution(1, 50),
+        "activation": CategoricalDistribution(["tanh", "relu"]),
+    }
+    curves: dict[int, list[tuple[int, float, float]]] = {}
+    every = steps // checkpoints
+    for number in range(trials):
+        params = {
+            "learning_rate": float(10 ** rng.uniform(-4, 0)),
+            "gamma": float(rng.uniform(0.2, 0.9999)),
+            "n_epochs": int(rng.integers(1, 51)),
+            "activation": str(rng.choice(["tanh", "relu"])),
+        }
+        final = (-0.3 - 0.15 * (math.log10(params["learning_rate"]) + 2) ** 2
+                 - 0.4 * abs(params["gamma"] - 0.8) + rng.normal(0, 0.05))
+        wall = float(rng.uniform(50, 150))
+        curve = learning_curve(final, steps, points, wall, rng)
+        marks = {(i + 1) * every: float(np.mean([r for s, r, _ in curve
+                                                 if i * every < s <= (i + 1) * every]))
+                 for i in range(checkpoints)}
+        state, value = TrialState.COMPLETE, final
+        attrs: dict[str, Any] = {"status": "complete", "env_steps": steps, "wall_time": wall}
+        if number % 5 == 4:
+            stop = every * int(rng.integers(2, checkpoints))
+            marks = {s: v for s, v in marks.items() if s <= stop}
+            curve = [p for p in curve if p[0] <= stop]
+            state, value = TrialState.PRUNED, None
+            attrs.update(status="pruned", pruned_at=stop, env_steps=stop)
+        elif number % 23 == 22:
+            state, value, marks, curve = TrialState.FAIL, None, {}, curve[:20]
+            attrs.update(status="failed", failure="diverged: the policy's parameters became NaN")
+        study.add_trial(create_trial(state=state, value=value, params=params,
+                                     distributions=distributions, user_attrs=attrs,
+                                     intermediate_values=marks))
+        curves[number] = curve
+    write_curves(store, study, curves)
+    return study

@@ -1,0 +1,314 @@
+"""`kraby-study report`: figures, tables and index pages drawn from a store alone."""
+
+from __future__ import annotations
+
+import math
+import sqlite3
+import sys
+from pathlib import Path
+
+import numpy as np
+import optuna
+import pandas as pd
+import pytest
+from conftest import sqlite_url
+from optuna.distributions import FloatDistribution
+from optuna.trial import TrialState, create_trial
+from scipy import stats
+
+from kraby_study.config import ConfigError
+from kraby_study.report import ReportIndex, run_report, write_report
+from kraby_study.report.stats import t_interval, welch_p
+from kraby_study.report.synthetic import Run, add_sweep, learning_curve, write_curves
+from kraby_study.store import DEFINITION, KIND, PLANNED, Store, StoreError
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+SWEEP_FIGURES = ["learning_curves", "final_score", "wallclock", "training_time"]
+SWEEP_TABLES = ["summary.csv", "summary.md", "trials.csv", "curves.csv", "curves_mean.csv"]
+SEARCH_FIGURES = ["history", "importances", "slices", "parallel", "intermediate"]
+
+
+def _runs(scores: dict[float, list[float | None]], times: dict[float, list[float]],
+          steps: int = 4000) -> list[Run]:
+    """Runs with known final scores; None is a failed run."""
+    rng = np.random.default_rng(0)
+    runs = []
+    for value, finals in scores.items():
+        for seed, (final, wall) in enumerate(zip(finals, times[value], strict=True)):
+            if final is None:
+                runs.append(Run(value=value, seed=seed, status="failed", wall_time=wall,
+                                failure="diverged: ValueError: nan in the actions"))
+            else:
+                runs.append(Run(value=value, seed=seed, final_score=final, wall_time=wall,
+                                curve=learning_curve(final, steps, 40, wall, rng)))
+    return runs
+
+
+@pytest.fixture(scope="module")
+def sweep_store(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """ent_coef: 2 values x 3 seeds with known scores and one failed run; gamma: 3 values,
+    two runs still queued; a single-run (train) study."""
+    url = sqlite_url(tmp_path_factory.mktemp("store") / "k.db")
+    store = Store(url)
+    try:
+        add_sweep(store, "ent_coef", "ppo.ent_coef", [0.01, 0.1], _runs(
+            {0.01: [1.0, 2.0, 3.0, None], 0.1: [2.0, 4.0, 9.0]},
+            {0.01: [10.0, 12.0, 14.0, 3.0], 0.1: [20.0, 20.0, 26.0]}), steps=4000,
+            curve_every=100)
+        runs = _runs({0.8: [-1.0, -1.2], 0.9: [-0.5, -0.7], 0.95: [-0.6, -0.4]},
+                     {0.8: [5.0, 6.0], 0.9: [5.0, 6.0], 0.95: [5.0, 6.0]})
+        runs[-1].status = "pending"
+        runs[-2].status = "pending"
+        add_sweep(store, "gamma", "ppo.gamma", [0.8, 0.9, 0.95], runs, steps=4000,
+                  curve_every=100)
+        _add_train(store)
+    finally:
+        store.close()
+    return url
+
+
+def _add_train(store: Store) -> None:
+    study = optuna.create_study(study_name="train-abc", storage=store.storage,
+                                direction="maximize")
+    study.set_user_attr(KIND, "train")
+    study.set_user_attr(DEFINITION, {"kind": "train", "steps": 4000, "curve_every": 100})
+    study.set_user_attr(PLANNED, 2)
+    rng = np.random.default_rng(1)
+    for seed, final in enumerate([-0.5, -0.6]):
+        study.add_trial(create_trial(state=TrialState.COMPLETE, value=final, user_attrs={
+            "key": f"s{seed}", "seed": seed, "status": "complete", "final_score": final,
+            "wall_time": 4.0, "env_steps": 4000, "model_path": None}))
+    write_curves(store, study, {n: learning_curve(-0.5, 4000, 40, 4.0, rng) for n in (0, 1)})
+
+
+def _search_store(path: Path, complete: int = 12) -> str:
+    """A search made with Optuna's own ask/tell: checkpoints, pruning, one failure."""
+    url = sqlite_url(path)
+    store = Store(url)
+    study = optuna.create_study(study_name="tpe", storage=store.storage, direction="maximize",
+                                sampler=optuna.samplers.RandomSampler(seed=0))
+    study.set_user_attr(KIND, "search")
+    for number in range(complete + 4):
+        trial = study.ask()
+        lr = trial.suggest_float("learning_rate", 1e-4, 1.0, log=True)
+        gamma = trial.suggest_float("gamma", 0.2, 0.9999)
+        epochs = trial.suggest_int("n_epochs", 1, 50)
+        act = trial.suggest_categorical("activation", ["tanh", "relu"])
+        score = -abs(math.log10(lr) + 2) - abs(gamma - 0.8) - 0.01 * epochs - (act == "relu")
+        if number == 3:
+            store.set_attrs(trial._trial_id, {"failure": "diverged: NaN loss"})
+            study.tell(trial, state=TrialState.FAIL)
+            continue
+        for step in (1000, 2000, 3000, 4000):
+            trial.report(score * (2 - step / 4000), step)
+            if number % 4 == 1 and step == 2000:
+                store.set_attrs(trial._trial_id, {"pruned_at": step})
+                break
+        else:
+            study.tell(trial, score)
+            continue
+        study.tell(trial, state=TrialState.PRUNED)
+    store.close()
+    return url
+
+
+@pytest.fixture(scope="module")
+def sweep_report(sweep_store: str, tmp_path_factory: pytest.TempPathFactory) -> ReportIndex:
+    """The report of every study of ``sweep_store``, written once for the tests that read it."""
+    return write_report(sweep_store, tmp_path_factory.mktemp("reports"))
+
+
+def _read_summary(out: Path, study: str) -> pd.DataFrame:
+    return pd.read_csv(out / study / "summary.csv", keep_default_na=False,
+                       na_values=[""]).set_index("value")
+
+
+def test_sweep_report_writes_every_file(sweep_report: ReportIndex) -> None:
+    index = sweep_report
+    out = index.out
+    assert [s.name for s in index.studies] == ["ent_coef", "gamma", "train-abc"]
+    for study in ("ent_coef", "gamma"):
+        for stem in SWEEP_FIGURES:
+            png = out / study / f"{stem}.png"
+            assert png.read_bytes()[:8] == PNG_MAGIC and png.stat().st_size > 10_000
+        for name in SWEEP_TABLES:
+            assert (out / study / name).stat().st_size > 0
+    # A single-run study has no value axis: curves, final score and wall-clock only.
+    assert sorted(p.name for p in (out / "train-abc").glob("*.png")) == [
+        "final_score.png", "learning_curves.png", "wallclock.png"]
+    markdown = (out / "index.md").read_text()
+    html = (out / "index.html").read_text()
+    for path in index.files[2:]:
+        link = f"{path.parent.name}/{path.name}"
+        assert f"({link})" in markdown and f'href="{link}"' in html
+    assert all(path.exists() for path in index.files)
+    # No model was saved, and the index says so instead of showing an animation.
+    assert "no policy animation" in markdown and not list(out.rglob("*.gif"))
+    # The summary table is inline in both pages.
+    assert "| ent_coef | complete | failed |" in markdown and "<table>" in html
+
+
+def test_summary_numbers_equal_a_hand_computation(sweep_report: ReportIndex) -> None:
+    out = sweep_report.out
+    summary = _read_summary(out, "ent_coef")
+    t2 = 4.302652729911275  # Student t, 97.5 % quantile, 2 degrees of freedom
+    low = summary.loc[0.01]
+    assert (low["complete"], low["failed"], low["pending"]) == (3, 1, 0)
+    assert low["final_mean"] == pytest.approx(2.0)
+    assert low["final_sd"] == pytest.approx(1.0)
+    assert low["final_low"] == pytest.approx(2.0 - t2 / math.sqrt(3), rel=1e-5)
+    assert low["final_high"] == pytest.approx(2.0 + t2 / math.sqrt(3), rel=1e-5)
+    assert low["time_mean"] == pytest.approx(12.0)  # the failed run's 3 s is not a result
+    high = summary.loc[0.1]
+    assert (high["complete"], high["failed"]) == (3, 0)
+    assert high["final_mean"] == pytest.approx(5.0)
+    assert high["final_sd"] == pytest.approx(math.sqrt(13.0), rel=1e-5)
+    assert high["final_high"] == pytest.approx(5.0 + t2 * math.sqrt(13.0 / 3.0), rel=1e-5)
+    # Welch: t = 3 / sqrt(13/3 + 1/3), Welch-Satterthwaite degrees of freedom.
+    var = (1.0 / 3.0, 13.0 / 3.0)
+    t_stat = 3.0 / math.sqrt(sum(var))
+    dof = sum(var) ** 2 / (var[0] ** 2 / 2 + var[1] ** 2 / 2)
+    p = 2 * stats.t.sf(t_stat, dof)
+    assert low["p_vs_best"] == pytest.approx(p, rel=1e-4)
+    assert (high["mark"], low["mark"]) == ("best", "tie")  # p = 0.28: not told apart
+    text = (out / "ent_coef" / "summary.md").read_text()
+    assert "Best: ent_coef = 0.1, mean final score 5" in text
+    assert "Welch's t-test" in text and "95 % Student-t" in text
+
+
+def test_statistics_edge_cases() -> None:
+    low, high = t_interval([1.0, 1.0], [0.5, 0.5], [1, 4])
+    assert math.isnan(low[0]) and math.isnan(high[0])  # one seed: no interval
+    assert high[1] == pytest.approx(1.0 + stats.t.ppf(0.975, 3) * 0.25)
+    assert math.isnan(welch_p([1.0], [1.0, 2.0]))
+    assert welch_p([1.0, 1.0], [1.0, 1.0]) == 1.0
+    assert welch_p([1.0, 1.0], [2.0, 2.0]) == 0.0
+
+
+def test_partly_finished_study_says_so(sweep_report: ReportIndex) -> None:
+    report = sweep_report.studies[1]
+    assert report.name == "gamma" and not report.finished
+    assert report.status == "4/6 complete, 2 pending"
+    assert "partly finished: 4/6 complete, 2 pending" in sweep_report.markdown.read_text()
+    summary = _read_summary(sweep_report.out, "gamma")
+    assert summary.loc[0.95, "complete"] == 0 and summary.loc[0.95, "pending"] == 2
+    assert summary.loc[0.9, "mark"] == "best"
+
+
+def test_failed_runs_are_listed(sweep_report: ReportIndex) -> None:
+    out = sweep_report.out
+    line = "ent_coef = 0.01, seed 3 (trial 3): diverged: ValueError: nan in the actions"
+    assert line in (out / "index.md").read_text()
+    assert line in (out / "ent_coef" / "summary.md").read_text()
+    trials = pd.read_csv(out / "ent_coef" / "trials.csv")
+    failed = trials[trials["outcome"] == "failed"]
+    assert failed[["ent_coef", "seed"]].values.tolist() == [[0.01, 3]]
+
+
+def test_svg_on_request(sweep_store: str, tmp_path: Path) -> None:
+    index = write_report(sweep_store, tmp_path / "r", study="gamma", fmt="SVG", policy=False)
+    figures = [p for p in index.files if p.suffix in (".png", ".svg")]
+    assert figures and all(p.suffix == ".svg" for p in figures)
+    assert figures[0].read_text().lstrip().startswith("<?xml")
+
+
+def test_search_report(tmp_path: Path) -> None:
+    url = _search_store(tmp_path / "s.db")
+    out = tmp_path / "r"
+    index = write_report(url, out)
+    (report,) = index.studies
+    assert report.status == "16/16 trials done: 11 complete, 4 pruned, 1 failed"
+    for stem in SEARCH_FIGURES:
+        assert (out / "tpe" / f"{stem}.png").read_bytes()[:8] == PNG_MAGIC
+    top = pd.read_csv(out / "tpe" / "top_trials.csv")
+    assert len(top) == 10 and top["value"].is_monotonic_decreasing
+    study = optuna.load_study(study_name="tpe", storage=url)
+    assert top["value"].iloc[0] == pytest.approx(study.best_value)
+    trials = pd.read_csv(out / "tpe" / "trials.csv")
+    pruned = trials[trials["outcome"] == "pruned"]
+    assert len(pruned) == 4 and (pruned["pruned_at"] == 2000).all()
+    markdown = (out / "index.md").read_text()
+    assert "trial 3 (" in markdown and "diverged: NaN loss" in markdown
+    assert f"Best: trial {study.best_trial.number}" in markdown
+
+
+def test_search_with_too_few_trials_for_importances(tmp_path: Path) -> None:
+    url = sqlite_url(tmp_path / "s.db")
+    study = optuna.create_study(study_name="plain", storage=url)  # not made by kraby-study
+    distributions = {"x": FloatDistribution(0.0, 1.0)}
+    study.add_trial(create_trial(value=1.0, params={"x": 0.5}, distributions=distributions))
+    study.add_trial(create_trial(state=TrialState.WAITING))
+    index = write_report(url, tmp_path / "r")
+    (report,) = index.studies
+    assert any("at least 2 complete trials" in note for note in report.notes)
+    assert not (tmp_path / "r" / "plain" / "importances.png").exists()
+    assert (tmp_path / "r" / "plain" / "history.png").exists()
+    assert "1 pending" in report.status and not report.finished
+
+
+def _one_line_error(error: type[Exception], url: str, tmp_path: Path, **kwargs: object) -> str:
+    with pytest.raises(error) as info:
+        write_report(url, tmp_path / "r", **kwargs)  # type: ignore[arg-type]
+    message = str(info.value)
+    assert message and "\n" not in message
+    return message
+
+
+def test_bad_stores_get_a_one_line_error_and_are_never_created(tmp_path: Path) -> None:
+    missing = tmp_path / "nowhere" / "k.db"
+    assert "no study store" in _one_line_error(StoreError, sqlite_url(missing), tmp_path)
+    assert not missing.exists() and not missing.parent.exists()
+    empty = tmp_path / "empty.db"
+    empty.write_bytes(b"")
+    assert "empty" in _one_line_error(StoreError, sqlite_url(empty), tmp_path)
+    assert empty.stat().st_size == 0
+    junk = tmp_path / "junk.db"
+    junk.write_text("these are not the studies you are looking for\n")
+    assert "not a SQLite database" in _one_line_error(StoreError, sqlite_url(junk), tmp_path)
+    other = tmp_path / "other.db"
+    with sqlite3.connect(other) as connection:
+        connection.execute("CREATE TABLE things (x INTEGER)")
+    assert "not a study store" in _one_line_error(StoreError, sqlite_url(other), tmp_path)
+    bare = tmp_path / "bare.db"
+    Store(sqlite_url(bare)).close()
+    assert "no studies" in _one_line_error(StoreError, sqlite_url(bare), tmp_path)
+    assert not (tmp_path / "r").exists()
+
+
+def test_unknown_study_and_bad_format(sweep_store: str, tmp_path: Path) -> None:
+    message = _one_line_error(StoreError, sweep_store, tmp_path, study="gama")
+    assert "no study named 'gama'" in message and "ent_coef, gamma" in message
+    assert "png or svg" in _one_line_error(ConfigError, sweep_store, tmp_path, fmt="jpg")
+    assert "storage" in _one_line_error(ConfigError, "mysql://u@h/db", tmp_path)
+
+
+def test_run_report_prints_where_the_report_is(sweep_store: str, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_report(sweep_store, tmp_path / "r", study="gamma", stream=sys.stdout,
+                      policy=False) == 0
+    out = capsys.readouterr().out
+    assert "gamma (sweep): 4/6 complete, 2 pending [partly finished]" in out
+    assert str(tmp_path / "r" / "index.html") in out
+
+
+@pytest.mark.slow
+def test_report_of_a_trained_store_shows_the_policy(tmp_path: Path) -> None:
+    """A real (tiny) sweep, trained and reported: every figure, and the policy's GIF."""
+    from kraby_study.cli import main
+
+    url = sqlite_url(tmp_path / "k.db")
+    assert main(["run", "study=clip_range", "budget=smoke", "budget.steps=512",
+                 "budget.curve_every=64", "ppo.n_envs=4", "ppo.n_steps=32", "ppo.n_epochs=2",
+                 "ppo.net_arch=[8]", "budget.seeds=2", "workers=1", f"storage={url}",
+                 f"models_dir={tmp_path / 'models'}", "study.values=[0.1,0.2]"]) == 0
+    out = tmp_path / "reports"
+    index = write_report(url, out)
+    gif = out / "clip_range" / "policy.gif"
+    assert gif in index.files and gif.read_bytes()[:6] == b"GIF89a"
+    from PIL import Image
+
+    with Image.open(gif) as image:
+        assert image.n_frames == 3 * 33 and image.size[0] == 160
+    assert "clip_range/policy.gif" in (out / "index.md").read_text()
+    for stem in SWEEP_FIGURES:
+        assert (out / "clip_range" / f"{stem}.png").stat().st_size > 10_000
