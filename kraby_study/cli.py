@@ -11,6 +11,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from omegaconf import DictConfig
+from sqlalchemy import exc as sa_exc
 
 from kraby_study.compose import compose_config
 from kraby_study.config import ConfigError, worker_count
@@ -283,6 +284,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except DatabaseLost as err:
         print(f"kraby-study: error: {err}", file=sys.stderr)
+        return 1
+    except sa_exc.OperationalError as err:
+        # A database that fails outside the retried calls (while a study is being opened).
+        reason = str(err.orig or err).strip().splitlines()[0]
+        print(f"kraby-study: error: database error: {reason}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("kraby-study: interrupted", file=sys.stderr)

@@ -90,7 +90,7 @@ class BudgetConfig:
     name: str = "full"
     """Label of the budget."""
     steps: int = 250_000
-    """Environment steps per training run (rounded up to whole rollouts)."""
+    """Environment steps per training run (a run stops there, even inside a rollout)."""
     seeds: int = 10
     """Training runs (seeds) per value."""
     curve_every: int = 2048

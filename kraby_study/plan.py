@@ -34,7 +34,7 @@ class TrialSpec:
     seed: int
     """Seed of the policy, the sampler and every leg's resets."""
     steps: int
-    """Environment steps to train for (rounded up to whole rollouts by SB3)."""
+    """Environment steps to train for (exactly, to a multiple of n_envs)."""
     curve_every: int
     """Environment steps per learning-curve point."""
     settings: dict[str, Any]

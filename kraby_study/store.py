@@ -280,7 +280,7 @@ def record_result(store: Store, study: optuna.Study, trial_id: int, result: Any)
     attrs: dict[str, Any] = {"status": result.status, "env_steps": result.env_steps,
                              "wall_time": result.wall_time, "started": result.started,
                              "ended": result.ended}
-    for name in ("failure", "final_score", "pruned_at"):
+    for name in ("failure", "final_score", "train_reward", "pruned_at"):
         if getattr(result, name) is not None:
             attrs[name] = getattr(result, name)
     store.set_attrs(trial_id, attrs)

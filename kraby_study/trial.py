@@ -57,6 +57,9 @@ class TrialResult:
     """Why a failed run failed (diverged: ... for NaN losses or parameters)."""
     pruned_at: int | None = None
     """Environment steps at which a pruner stopped the run."""
+    train_reward: float | None = None
+    """Mean episode reward over the last 10 % of training (the final score unless the objective
+    is an evaluation)."""
     checkpoints: list[tuple[int, float]] = field(default_factory=list)
 
 
@@ -131,6 +134,7 @@ class _Run:
     failure: str | None = None
     pruned_at: int | None = None
     score: float | None = None
+    train_reward: float | None = None
     model: Any = None
 
 
@@ -161,8 +165,11 @@ def _train(spec: TrialSpec, seed: int, offset: int, on_checkpoint: CheckpointHoo
                 self.last_progress = now
                 on_progress(offset + self.num_timesteps)
             if spec.checkpoint_every and self.num_timesteps >= self.next_checkpoint:
-                return self._checkpoint()
-            return True
+                if not self._checkpoint():
+                    return False
+            # SB3 trains in whole rollouts; stopping here gives every run the same experience
+            # (the unfinished rollout is not learnt from).
+            return self.num_timesteps < spec.steps
 
         def _checkpoint(self) -> bool:
             step = self.num_timesteps
@@ -196,12 +203,13 @@ def _train(spec: TrialSpec, seed: int, offset: int, on_checkpoint: CheckpointHoo
         env.close()
     run.env_steps = int(run.model.num_timesteps) if run.model is not None else 0
     if run.failure is None and run.pruned_at is None:
+        run.train_reward = final_score(run.episodes, run.env_steps)
         if spec.objective == "evaluation":
             from kraby_study.evaluation import evaluate
 
             run.score = evaluate(run.model, spec.settings["env"], spec.eval_episodes)
         else:
-            run.score = final_score(run.episodes, run.env_steps)
+            run.score = run.train_reward
         if run.score is None or not math.isfinite(run.score):
             run.failure = "error: no finite score (no episode ended in the last 10 %)"
     return run
@@ -251,6 +259,8 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
         result.status, result.pruned_at = "pruned", last.pruned_at
     else:
         result.final_score = float(np.mean([r.score for r in runs]))
+        rewards = [r.train_reward for r in runs if r.train_reward is not None]
+        result.train_reward = float(np.mean(rewards)) if rewards else None
         if spec.model_path:
             best = max(runs, key=lambda r: float(r.score or -math.inf))
             Path(spec.model_path).parent.mkdir(parents=True, exist_ok=True)

@@ -194,3 +194,34 @@ class _no_exit:
 
     def __exit__(self, *exc: object) -> None:
         return None
+
+
+def test_evaluation_objective_scores_the_deterministic_policy(spaces: Path) -> None:
+    assert run_cli("optuna", "--trials", "1", "search=tiny", "--workers", "1", *TINY,
+                   "budget.seeds=1", "search.objective=evaluation",
+                   "search.eval_episodes=3") == 0
+    trial = load(spaces / "studies" / "kraby.db", "tiny").trials[0]
+    assert trial.state == TrialState.COMPLETE
+    # The evaluation is its own number: not the training reward of the last 10 %.
+    from kraby_study.evaluation import evaluation_targets
+    assert trial.value < 0 and trial.value == trial.user_attrs["final_score"]
+    assert trial.user_attrs["train_reward"] < 0
+    assert trial.value != trial.user_attrs["train_reward"]
+    assert evaluation_targets(3, 0.5).shape == (3, 3)
+    assert (evaluation_targets(3, 0.5) == evaluation_targets(3, 0.5)).all()
+
+
+def test_evaluation_is_deterministic_for_a_model(tmp_path: Path) -> None:
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    import kraby_envs
+    from kraby_study.evaluation import evaluate
+    from kraby_study.plan import resolved_settings
+
+    settings = resolved_settings(compose_config(["ppo=tuned"]))
+    env = gym.make(kraby_envs.ENV_ID)
+    model = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [8]})
+    first = evaluate(model, settings["env"], 4)
+    assert first == evaluate(model, settings["env"], 4)
+    assert -2.0 < first < 0
