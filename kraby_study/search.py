@@ -7,14 +7,15 @@ from typing import Any, TextIO
 
 import optuna
 from omegaconf import DictConfig
+from optuna.trial import FrozenTrial
 
 from kraby_study.config import ConfigError, rollout_size, to_container, validate_env, validate_ppo
 from kraby_study.ledger import superseded
 from kraby_study.plan import TrialSpec, fingerprint, model_path, resolved_settings, with_value
 from kraby_study.progress import Progress
 from kraby_study.runner import Retrying, RunSummary, run_trials
-from kraby_study.store import PLANNED, Store, record_result
-from kraby_study.trial import TrialResult
+from kraby_study.source import StudySource
+from kraby_study.store import PLANNED, Store
 
 SAMPLERS = ("tpe", "random")
 PRUNERS = ("median", "hyperband", "none")
@@ -174,19 +175,16 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
             "curve_every": int(cfg.budget.curve_every), "seed": int(cfg.seed)}
 
 
-class SearchSource:
+class SearchSource(StudySource):
     """Asks the sampler for trials until the study holds its total; prunes at checkpoints."""
 
     def __init__(self, store: Store, study: optuna.Study, cfg: DictConfig) -> None:
-        self.store = store
-        self.study = study
+        super().__init__(store, study)
         self.cfg = cfg
         self.total = int(cfg.search.trials)
 
     def _counted(self) -> int:
-        trials = self.study.get_trials(deepcopy=False)
-        replaced = superseded(trials)
-        return sum(1 for t in trials if t.number not in replaced)
+        return len(self.counted(self.study.get_trials(deepcopy=False)))
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
         while True:
@@ -230,29 +228,9 @@ class SearchSource:
         trial.report(value, step)
         return not trial.should_prune()
 
-    def record(self, trial_id: int, spec: TrialSpec, result: TrialResult) -> str:
-        record_result(self.store, self.study, trial_id, result)
-        if result.status == "complete":
-            return f"complete, score {result.final_score:.4g} ({result.wall_time:.0f} s)"
-        if result.status == "pruned":
-            return f"pruned at {result.pruned_at:,} env steps"
-        return f"failed ({result.failure})"
-
-    def interrupted(self, trial_id: int, spec: TrialSpec, reason: str) -> None:
-        self.store.give_back(self.study, trial_id, reason)
-
-    def heartbeat(self, trial_ids: list[int]) -> None:
-        for trial_id in trial_ids:
-            self.store.heartbeat(trial_id)
-
-    def running_elsewhere(self) -> bool:
-        if self.store.exclusive:
-            return False
-        self.store.fail_orphans(self.study)
-        trials = self.study.get_trials(deepcopy=False)
+    def counted(self, trials: list[FrozenTrial]) -> list[FrozenTrial]:
         replaced = superseded(trials)
-        return any(t.state in (optuna.trial.TrialState.RUNNING, optuna.trial.TrialState.WAITING)
-                   for t in trials if t.number not in replaced)
+        return [t for t in trials if t.number not in replaced]
 
 
 def run_search(store: Store, cfg: DictConfig, workers: int, stream: TextIO,

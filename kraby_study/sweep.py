@@ -5,14 +5,14 @@ from __future__ import annotations
 from typing import TextIO
 
 import optuna
-from optuna.trial import TrialState
+from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.ledger import attempts_by_key, is_final_failure, value_label, was_interrupted
 from kraby_study.plan import StudyPlan, TrialSpec
 from kraby_study.progress import Progress
 from kraby_study.runner import Retrying, RunSummary, run_trials
-from kraby_study.store import PLANNED, Store, record_result
-from kraby_study.trial import TrialResult
+from kraby_study.source import StudySource
+from kraby_study.store import PLANNED, Store
 
 
 def param_name(plan: StudyPlan) -> str | None:
@@ -40,12 +40,11 @@ def ensure_queued(store: Store, study: optuna.Study, plan: StudyPlan) -> int:
     return queued
 
 
-class SweepSource:
+class SweepSource(StudySource):
     """Hands out a sweep's queued trials and records their results."""
 
     def __init__(self, store: Store, study: optuna.Study, plan: StudyPlan) -> None:
-        self.store = store
-        self.study = study
+        super().__init__(store, study)
         self.plan = plan
         self.specs = {spec.key: spec for spec in plan.specs}
         self.name = param_name(plan)
@@ -70,26 +69,9 @@ class SweepSource:
     def checkpoint(self, trial_id: int, step: int, value: float) -> bool:
         return True
 
-    def record(self, trial_id: int, spec: TrialSpec, result: TrialResult) -> str:
-        record_result(self.store, self.study, trial_id, result)
-        if result.status == "complete":
-            return f"complete, score {result.final_score:.4g} ({result.wall_time:.0f} s)"
-        return f"failed ({result.failure})"
-
-    def interrupted(self, trial_id: int, spec: TrialSpec, reason: str) -> None:
-        self.store.give_back(self.study, trial_id, reason)
-
-    def heartbeat(self, trial_ids: list[int]) -> None:
-        for trial_id in trial_ids:
-            self.store.heartbeat(trial_id)
-
-    def running_elsewhere(self) -> bool:
-        if self.store.exclusive:
-            return False
-        self.store.fail_orphans(self.study)
-        latest = attempts_by_key(self.study.get_trials(deepcopy=False))
-        return any(latest[key].state in (TrialState.RUNNING, TrialState.WAITING)
-                   for key in self.specs if key in latest)
+    def counted(self, trials: list[FrozenTrial]) -> list[FrozenTrial]:
+        latest = attempts_by_key(trials)
+        return [latest[key] for key in self.specs if key in latest]
 
 
 def plan_counts(study: optuna.Study, plan: StudyPlan) -> tuple[int, int]:

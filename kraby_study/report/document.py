@@ -9,7 +9,10 @@ from __future__ import annotations
 import html
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from urllib.parse import quote
+
+import pandas as pd
 
 
 @dataclass(frozen=True)
@@ -165,3 +168,13 @@ def to_html(blocks: Sequence[Block], title: str) -> str:
             parts.append(f"<p>{html.escape(block.label)}: {links}</p>")
     parts.append("</body></html>\n")
     return "\n".join(parts)
+
+
+def write_csvs(folder: Path, frames: Sequence[tuple[str, pd.DataFrame]]) -> list[Path]:
+    """Write named tables as CSV files in a folder; returns their paths."""
+    paths = []
+    for name, frame in frames:
+        path = folder / name
+        frame.to_csv(path, index=False, float_format="%.6g")
+        paths.append(path)
+    return paths

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 
 from kraby_study.report import search_plots
-from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text
+from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
 from kraby_study.report.results import StudyReport
 from kraby_study.report.search import Search, format_param, top_trials
@@ -63,7 +63,6 @@ def failed_items(search: Search) -> list[str]:
 
 
 def _tables(search: Search, folder: Path) -> list[Path]:
-    paths = []
     frames: list[tuple[str, pd.DataFrame]] = [("trials.csv", search.trials),
                                               ("top_trials.csv", top_trials(search))]
     if not search.data.curves.empty:
@@ -75,11 +74,7 @@ def _tables(search: Search, folder: Path) -> list[Path]:
         frames.append(("importances.csv", pd.DataFrame(
             sorted(search.importances.items(), key=lambda kv: -kv[1]),
             columns=["parameter", "importance"])))
-    for name, frame in frames:
-        path = folder / name
-        frame.to_csv(path, index=False, float_format="%.6g")
-        paths.append(path)
-    return paths
+    return write_csvs(folder, frames)
 
 
 def verdict(search: Search) -> str:

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 
 from kraby_study.report import sweep_plots
-from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text
+from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
 from kraby_study.report.results import StudyReport
 from kraby_study.report.stats import ALPHA, INTERVAL_NAME, TEST_NAME
@@ -108,12 +108,7 @@ def _tables(sweep: Sweep, folder: Path) -> list[Path]:
     bands = bands.rename(columns={"value": sweep.name, "low": "ci_low", "high": "ci_high"})
     frames: list[tuple[str, pd.DataFrame]] = [("summary.csv", summary), ("trials.csv", trials),
                                               ("curves.csv", curves), ("curves_mean.csv", bands)]
-    paths = []
-    for name, frame in frames:
-        path = folder / name
-        frame.to_csv(path, index=False, float_format="%.6g")
-        paths.append(path)
-    return paths
+    return write_csvs(folder, frames)
 
 
 def describe_sweep(sweep: Sweep) -> str:
