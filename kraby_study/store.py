@@ -17,7 +17,6 @@ import os
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
-from pathlib import Path
 from typing import IO, Any
 
 import optuna
@@ -266,12 +265,6 @@ def opened(url: str, **kwargs: Any) -> Iterator[Store]:
         yield store
     finally:
         store.close()
-
-
-def store_exists(url: str) -> bool:
-    """Whether a SQLite store file exists (servers are assumed to)."""
-    path = sqlite_path(url)
-    return path is None or Path(path).is_file()
 
 
 def record_result(store: Store, study: optuna.Study, trial_id: int, result: Any) -> None:
