@@ -6,6 +6,8 @@ import hashlib
 import os
 import subprocess
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import optuna
@@ -72,3 +74,22 @@ def _cmdline(pid: int) -> bytes:
         return Path(f"/proc/{pid}/cmdline").read_bytes()
     except OSError:
         return b""
+
+
+def wait_for(predicate: Callable[[], bool], timeout: float = 180.0) -> None:
+    """Poll until the predicate holds; fail the test after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.1)
+    raise AssertionError("timed out")
+
+
+def write_study_file(root: Path, name: str, parameter: str, values: str, extra: str = "") -> None:
+    """A user's study file in ./conf/study/ of a working directory."""
+    folder = root / "conf" / "study"
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{name}.yaml").write_text(
+        f"# @package _global_\nstudy:\n  name: {name}\n  parameter: {parameter}\n"
+        f"  values: {values}\n{extra}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from conftest import write_study_file
 
 from kraby_study.compose import compose_config
 from kraby_study.config import ConfigError
@@ -110,10 +111,7 @@ def test_bad_config_is_refused_in_one_line(overrides: list[str], expected: str) 
 
 def test_a_study_value_of_the_wrong_type_is_refused(tmp_path: Path,
                                                     monkeypatch: pytest.MonkeyPatch) -> None:
-    (tmp_path / "conf" / "study").mkdir(parents=True)
-    (tmp_path / "conf" / "study" / "mine.yaml").write_text(
-        "# @package _global_\nstudy:\n  name: mine\n  parameter: ppo.n_epochs\n"
-        "  values: [1, lots]\n")
+    write_study_file(tmp_path, "mine", "ppo.n_epochs", "[1, lots]")
     monkeypatch.chdir(tmp_path)
     cfg = compose_config(["study=mine"])
     with pytest.raises(ConfigError, match="lots"):
@@ -122,10 +120,7 @@ def test_a_study_value_of_the_wrong_type_is_refused(tmp_path: Path,
 
 def test_a_user_study_file_in_the_working_directory_is_found(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    (tmp_path / "conf" / "study").mkdir(parents=True)
-    (tmp_path / "conf" / "study" / "vf.yaml").write_text(
-        "# @package _global_\nstudy:\n  name: vf\n  parameter: ppo.vf_coef\n"
-        "  values: [0.25, 0.5, 1.0]\nppo:\n  n_steps: 32\n")
+    write_study_file(tmp_path, "vf", "ppo.vf_coef", "[0.25, 0.5, 1.0]", "ppo:\n  n_steps: 32\n")
     monkeypatch.chdir(tmp_path)
     plan = expand_study(compose_config(["study=vf", "budget=smoke"]))
     assert plan.values == [0.25, 0.5, 1.0]
@@ -134,10 +129,7 @@ def test_a_user_study_file_in_the_working_directory_is_found(
 
 def test_a_study_value_that_breaks_a_rule_names_the_value(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    (tmp_path / "conf" / "study").mkdir(parents=True)
-    (tmp_path / "conf" / "study" / "bad.yaml").write_text(
-        "# @package _global_\nstudy:\n  name: bad\n  parameter: ppo.batch_size\n"
-        "  values: [64, 100]\n")
+    write_study_file(tmp_path, "bad", "ppo.batch_size", "[64, 100]")
     monkeypatch.chdir(tmp_path)
     with pytest.raises(ConfigError, match="value 100"):
         expand_study(compose_config(["study=bad"]))

@@ -15,7 +15,7 @@ from pathlib import Path
 import optuna
 import pytest
 import sqlalchemy as sa
-from conftest import TINY, children, run_cli, spawn_cli
+from conftest import TINY, children, run_cli, spawn_cli, wait_for
 from optuna.trial import TrialState
 
 from kraby_study.ledger import attempts_by_key, superseded
@@ -65,15 +65,6 @@ def _trials(url: str, name: str) -> list[optuna.trial.FrozenTrial]:
         return []
 
 
-def _wait_for(predicate, timeout: float = 180.0) -> None:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.2)
-    raise AssertionError("timed out")
-
-
 def _kill_tree(proc) -> None:  # type: ignore[no-untyped-def]
     for pid in [proc.pid, *children(proc.pid, workers_only=False)]:
         try:
@@ -85,7 +76,7 @@ def _kill_tree(proc) -> None:  # type: ignore[no-untyped-def]
 
 def _three_commands_one_killed(args: list[str], cwd: Path, url: str, name: str) -> list[str]:
     procs = [spawn_cli(*args, cwd=cwd) for _ in range(3)]
-    _wait_for(lambda: sum(t.state == TrialState.RUNNING for t in _trials(url, name)) >= 3)
+    wait_for(lambda: sum(t.state == TrialState.RUNNING for t in _trials(url, name)) >= 3)
     time.sleep(0.5)
     _kill_tree(procs[0])
     outputs = []

@@ -17,18 +17,12 @@ from conftest import (
     run_cli,
     spawn_cli,
     sqlite_url,
+    wait_for,
+    write_study_file,
 )
 from optuna.trial import TrialState
 
 from kraby_study.ledger import attempts_by_key
-
-
-def _study_file(root: Path, name: str, parameter: str, values: str, extra: str = "") -> None:
-    folder = root / "conf" / "study"
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / f"{name}.yaml").write_text(
-        f"# @package _global_\nstudy:\n  name: {name}\n  parameter: {parameter}\n"
-        f"  values: {values}\n{extra}")
 
 
 def _complete_keys(db: Path, name: str) -> list[str]:
@@ -137,7 +131,7 @@ def test_bad_input_creates_no_store(workdir: Path) -> None:
 
 def test_diverging_trial_is_recorded_and_the_study_goes_on(
         workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    _study_file(workdir, "lr_blowup", "ppo.learning_rate", "[0.001, 1.0e+12]")
+    write_study_file(workdir, "lr_blowup", "ppo.learning_rate", "[0.001, 1.0e+12]")
     assert run_cli("run", "study=lr_blowup", "budget.seeds=1", "workers=1", *TINY) == 0
     study = load(workdir / "studies" / "kraby.db", "lr_blowup")
     by_lr = {t.params["learning_rate"]: t for t in study.get_trials()}
@@ -185,15 +179,6 @@ def test_a_second_command_on_a_busy_sqlite_store_is_refused(workdir: Path) -> No
     Store(url).close()
 
 
-def _wait_for(predicate, timeout: float = 120.0) -> None:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.1)
-    raise AssertionError("timed out")
-
-
 def _complete_count(db: Path, name: str) -> int:
     try:
         return len(_complete_keys(db, name))
@@ -215,7 +200,7 @@ SLOWER = [a if not a.startswith("budget.steps") else "budget.steps=4096" for a i
 def test_killing_a_worker_mid_study_loses_and_duplicates_nothing(workdir: Path) -> None:
     db = workdir / "studies" / "kraby.db"
     proc = spawn_cli("run", "study=clip_range", "workers=2", *SLOWER, cwd=workdir)
-    _wait_for(lambda: _running_trials(db, "clip_range") == 2)
+    wait_for(lambda: _running_trials(db, "clip_range") == 2)
     time.sleep(1.0)
     workers = children(proc.pid)
     assert workers, "no worker processes found"
@@ -233,8 +218,8 @@ def test_killing_a_worker_mid_study_loses_and_duplicates_nothing(workdir: Path) 
 def test_resume_after_the_command_is_killed(workdir: Path) -> None:
     db = workdir / "studies" / "kraby.db"
     proc = spawn_cli("run", "study=clip_range", "workers=2", *SLOWER, cwd=workdir)
-    _wait_for(lambda: _complete_count(db, "clip_range") >= 2)
-    _wait_for(lambda: _running_trials(db, "clip_range") >= 1)
+    wait_for(lambda: _complete_count(db, "clip_range") >= 2)
+    wait_for(lambda: _running_trials(db, "clip_range") >= 1)
     for pid in [proc.pid, *children(proc.pid, workers_only=False)]:
         os.kill(pid, signal.SIGKILL)
     proc.wait()
@@ -264,8 +249,8 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_completes(workdir: Path) -> None:
     proc = subprocess.Popen([sys.executable, "-m", "kraby_study.cli", "run", "study=clip_range",
                              "workers=2", *SLOWER], cwd=workdir, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, start_new_session=True)
-    _wait_for(lambda: _complete_count(db, "clip_range") >= 1)
-    _wait_for(lambda: _running_trials(db, "clip_range") >= 1)
+    wait_for(lambda: _complete_count(db, "clip_range") >= 1)
+    wait_for(lambda: _running_trials(db, "clip_range") >= 1)
     os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C sends: the whole group
     out, _ = proc.communicate(timeout=120)
     assert proc.returncode == 130, out
