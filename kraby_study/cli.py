@@ -24,13 +24,20 @@ OVERRIDES_HELP = ("Hydra overrides, e.g. study=ent_coef budget=quick ppo.n_steps
 EPILOG = """\
 config groups (conf/): env=leg, ppo=start|tuned, budget=full|quick|smoke,
 study=observation|batch_size|n_steps|n_epochs|gamma|clip_range|learning_rate|gae_lambda|
-ent_coef|n_envs. Any setting can be overridden with key=value (ppo.gamma=0.8).
+ent_coef|n_envs, search=ppo (the Optuna space).
+Any setting can be overridden with key=value (ppo.gamma=0.8).
 Your own YAML files in ./conf/<group>/ extend these groups.
 """
 
 
 def _compose(overrides: Sequence[str]) -> DictConfig:
     return compose_config(list(overrides))
+
+
+def with_default(overrides: Sequence[str], group: str, option: str) -> list[str]:
+    """The overrides, choosing ``group=option`` first unless the user chose that group."""
+    chosen = any(o.startswith(f"{group}=") for o in overrides)
+    return list(overrides) if chosen else [f"{group}={option}", *overrides]
 
 
 def open_writer(cfg: DictConfig):  # noqa: ANN201 - a context manager of Store
@@ -69,10 +76,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from kraby_study.plan import single_run
     from kraby_study.sweep import run_plan
 
-    overrides = list(args.overrides)
-    if not any(o.startswith("ppo=") for o in overrides):
-        overrides.insert(0, "ppo=tuned")
-    cfg = _compose(overrides)
+    cfg = _compose(with_default(args.overrides, "ppo", "tuned"))
     plan = single_run(cfg)
     with open_writer(cfg) as store:
         summary, _, _ = run_plan(store, plan, 1, sys.stdout, **run_timing(cfg))
@@ -143,9 +147,7 @@ def search_overrides(args: argparse.Namespace) -> list[str]:
              ("pruner", "search.pruner"), ("seed", "search.seed")]
     overrides = [f"{key}={getattr(args, attr)}" for attr, key in flags
                  if getattr(args, attr) is not None]
-    if not any(o.startswith("budget=") for o in args.overrides):
-        overrides.insert(0, "budget=quick")
-    return overrides + list(args.overrides)
+    return with_default(overrides + list(args.overrides), "budget", "quick")
 
 
 def cmd_optuna(args: argparse.Namespace) -> int:
