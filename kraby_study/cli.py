@@ -15,6 +15,7 @@ from sqlalchemy import exc as sa_exc
 
 from kraby_study.compose import compose_config
 from kraby_study.config import ConfigError, worker_count
+from kraby_study.messages import first_line
 from kraby_study.runner import DatabaseLost
 from kraby_study.store import StoreError
 
@@ -289,8 +290,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except sa_exc.OperationalError as err:
         # A database that fails outside the retried calls (while a study is being opened).
-        reason = str(err.orig or err).strip().splitlines()[0]
-        print(f"kraby-study: error: database error: {reason}", file=sys.stderr)
+        print(f"kraby-study: error: database error: {first_line(err)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("kraby-study: interrupted", file=sys.stderr)

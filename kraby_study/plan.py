@@ -19,6 +19,7 @@ from kraby_study.config import (
     validate_env,
     validate_ppo,
 )
+from kraby_study.messages import first_line
 
 SWEEPABLE_ROOTS = ("env", "ppo")
 
@@ -114,8 +115,7 @@ def with_value(cfg: DictConfig, parameter: str, value: Any) -> DictConfig:
     try:
         OmegaConf.update(trial_cfg, parameter, value, merge=False)
     except OmegaConfBaseException as err:
-        first = str(err).splitlines()[0]
-        raise ConfigError(f"study value {value!r} for {parameter}: {first}") from None
+        raise ConfigError(f"study value {value!r} for {parameter}: {first_line(err)}") from None
     return trial_cfg
 
 

@@ -14,6 +14,7 @@ from typing import Any, Protocol, TextIO
 
 from sqlalchemy import exc as sa_exc
 
+from kraby_study.messages import first_line
 from kraby_study.plan import TrialSpec
 from kraby_study.progress import Progress
 from kraby_study.trial import TrialResult
@@ -83,9 +84,8 @@ class Retrying:
                     return attr(*args)
                 except (sa_exc.OperationalError, sa_exc.InterfaceError) as err:
                     if time.monotonic() >= deadline:
-                        reason = str(err.orig or err).strip().splitlines()[0]
                         raise DatabaseLost(f"lost the database for {self._patience:.0f} s, "
-                                           f"giving up: {reason}") from None
+                                           f"giving up: {first_line(err)}") from None
                     print(f"database out of reach ({name}), retrying in {delay:.1f} s",
                           file=self._stream, flush=True)
                     time.sleep(delay)

@@ -14,7 +14,7 @@ from kraby_study.ledger import superseded
 from kraby_study.plan import TrialSpec, fingerprint, model_path, resolved_settings, with_value
 from kraby_study.progress import Progress
 from kraby_study.runner import Retrying, RunSummary, run_trials
-from kraby_study.source import StudySource
+from kraby_study.source import StudySource, rerun_orphans
 from kraby_study.store import PLANNED, Store
 
 SAMPLERS = ("tpe", "random")
@@ -243,10 +243,7 @@ def run_search(store: Store, cfg: DictConfig, workers: int, stream: TextIO,
     study.set_user_attr("sampler", str(cfg.search.sampler))
     study.set_user_attr("sampler_seed", int(cfg.search.seed))
     study.set_user_attr(PLANNED, int(cfg.search.trials))
-    rerun = store.fail_orphans(study)
-    if rerun:
-        print(f"{rerun} trial(s) left running by a stopped command will run again",
-              file=stream)
+    rerun_orphans(store, study, stream)
     source = SearchSource(store, study, cfg)
     done = source._counted() - len(study.get_trials(
         deepcopy=False, states=(optuna.trial.TrialState.WAITING,

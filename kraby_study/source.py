@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TextIO
+
 import optuna
 from optuna.trial import FrozenTrial, TrialState
 
@@ -48,3 +50,11 @@ class StudySource:
     def counted(self, trials: list[FrozenTrial]) -> list[FrozenTrial]:
         """The trials that make up the study's result (one attempt per run)."""
         raise NotImplementedError
+
+
+def rerun_orphans(store: Store, study: optuna.Study, stream: TextIO) -> None:
+    """Queue again the trials a stopped command left running, and say so."""
+    rerun = store.fail_orphans(study)
+    if rerun:
+        print(f"{rerun} trial(s) left running by a stopped command will run again",
+              file=stream)

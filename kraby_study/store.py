@@ -25,6 +25,7 @@ from optuna.storages import RDBStorage
 from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.config import sqlite_path
+from kraby_study.messages import first_line
 
 KIND = "kraby_kind"
 DEFINITION = "kraby_definition"
@@ -94,8 +95,7 @@ class Store:
                 metadata.create_all(self.storage.engine)
         except (sa.exc.SQLAlchemyError, RuntimeError, ValueError) as err:
             self.close()
-            first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-            raise StoreError(f"cannot open the store {url}: {first}") from None
+            raise StoreError(f"cannot open the store {url}: {first_line(err)}") from None
         self.engine = self.storage.engine
 
     def _lock(self) -> None:

@@ -11,7 +11,7 @@ from kraby_study.ledger import attempts_by_key, is_final_failure, value_label, w
 from kraby_study.plan import StudyPlan, TrialSpec
 from kraby_study.progress import Progress
 from kraby_study.runner import Retrying, RunSummary, run_trials
-from kraby_study.source import StudySource
+from kraby_study.source import StudySource, rerun_orphans
 from kraby_study.store import PLANNED, Store
 
 
@@ -89,10 +89,7 @@ def run_plan(store: Store, plan: StudyPlan, workers: int, stream: TextIO,
     """Queue, run and record a plan's trials; returns this command's summary and the totals."""
     kind = str(plan.definition.get("kind"))
     study = store.open_study(plan.name, kind, plan.definition, plan.fingerprint)
-    rerun = store.fail_orphans(study)
-    if rerun:
-        print(f"{rerun} trial(s) left running by a stopped command will run again",
-              file=stream)
+    rerun_orphans(store, study, stream)
     ensure_queued(store, study, plan)
     complete, failed = plan_counts(study, plan)
     pending = len(plan.specs) - complete - failed

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from kraby_study.messages import first_line
 from kraby_study.plan import TrialSpec
 
 FINAL_FRACTION = 0.1
@@ -196,9 +197,8 @@ def _train(spec: TrialSpec, seed: int, offset: int, on_checkpoint: CheckpointHoo
         if _has_nan(run.model):
             run.failure = "diverged: the policy's parameters became NaN"
     except (ValueError, RuntimeError, FloatingPointError) as err:
-        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
         kind = "diverged" if _is_divergence(err) else "error"
-        run.failure = f"{kind}: {type(err).__name__}: {first[:300]}"
+        run.failure = f"{kind}: {type(err).__name__}: {first_line(err)[:300]}"
     finally:
         env.close()
     run.env_steps = int(run.model.num_timesteps) if run.model is not None else 0

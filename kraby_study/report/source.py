@@ -19,6 +19,7 @@ from optuna.trial import FrozenTrial
 
 from kraby_study.config import ConfigError, sqlite_path, validate_storage
 from kraby_study.ledger import attempts_by_key, superseded
+from kraby_study.messages import first_line
 from kraby_study.store import (
     DEFINITION,
     KIND,
@@ -110,22 +111,17 @@ def report_store(url: str) -> Iterator[Store]:
     try:
         store = Store(url, create=False, writer=False)
     except (sa.exc.SQLAlchemyError, optuna.exceptions.OptunaError) as err:
-        raise StoreError(f"cannot open the store {url}: {_first_line(err)}") from None
+        raise StoreError(f"cannot open the store {url}: {first_line(err)}") from None
     try:
         try:
             names = store.study_names()
         except (sa.exc.SQLAlchemyError, optuna.exceptions.OptunaError) as err:
-            raise StoreError(f"cannot read the store {url}: {_first_line(err)}") from None
+            raise StoreError(f"cannot read the store {url}: {first_line(err)}") from None
         if not names:
             raise StoreError(f"no studies in {url}: run one first (kraby-study run ...)")
         yield store
     finally:
         store.close()
-
-
-def _first_line(err: BaseException) -> str:
-    text = str(err).strip()
-    return text.splitlines()[0] if text else type(err).__name__
 
 
 def select_studies(store: Store, name: str | None) -> list[str]:
