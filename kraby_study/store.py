@@ -93,9 +93,12 @@ class Store:
                                       skip_table_creation=not create, **heartbeat)
             if create:
                 metadata.create_all(self.storage.engine)
-        except (sa.exc.SQLAlchemyError, RuntimeError, ValueError) as err:
+        except (sa.exc.SQLAlchemyError, optuna.exceptions.OptunaError, RuntimeError,
+                ValueError) as err:
             self.close()
-            raise StoreError(f"cannot open the store {url}: {first_line(err)}") from None
+            # Optuna wraps the driver's error in a generic one: name the cause.
+            cause = err.__cause__ if isinstance(err, optuna.exceptions.OptunaError) else None
+            raise StoreError(f"cannot open the store {url}: {first_line(cause or err)}") from None
         self.engine = self.storage.engine
 
     def _lock(self) -> None:

@@ -262,3 +262,18 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_completes(workdir: Path) -> None:
     final = _complete_keys(db, "clip_range")
     assert set(kept) <= set(final)
     assert final == sorted(f"v{v}-s{s}" for v in range(4) for s in range(2))
+
+
+@pytest.mark.parametrize("command", ["list", "run", "train"])
+def test_a_file_that_is_not_a_store_is_refused_in_one_line_and_kept(
+        workdir: Path, capsys: pytest.CaptureFixture[str], command: str) -> None:
+    db = workdir / "studies" / "kraby.db"
+    db.parent.mkdir()
+    db.write_text("not a database\n")
+    args = ["study=clip_range", *TINY] if command == "run" else (TINY if command == "train"
+                                                                  else [])
+    assert run_cli(command, *args) == 2
+    err = capsys.readouterr().err
+    assert err == ("kraby-study: error: cannot open the store sqlite:///studies/kraby.db: "
+                   "file is not a database\n")
+    assert db.read_text() == "not a database\n"
