@@ -1,8 +1,10 @@
 """``KrabyBatchedVecEnv``: many Kraby legs in one physics world, as an SB3 ``VecEnv``.
 
 All legs share one PyBullet client and one ``stepSimulation`` per sub-step; their bases
-sit on a grid far enough apart that they never touch. Leg ``i`` behaves exactly like a
-``KrabyOneLegEnv`` reset with seed ``seed + i`` and driven by the same actions.
+sit on a grid far enough apart that they never touch. With ``processes > 1`` the grid is
+split into that many shares stepped in parallel (see :mod:`kraby_envs.sharded`). Leg ``i``
+behaves exactly like a ``KrabyOneLegEnv`` reset with seed ``seed + i`` and driven by the
+same actions.
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 
 from .config import ENV_KWARGS, EnvConfig, make_config
 from .observation import observation_space
-from .world import LegWorld, leg_info
+from .sharded import ShardedWorld
+from .world import draw_start, leg_info
 
 
 def _positive_int(name: str, value: Any) -> int:
@@ -34,7 +37,7 @@ def _positive_int(name: str, value: Any) -> int:
 
 
 class KrabyBatchedVecEnv(VecEnv):
-    """``n_envs`` Kraby legs simulated in a single PyBullet world.
+    """``n_envs`` Kraby legs simulated in one PyBullet world (or one per process).
 
     Episodes end after ``max_episode_steps`` (a time limit, never a terminal state); the
     leg is then reset at once and its step ``info`` carries ``terminal_observation``,
@@ -46,6 +49,8 @@ class KrabyBatchedVecEnv(VecEnv):
         n_envs: Number of legs.
         max_episode_steps: Episode length.
         leg_spacing: Distance between neighbouring bases (m), at least 0.6.
+        processes: Processes that step the legs in parallel, this one included (at most
+            ``n_envs`` are used). Every leg moves bit for bit the same for any number.
         **env_kwargs: Keyword arguments of :class:`kraby_envs.KrabyOneLegEnv`.
 
     Raises:
@@ -58,13 +63,15 @@ class KrabyBatchedVecEnv(VecEnv):
         *,
         max_episode_steps: int = 32,
         leg_spacing: float = 1.0,
+        processes: int = 1,
         **env_kwargs: Any,
     ) -> None:
         n_envs = _positive_int("n_envs", n_envs)
         self.max_episode_steps = _positive_int("max_episode_steps", max_episode_steps)
         self.config: EnvConfig = make_config(**env_kwargs)
         self.render_mode = self.config.render_mode
-        self._world = LegWorld(n_envs, self.config, leg_spacing=leg_spacing)
+        processes = _positive_int("processes", processes)
+        self._world = ShardedWorld(n_envs, self.config, leg_spacing, processes)
         self._rngs: list[np.random.Generator | None] = [None] * n_envs
         self._actions = np.zeros((n_envs, 3))
         # float32 sums and int32 lengths, as VecMonitor accumulates them.
@@ -97,19 +104,21 @@ class KrabyBatchedVecEnv(VecEnv):
 
     # --- stepping ------------------------------------------------------------------
 
-    def _reset_leg(self, index: int) -> None:
-        seed = self._seeds[index]
-        if seed is not None or self._rngs[index] is None:
-            # The same generator a Gymnasium env creates in reset(seed=seed).
-            self._rngs[index], _ = seeding.np_random(seed)
-        self._world.reset_leg(index, self._rngs[index], self._options[index])  # type: ignore[arg-type]
-        self._episode_returns[index] = 0.0
-        self._episode_lengths[index] = 0
+    def _reset_legs(self, indices: list[int]) -> None:
+        starts = []
+        for index in indices:
+            seed = self._seeds[index]
+            if seed is not None or self._rngs[index] is None:
+                # The same generator a Gymnasium env creates in reset(seed=seed).
+                self._rngs[index], _ = seeding.np_random(seed)
+            starts.append(draw_start(self._rngs[index], self.config, self._options[index]))  # type: ignore[arg-type]
+        self._world.place_legs(indices, starts)
+        self._episode_returns[indices] = 0.0
+        self._episode_lengths[indices] = 0
 
     def reset(self) -> VecEnvObs:
         """Resets every leg, using the seeds and options set since the last reset."""
-        for index in range(self.num_envs):
-            self._reset_leg(index)
+        self._reset_legs(list(range(self.num_envs)))
         self._reset_seeds()
         self._reset_options()
         observations, squared, tips = self._world.observe()
@@ -138,7 +147,7 @@ class KrabyBatchedVecEnv(VecEnv):
                     "l": self._episode_lengths[index],
                     "t": elapsed,
                 }
-                self._reset_leg(index)
+            self._reset_legs(finished)
             observations = observations.copy()
             observations[finished] = self._world.observe(finished)[0]
         return observations, rewards, dones, infos
@@ -212,7 +221,8 @@ def make_batched(
         n_envs: Number of legs.
         seed: Base seed, or None for OS entropy.
         max_episode_steps: Episode length.
-        **env_kwargs: ``leg_spacing`` and the keyword arguments of ``KrabyOneLegEnv``.
+        **env_kwargs: ``leg_spacing``, ``processes`` and the keyword arguments of
+            ``KrabyOneLegEnv``.
 
     Returns:
         The VecEnv, seeded for its first reset.

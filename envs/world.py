@@ -34,6 +34,32 @@ def grid_positions(n_legs: int, spacing: float) -> np.ndarray:
     return np.stack([cols * spacing, rows * spacing, np.zeros(n_legs)], axis=1).astype(float)
 
 
+def draw_start(
+    rng: np.random.Generator, config: EnvConfig, options: Mapping[str, Any] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The start angles and target of one episode: drawn from ``rng``, then ``options``.
+
+    The generator is always consumed the same way, even when ``options`` fixes the start,
+    so later episodes do not depend on options.
+    """
+    angles, target = sample_start(rng, config.reset_angle_range, config.delta)
+    return apply_reset_options(options, angles, target)
+
+
+def observe_legs(
+    config: EnvConfig,
+    state: tuple[np.ndarray, np.ndarray, np.ndarray],
+    targets: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Observations (k, obs_size) float32, squared tip-target distances (k,) and tips (k, 3)
+    of legs in ``state`` (angles, velocities, tips) reaching for ``targets`` (k, 3)."""
+    angles, velocities, tips = state
+    observations = build_observations(
+        config.observation, angles, velocities, tips, targets, config.max_velocity
+    )
+    return observations, squared_distance(tips, targets), tips
+
+
 def leg_info(tip: np.ndarray, squared_distance: float) -> dict[str, Any]:
     """The ``info`` entries every env reports for a leg: tip position and distance (m)."""
     return {"tip_position": np.array(tip), "distance": math.sqrt(squared_distance)}
@@ -48,11 +74,22 @@ class LegWorld:
         n_legs: Number of legs.
         config: Environment configuration.
         leg_spacing: Distance between neighbouring bases on the grid (m).
+        bases: Base positions (n_legs, 3) instead of the grid: a share of a larger world
+            keeps its legs where the whole world has them, so that every leg computes
+            bit for bit the same motion whichever world it is simulated in.
     """
 
-    def __init__(self, n_legs: int, config: EnvConfig, leg_spacing: float = 1.0) -> None:
+    def __init__(
+        self,
+        n_legs: int,
+        config: EnvConfig,
+        leg_spacing: float = 1.0,
+        bases: np.ndarray | None = None,
+    ) -> None:
         if not isinstance(leg_spacing, numbers.Real) or not leg_spacing >= MIN_LEG_SPACING:
             raise ValueError(f"leg_spacing must be >= {MIN_LEG_SPACING} m, got {leg_spacing!r}")
+        if bases is not None and np.shape(bases) != (n_legs, 3):
+            raise ValueError(f"bases must have shape ({n_legs}, 3), got {np.shape(bases)}")
         self.n_legs = n_legs
         self.config = config
         self._client = p.connect(p.DIRECT)
@@ -62,7 +99,9 @@ class LegWorld:
         # is in the world: without it, a leg among 32 drifts from the same leg alone.
         p.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=self._client)
         ground = create_ground(self._client)
-        self.bases = grid_positions(n_legs, leg_spacing)
+        self.bases = (
+            grid_positions(n_legs, leg_spacing) if bases is None else np.array(bases, dtype=float)
+        )
         self.legs = [load_leg(self._client, base) for base in self.bases]
         for leg in self.legs:
             skip_impossible_contacts(self._client, leg, ground)
@@ -110,8 +149,10 @@ class LegWorld:
                 ``options`` fixes the start, so later episodes do not depend on options.
             options: Optional ``joint_angles`` and ``target`` overriding the draw.
         """
-        angles, target = sample_start(rng, self.config.reset_angle_range, self.config.delta)
-        angles, target = apply_reset_options(options, angles, target)
+        self.place_leg(index, *draw_start(rng, self.config, options))
+
+    def place_leg(self, index: int, angles: np.ndarray, target: np.ndarray) -> None:
+        """Puts leg ``index`` at rest at joint ``angles`` (3,) with ``target`` (3,)."""
         body = self._bodies[index]
         for joint, angle in zip(self._joints, angles, strict=True):
             p.resetJointState(body, joint, float(angle), 0.0, physicsClientId=self._client)
@@ -174,12 +215,8 @@ class LegWorld:
         Returns:
             Observations (k, obs_size) float32, squared distances (k,), tips (k, 3).
         """
-        angles, velocities, tips = self.read_state(indices)
         targets = self.targets if indices is None else self.targets[list(indices)]
-        observations = build_observations(
-            self.config.observation, angles, velocities, tips, targets, self.config.max_velocity
-        )
-        return observations, squared_distance(tips, targets), tips
+        return observe_legs(self.config, self.read_state(indices), targets)
 
     def render(self, index: int) -> np.ndarray:
         """An offscreen (tiny renderer) image of leg ``index`` and its target, (H, W, 3) uint8."""

@@ -94,7 +94,7 @@ def test_seed_reseeds_the_next_reset(venv):
 def test_legs_never_touch_each_other():
     venv = make_batched(n_envs=9, seed=0, delta=1.0)
     venv.reset()
-    world = venv._world
+    world = venv._world._local
     legs = set(world._bodies)
     for actions in random_actions(64, 9, seed=1):
         venv.step(actions * 2.0)
@@ -147,6 +147,63 @@ def test_render_images():
     venv.close()
 
 
+def _play(venv: KrabyBatchedVecEnv, n_steps: int) -> list[np.ndarray]:
+    """Everything a run of random actions shows, through a delta change and reset options."""
+    seen = [venv.reset()]
+    for t, actions in enumerate(random_actions(n_steps, venv.num_envs, seed=3)):
+        if t == n_steps // 2:
+            venv.set_attr("delta", 1.0)
+            venv.set_options({"joint_angles": (0.1, -0.2, 0.3)})
+            seen.append(venv.reset())
+        observations, rewards, _, infos = venv.step(actions * 1.5)
+        seen += [observations, rewards, np.array([info["distance"] for info in infos])]
+        seen += [info["terminal_observation"] for info in infos if "terminal_observation" in info]
+    return seen
+
+
+def test_legs_move_bit_for_bit_the_same_in_any_number_of_processes():
+    runs = []
+    for processes in (1, 3):
+        venv = make_batched(n_envs=8, seed=4, processes=processes)
+        assert venv._world.processes == processes
+        runs.append(_play(venv, 80))
+        venv.close()
+    assert len(runs[0]) == len(runs[1])
+    for one, three in zip(*runs, strict=True):
+        np.testing.assert_array_equal(one, three)
+
+
+def test_a_share_process_renders_its_legs():
+    images = []
+    for processes in (1, 2):
+        # 3 m apart, no other leg is in the camera's view.
+        venv = make_batched(n_envs=2, seed=0, processes=processes, leg_spacing=3.0,
+                            render_mode="rgb_array",
+                            render_width=40, render_height=30)
+        venv.reset()
+        images.append(venv.get_images())
+        venv.close()
+    # The same scene; the tiny renderer may still shade a few edge pixels differently.
+    differ = np.any(images[0][1] != images[1][1], axis=2)
+    assert images[1][1].shape == (30, 40, 3) and differ.mean() < 0.01
+
+
+def test_share_processes_stop_with_the_env_and_their_death_is_an_error():
+    venv = make_batched(n_envs=4, seed=0, processes=2)
+    venv.reset()
+    share = venv._world._remotes[0]._process
+    assert share.poll() is None
+    share.kill()
+    share.wait()
+    with pytest.raises(RuntimeError, match="physics share process stopped"):
+        venv.step(random_actions(1, 4)[0])
+    venv.close()
+    other = make_batched(n_envs=4, seed=0, processes=2)
+    process = other._world._remotes[0]._process
+    other.close()
+    assert process.poll() == 0
+
+
 @pytest.mark.parametrize(
     ("kwargs", "name"),
     [
@@ -158,6 +215,7 @@ def test_render_images():
         ({"delta": 3.0}, "delta"),
         ({"observation": "pixels"}, "observation"),
         ({"wings": 2}, "wings"),
+        ({"processes": 0}, "processes"),
     ],
 )
 def test_bad_arguments_raise_value_error_naming_them(kwargs, name):

@@ -1,0 +1,219 @@
+"""A world of many legs split into shares that step in parallel, one process each.
+
+PyBullet holds Python's global lock while it steps, so threads cannot share the physics;
+processes can. Share 0 lives in the calling process, every other share in a
+:mod:`kraby_envs.shard_server` process. The legs keep the bases they have in the whole
+world, so a leg moves bit for bit the same whatever the number of shares: the number
+is a matter of speed only, never of results.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Mapping, Sequence
+from multiprocessing import Pipe
+from typing import Any
+
+import numpy as np
+
+from .config import EnvConfig
+from .task import TARGET_CENTRE
+from .world import LegWorld, draw_start, grid_positions, observe_legs
+
+State = tuple[np.ndarray, np.ndarray, np.ndarray]
+"""Joint angles, joint velocities and base-relative tip positions, each (k, 3)."""
+
+
+class ShardProcess:
+    """One share of the legs, simulated by a :mod:`kraby_envs.shard_server` process.
+
+    Requests are sent at once and answered in order, so the caller can send a step,
+    do its own share's work, and only then collect the answer.
+    """
+
+    def __init__(self, config: EnvConfig, bases: np.ndarray) -> None:
+        ours, theirs = Pipe()
+        self._process = subprocess.Popen(
+            [sys.executable, "-m", "kraby_envs.shard_server", str(theirs.fileno())],
+            pass_fds=(theirs.fileno(),),
+            stdin=subprocess.DEVNULL,
+        )
+        theirs.close()
+        self._conn = ours
+        self.n_legs = len(bases)
+        self.send("init", config, np.asarray(bases, dtype=float))
+
+    def send(self, operation: str, *args: Any) -> None:
+        """Sends a request; its answer comes from :meth:`receive`, in order."""
+        try:
+            self._conn.send((operation, args))
+        except OSError:
+            self._raise_stopped()
+
+    def receive(self) -> Any:
+        """The answer to the oldest request not yet received."""
+        try:
+            status, value = self._conn.recv()
+        except (EOFError, OSError):
+            self._raise_stopped()
+        if status != "ok":
+            raise RuntimeError(f"physics share process: {value}")
+        return value
+
+    def call(self, operation: str, *args: Any) -> Any:
+        self.send(operation, *args)
+        return self.receive()
+
+    def _raise_stopped(self) -> None:
+        code = self._process.poll()
+        raise RuntimeError(f"a physics share process stopped (exit code {code})")
+
+    def close(self) -> None:
+        """Stops the process; safe to call twice."""
+        if self._process.poll() is None:
+            try:
+                self._conn.send(("close", ()))
+            except OSError:
+                pass
+            try:
+                self._process.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self._process.kill()
+                self._process.wait()
+        self._conn.close()
+
+
+class ShardedWorld:
+    """The interface of :class:`kraby_envs.world.LegWorld` over ``processes`` shares.
+
+    Every call that moves a leg refreshes its cached state, so reading the state of the
+    whole world costs no round trip.
+
+    Args:
+        n_legs: Number of legs.
+        config: Environment configuration.
+        leg_spacing: Distance between neighbouring bases on the grid (m).
+        processes: Number of shares (at most ``n_legs``); 1 keeps every leg in this process.
+    """
+
+    def __init__(
+        self, n_legs: int, config: EnvConfig, leg_spacing: float = 1.0, processes: int = 1
+    ) -> None:
+        self.n_legs = n_legs
+        self.config = config
+        self.bases = grid_positions(n_legs, leg_spacing)
+        self.targets = np.tile(TARGET_CENTRE, (n_legs, 1))
+        shares = np.array_split(np.arange(n_legs), max(1, min(processes, n_legs)))
+        self._shares = [share.tolist() for share in shares]
+        # Leg i is leg _local_index[i] of share _share_of[i].
+        self._share_of = np.concatenate([np.full(len(s), k) for k, s in enumerate(shares)])
+        self._local_index = np.concatenate([np.arange(len(s)) for s in shares])
+        self._remotes: list[ShardProcess] = []
+        self._local: LegWorld | None = None
+        try:
+            # Remote shares start first: their interpreters load while ours builds.
+            self._remotes = [ShardProcess(config, self.bases[s]) for s in shares[1:]]
+            self._local = LegWorld(len(shares[0]), config, leg_spacing, bases=self.bases[shares[0]])
+            states = [self._local.read_state()] + [r.receive() for r in self._remotes]
+        except BaseException:
+            self.close()
+            raise
+        self._state: State = tuple(  # type: ignore[assignment]
+            np.concatenate([s[part] for s in states]) for part in range(3)
+        )
+
+    @property
+    def processes(self) -> int:
+        """Number of shares, this process's included."""
+        return len(self._shares)
+
+    def set_config(self, config: EnvConfig) -> None:
+        """Applies a new configuration to every share."""
+        assert self._local is not None
+        self._local.set_config(config)
+        for remote in self._remotes:
+            remote.call("config", config)
+        self.config = config
+
+    def reset_leg(
+        self, index: int, rng: np.random.Generator, options: Mapping[str, Any] | None = None
+    ) -> None:
+        """Draws a start like :meth:`LegWorld.reset_leg` and places leg ``index`` there."""
+        self.place_legs([index], [draw_start(rng, self.config, options)])
+
+    def place_legs(
+        self, indices: Sequence[int], starts: Sequence[tuple[np.ndarray, np.ndarray]]
+    ) -> None:
+        """Puts legs at rest at their (angles, target) starts, one request per share."""
+        assert self._local is not None
+        by_share: dict[int, list[int]] = {}
+        for position, index in enumerate(indices):
+            by_share.setdefault(int(self._share_of[index]), []).append(position)
+        pending = []
+        for share, positions in by_share.items():
+            legs = [int(indices[p]) for p in positions]
+            local = [int(self._local_index[i]) for i in legs]
+            angles = [starts[p][0] for p in positions]
+            targets = [starts[p][1] for p in positions]
+            self.targets[legs] = targets
+            if share == 0:
+                for leg, start, target in zip(local, angles, targets, strict=True):
+                    self._local.place_leg(leg, start, target)
+                self._store(legs, self._local.read_state(local))
+            else:
+                self._remotes[share - 1].send("place", local, angles, targets)
+                pending.append((share, legs))
+        for share, legs in pending:
+            self._store(legs, self._remotes[share - 1].receive())
+
+    def step(self, actions: np.ndarray) -> None:
+        """Drives every leg for one control period, the shares in parallel."""
+        assert self._local is not None
+        for remote, share in zip(self._remotes, self._shares[1:], strict=True):
+            remote.send("step", actions[share])
+        self._local.step(actions[self._shares[0]])
+        states = [self._local.read_state()] + [r.receive() for r in self._remotes]
+        self._state = tuple(  # type: ignore[assignment]
+            np.concatenate([s[part] for s in states]) for part in range(3)
+        )
+
+    def _store(self, legs: list[int], state: State) -> None:
+        for part, values in zip(self._state, state, strict=True):
+            part[legs] = values
+
+    def read_state(self, indices: Sequence[int] | None = None) -> State:
+        """Joint angles, joint velocities and tip positions (base-relative), each (k, 3)."""
+        if indices is None:
+            return tuple(part.copy() for part in self._state)  # type: ignore[return-value]
+        rows = list(indices)
+        return tuple(part[rows] for part in self._state)  # type: ignore[return-value]
+
+    def observe(
+        self, indices: Sequence[int] | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Observations, squared tip-target distances and tips, as :meth:`LegWorld.observe`."""
+        targets = self.targets if indices is None else self.targets[list(indices)]
+        return observe_legs(self.config, self.read_state(indices), targets)
+
+    def render(self, index: int) -> np.ndarray:
+        """An offscreen image of leg ``index`` and its target, (H, W, 3) uint8."""
+        assert self._local is not None
+        share, local = int(self._share_of[index]), int(self._local_index[index])
+        if share == 0:
+            return self._local.render(local)
+        return self._remotes[share - 1].call("render", local)
+
+    def close(self) -> None:
+        """Stops every share; safe to call twice."""
+        for remote in self._remotes:
+            remote.close()
+        self._remotes = []
+        if self._local is not None:
+            self._local.close()
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - interpreter shutdown may have torn things down
+            pass
