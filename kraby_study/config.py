@@ -295,9 +295,17 @@ def validate(cfg: DictConfig) -> None:
     _require(int(cfg.seed) >= 0, f"seed must be >= 0, got {cfg.seed}")
 
 
+def cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
 def worker_count(cfg: DictConfig) -> int:
     """Worker processes to use: the configured number, or one per core."""
-    return int(cfg.workers) if cfg.workers is not None else max(1, os.cpu_count() or 1)
+    return int(cfg.workers) if cfg.workers is not None else cores()
 
 
 def sqlite_path(url: str) -> Path | None:

@@ -14,9 +14,10 @@ from typing import Any, Protocol, TextIO
 
 from sqlalchemy import exc as sa_exc
 
+from kraby_study.config import cores
 from kraby_study.messages import first_line
-from kraby_study.plan import TrialSpec
 from kraby_study.progress import Progress
+from kraby_study.spec import TrialSpec
 from kraby_study.trial import TrialResult
 from kraby_study.workers import WorkerPool
 
@@ -103,7 +104,8 @@ def run_trials(source: TrialSource, workers: int, progress: Progress,
     once its heartbeat is stale, and this command runs it.
     """
     summary = RunSummary()
-    pool = WorkerPool(workers)
+    # Cores the workers leave idle step their legs: a lone trial uses the whole machine.
+    pool = WorkerPool(workers, physics_processes=max(1, cores() // workers))
     deaths: dict[int, int] = {}
     last_beat = 0.0
     next_claim = 0.0

@@ -11,10 +11,11 @@ from optuna.trial import FrozenTrial
 
 from kraby_study.config import ConfigError, rollout_size, to_container, validate_env, validate_ppo
 from kraby_study.ledger import superseded
-from kraby_study.plan import TrialSpec, fingerprint, model_path, resolved_settings, with_value
+from kraby_study.plan import fingerprint, model_path, resolved_settings, with_value
 from kraby_study.progress import Progress
 from kraby_study.runner import Retrying, RunSummary, run_trials
 from kraby_study.source import StudySource, rerun_orphans
+from kraby_study.spec import TrialSpec
 from kraby_study.store import PLANNED, Store
 
 SAMPLERS = ("tpe", "random")

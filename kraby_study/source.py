@@ -7,7 +7,7 @@ from typing import TextIO
 import optuna
 from optuna.trial import FrozenTrial, TrialState
 
-from kraby_study.plan import TrialSpec
+from kraby_study.spec import TrialSpec
 from kraby_study.store import Store, record_result
 from kraby_study.trial import TrialResult
 

@@ -8,10 +8,11 @@ import optuna
 from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.ledger import attempts_by_key, is_final_failure, value_label, was_interrupted
-from kraby_study.plan import StudyPlan, TrialSpec
+from kraby_study.plan import StudyPlan
 from kraby_study.progress import Progress
 from kraby_study.runner import Retrying, RunSummary, run_trials
 from kraby_study.source import StudySource, rerun_orphans
+from kraby_study.spec import TrialSpec
 from kraby_study.store import PLANNED, Store
 
 

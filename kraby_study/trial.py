@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from kraby_study.messages import first_line
-from kraby_study.plan import TrialSpec
+from kraby_study.spec import TrialSpec
 
 FINAL_FRACTION = 0.1
 """The final score averages the episodes that end in this last fraction of training."""
@@ -116,14 +116,14 @@ def build_model(spec: TrialSpec, env: Any, seed: int) -> Any:
         seed=seed, device="cpu", verbose=0)
 
 
-def make_env(spec: TrialSpec, seed: int) -> Any:
-    """The batched world of a spec: n_envs legs in one physics client."""
+def make_env(spec: TrialSpec, seed: int, processes: int = 1) -> Any:
+    """The batched world of a spec: n_envs legs stepped in ``processes`` processes."""
     from kraby_envs import make_batched
 
     env = dict(spec.settings["env"])
     max_steps = int(env.pop("max_episode_steps"))
     return make_batched(n_envs=int(spec.settings["ppo"]["n_envs"]), seed=seed,
-                        max_episode_steps=max_steps, **env)
+                        max_episode_steps=max_steps, processes=processes, **env)
 
 
 @dataclass
@@ -140,7 +140,8 @@ class _Run:
 
 
 def _train(spec: TrialSpec, seed: int, offset: int, on_checkpoint: CheckpointHook | None,
-           on_progress: ProgressHook | None, checkpoints: list[tuple[int, float]]) -> _Run:
+           on_progress: ProgressHook | None, checkpoints: list[tuple[int, float]],
+           physics_processes: int) -> _Run:
     """Train one seed; checkpoint and progress steps count from ``offset`` (earlier seeds)."""
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -190,7 +191,7 @@ def _train(spec: TrialSpec, seed: int, offset: int, on_checkpoint: CheckpointHoo
                 return False
             return True
 
-    env = make_env(spec, seed)
+    env = make_env(spec, seed, physics_processes)
     try:
         run.model = build_model(spec, env, seed)
         run.model.learn(total_timesteps=spec.steps, callback=Recorder())
@@ -230,11 +231,14 @@ def mean_curve(curves: list[list[CurvePoint]]) -> list[CurvePoint]:
 
 
 def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
-              on_progress: ProgressHook | None = None) -> TrialResult:
+              on_progress: ProgressHook | None = None,
+              physics_processes: int = 1) -> TrialResult:
     """Train PPO as the spec says; divergence and errors come back as a failed result.
 
     A spec with repeats > 1 trains seeds seed .. seed + repeats - 1 one after the other; its
     checkpoints count env steps across them, so a pruner can stop it after its first seed.
+    ``physics_processes`` sets how many processes step the legs: speed only, the result is
+    the same.
     """
     started = _now()
     t0 = time.perf_counter()
@@ -243,7 +247,7 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
     for index in range(spec.repeats):
         # Seed i's checkpoints count from i x the nominal budget: equal for every trial.
         run = _train(spec, spec.seed + index, index * spec.steps, on_checkpoint, on_progress,
-                     checkpoints)
+                     checkpoints, physics_processes)
         runs.append(run)
         if run.failure is not None or run.pruned_at is not None:
             break

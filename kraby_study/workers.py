@@ -1,55 +1,26 @@
 """Worker processes that run trials and send their results back to the parent.
 
 Workers never open the database: the parent is the single writer (SQLite allows one). Each worker
-is a spawned process with one torch thread, fed one spec at a time through its own pipe, so a
-worker that dies (killed, out of memory) is seen at once through its process sentinel and only its
-own trial needs running again.
+is a fresh interpreter running :mod:`kraby_study.worker`, fed one spec at a time through its own
+pipe, so a worker that dies (killed, out of memory) is seen at once as the end of its pipe and
+only its own trial needs running again.
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import signal
-import traceback
+import subprocess
+import sys
 from dataclasses import dataclass
+from multiprocessing import Pipe
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from kraby_study.plan import TrialSpec
-
-
-def _worker_main(conn: Connection) -> None:
-    # Ctrl-C reaches the whole process group: the parent decides what stops.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    import torch
-
-    torch.set_num_threads(1)
-    from kraby_study.trial import TrialResult, run_trial
-
-    while True:
-        message = conn.recv()
-        if message is None:
-            return
-        trial_id, spec = message
-
-        def progress(step: int, trial_id: int = trial_id) -> None:
-            conn.send(("progress", trial_id, step))
-
-        def checkpoint(step: int, value: float, trial_id: int = trial_id) -> bool:
-            conn.send(("checkpoint", trial_id, step, value))
-            return bool(conn.recv())
-
-        try:
-            result = run_trial(spec, checkpoint if spec.checkpoint_every else None, progress)
-        except Exception as err:  # a bug or a bad environment must not kill the study
-            last = traceback.format_exception_only(type(err), err)[-1].strip()
-            result = TrialResult(key=spec.key, status="failed", failure=f"error: {last}")
-        conn.send(("result", trial_id, result))
+from kraby_study.spec import TrialSpec
 
 
 @dataclass
 class _Slot:
-    process: Any
+    process: subprocess.Popen[bytes]
     conn: Connection
     trial_id: int | None = None
     spec: TrialSpec | None = None
@@ -66,19 +37,24 @@ class Event:
 
 
 class WorkerPool:
-    """Up to ``size`` worker processes, started when there is work for them."""
+    """Up to ``size`` worker processes, started when there is work for them.
 
-    def __init__(self, size: int) -> None:
+    Each worker steps its trials' legs in ``physics_processes`` processes.
+    """
+
+    def __init__(self, size: int, physics_processes: int = 1) -> None:
         self.size = size
-        self._ctx = mp.get_context("spawn")
+        self.physics_processes = physics_processes
         self._slots: list[_Slot] = []
 
     def _start(self) -> _Slot:
-        parent, child = self._ctx.Pipe()
-        process = self._ctx.Process(target=_worker_main, args=(child,), daemon=True)
-        process.start()
-        child.close()
-        slot = _Slot(process, parent)
+        ours, theirs = Pipe()
+        process = subprocess.Popen(
+            [sys.executable, "-m", "kraby_study.worker", str(theirs.fileno()),
+             str(self.physics_processes)],
+            pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL)
+        theirs.close()
+        slot = _Slot(process, ours)
         self._slots.append(slot)
         return slot
 
@@ -99,26 +75,23 @@ class WorkerPool:
 
     def events(self, timeout: float) -> list[Event]:
         """What the workers said or did within ``timeout`` seconds."""
-        waitables: list[Any] = [s.conn for s in self._slots] + [
-            s.process.sentinel for s in self._slots]
-        if not waitables:
+        if not self._slots:
             return []
-        ready = set(wait(waitables, timeout=timeout))
+        ready = set(wait([s.conn for s in self._slots], timeout=timeout))
         out: list[Event] = []
         for slot in list(self._slots):
-            if slot.conn in ready:
-                out.extend(self._drain(slot))
-            if slot.process.sentinel in ready and not slot.process.is_alive():
-                out.extend(self._drain(slot))
+            if slot.conn in ready and not self._drain(slot, out):
+                # Its pipe ended: the worker is gone (only its exit closes the pipe).
                 self._slots.remove(slot)
                 slot.conn.close()
+                code = _exit_code(slot.process)
                 if slot.trial_id is not None:
-                    code = slot.process.exitcode
                     out.append(Event("died", slot.trial_id, (slot.spec, code)))
         return out
 
-    def _drain(self, slot: _Slot) -> list[Event]:
-        out: list[Event] = []
+    @staticmethod
+    def _drain(slot: _Slot, out: list[Event]) -> bool:
+        """Adds what the worker said to ``out``; False when its pipe has ended."""
         try:
             while slot.conn.poll():
                 kind, trial_id, *rest = slot.conn.recv()
@@ -130,8 +103,8 @@ class WorkerPool:
                 else:
                     out.append(Event(kind, trial_id, rest[0], slot))
         except (EOFError, OSError):
-            pass
-        return out
+            return False
+        return True
 
     @staticmethod
     def reply(event: Event, keep_going: bool) -> None:
@@ -153,9 +126,15 @@ class WorkerPool:
             except (BrokenPipeError, OSError):
                 pass
         for slot in self._slots:
-            slot.process.join(timeout=10)
-            if slot.process.is_alive():
-                slot.process.kill()
-                slot.process.join()
+            _exit_code(slot.process)
             slot.conn.close()
         self._slots.clear()
+
+
+def _exit_code(process: subprocess.Popen[bytes], patience: float = 10.0) -> int:
+    """The exit code of a worker that is stopping, killing it after ``patience`` seconds."""
+    try:
+        return process.wait(timeout=patience)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        return process.wait()

@@ -64,8 +64,7 @@ def children(pid: int, workers_only: bool = True) -> list[int]:
     for thread in task.iterdir() if task.exists() else []:
         out.extend(int(c) for c in (thread / "children").read_text().split())
     if workers_only:
-        out = [c for c in out if b"spawn_main" in _cmdline(c)
-               and b"resource_tracker" not in _cmdline(c)]
+        out = [c for c in out if b"kraby_study.worker" in _cmdline(c)]
     return out
 
 
