@@ -112,14 +112,25 @@ class ShardedWorld:
         self._remotes: list[ShardProcess] = []
         self._local: LegWorld | None = None
         try:
-            # Remote shares start first: their interpreters load while ours builds.
+            # Remote shares start first: their interpreters load while ours builds, and
+            # their first answer is only awaited when a leg is first used.
             self._remotes = [ShardProcess(config, self.bases[s]) for s in shares[1:]]
             self._local = LegWorld(len(shares[0]), config, leg_spacing, bases=self.bases[shares[0]])
-            states = [self._local.read_state()] + [r.receive() for r in self._remotes]
         except BaseException:
             self.close()
             raise
-        self._state: State = tuple(  # type: ignore[assignment]
+        self._cached: State | None = None
+
+    def _ready(self) -> State:
+        """The state of every leg; the first call collects the shares' first answers."""
+        if self._cached is None:
+            self._cached = self._gather([r.receive() for r in self._remotes])
+        return self._cached
+
+    def _gather(self, remote_states: list[State]) -> State:
+        assert self._local is not None
+        states = [self._local.read_state(), *remote_states]
+        return tuple(  # type: ignore[return-value]
             np.concatenate([s[part] for s in states]) for part in range(3)
         )
 
@@ -131,6 +142,7 @@ class ShardedWorld:
     def set_config(self, config: EnvConfig) -> None:
         """Applies a new configuration to every share."""
         assert self._local is not None
+        self._ready()
         self._local.set_config(config)
         for remote in self._remotes:
             remote.call("config", config)
@@ -147,6 +159,7 @@ class ShardedWorld:
     ) -> None:
         """Puts legs at rest at their (angles, target) starts, one request per share."""
         assert self._local is not None
+        self._ready()
         by_share: dict[int, list[int]] = {}
         for position, index in enumerate(indices):
             by_share.setdefault(int(self._share_of[index]), []).append(position)
@@ -170,24 +183,23 @@ class ShardedWorld:
     def step(self, actions: np.ndarray) -> None:
         """Drives every leg for one control period, the shares in parallel."""
         assert self._local is not None
+        self._ready()  # answers come in order: the shares' first ones before any step's
         for remote, share in zip(self._remotes, self._shares[1:], strict=True):
             remote.send("step", actions[share])
         self._local.step(actions[self._shares[0]])
-        states = [self._local.read_state()] + [r.receive() for r in self._remotes]
-        self._state = tuple(  # type: ignore[assignment]
-            np.concatenate([s[part] for s in states]) for part in range(3)
-        )
+        self._cached = self._gather([r.receive() for r in self._remotes])
 
     def _store(self, legs: list[int], state: State) -> None:
-        for part, values in zip(self._state, state, strict=True):
+        for part, values in zip(self._ready(), state, strict=True):
             part[legs] = values
 
     def read_state(self, indices: Sequence[int] | None = None) -> State:
         """Joint angles, joint velocities and tip positions (base-relative), each (k, 3)."""
+        state = self._ready()
         if indices is None:
-            return tuple(part.copy() for part in self._state)  # type: ignore[return-value]
+            return tuple(part.copy() for part in state)  # type: ignore[return-value]
         rows = list(indices)
-        return tuple(part[rows] for part in self._state)  # type: ignore[return-value]
+        return tuple(part[rows] for part in state)  # type: ignore[return-value]
 
     def observe(
         self, indices: Sequence[int] | None = None
@@ -202,6 +214,7 @@ class ShardedWorld:
         share, local = int(self._share_of[index]), int(self._local_index[index])
         if share == 0:
             return self._local.render(local)
+        self._ready()
         return self._remotes[share - 1].call("render", local)
 
     def close(self) -> None:
