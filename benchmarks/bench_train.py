@@ -4,9 +4,12 @@ Run: python benchmarks/bench_train.py [--steps 32768] [--skip-workers]
 
 Both trainings use the tuned settings (n_steps 32 x 32 legs, batch 1024, 30 epochs). The plain
 script is what a user would write without kraby-study: PPO on a DummyVecEnv of 32 single
-environments (one PyBullet client each) wrapped in VecMonitor. Each side runs as its own process
-tree; peak memory is the largest sum of RSS over the tree, sampled every 50 ms. Speeds are env
-steps per second of training (model construction to the end of learn) and of the whole command.
+environments (one PyBullet client each) wrapped in VecMonitor, with one torch thread like a
+kraby-study worker. Each side runs as its own process tree. Peak memory is the largest sum over
+the tree of PSS (proportional set size: a page shared by n processes counts 1/n in each, so the
+Python, NumPy and PyBullet libraries that several processes map are counted once) and, for
+reference, of RSS (which counts them once per process). Speeds are env steps per second of
+training (environment and model construction to the end of learning) and of the whole command.
 """
 
 from __future__ import annotations
@@ -64,19 +67,40 @@ def _rss_mb(pids: list[int]) -> float:
     return total / 1024
 
 
-def measure(cmd: list[str], cwd: Path) -> tuple[float, float, str]:
-    """(wall seconds, peak tree RSS in MB, stdout) of a command."""
+def _pss_mb(pids: list[int]) -> float:
+    total = 0
+    for pid in pids:
+        try:
+            for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines():
+                if line.startswith("Pss:"):
+                    total += int(line.split()[1])
+        except OSError:
+            continue
+    return total / 1024
+
+
+def measure(cmd: list[str], cwd: Path) -> tuple[float, tuple[float, float], str]:
+    """(wall seconds, (peak tree RSS, peak tree PSS) in MB, stdout) of a command.
+
+    RSS is sampled every 50 ms; PSS, which walks every mapping, every 500 ms so that the
+    sampling does not take a core from the command measured.
+    """
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True)
-    peak = 0.0
+    peak_rss = peak_pss = 0.0
+    ticks = 0
     while proc.poll() is None:
-        peak = max(peak, _rss_mb(_tree(proc.pid)))
+        pids = _tree(proc.pid)
+        peak_rss = max(peak_rss, _rss_mb(pids))
+        if ticks % 10 == 0:
+            peak_pss = max(peak_pss, _pss_mb(pids))
+        ticks += 1
         time.sleep(0.05)
     out = proc.stdout.read() if proc.stdout else ""
     if proc.returncode != 0:
         raise SystemExit(f"command failed ({proc.returncode}): {' '.join(cmd)}\n{out}")
-    return time.perf_counter() - t0, peak, out
+    return time.perf_counter() - t0, (peak_rss, peak_pss), out
 
 
 def kraby(*args: str) -> list[str]:
@@ -99,32 +123,40 @@ def bench_train(steps: int, work: Path) -> list[str]:
     plain = json.loads(out_p.strip().splitlines()[-1])
     p_steps, p_train = plain["env_steps"], plain["train_seconds"]
     rows = [
-        "| run | env steps | training steps/s | command steps/s | peak memory (MB) |",
-        "|---|---:|---:|---:|---:|",
+        "| run | env steps | training steps/s | command steps/s | peak PSS (MB) | peak RSS (MB) |",
+        "|---|---:|---:|---:|---:|---:|",
         f"| plain SB3, DummyVecEnv x 32 | {p_steps} | {p_steps / p_train:,.0f} | "
-        f"{p_steps / wall_p:,.0f} | {peak_p:,.0f} |",
+        f"{p_steps / wall_p:,.0f} | {peak_p[1]:,.0f} | {peak_p[0]:,.0f} |",
         f"| kraby-study train ppo=tuned | {k_steps} | {k_steps / k_train:,.0f} | "
-        f"{k_steps / wall_k:,.0f} | {peak_k:,.0f} |",
+        f"{k_steps / wall_k:,.0f} | {peak_k[1]:,.0f} | {peak_k[0]:,.0f} |",
         f"| ratio kraby / plain | | {(k_steps / k_train) / (p_steps / p_train):.2f}x | "
-        f"{(k_steps / wall_k) / (p_steps / wall_p):.2f}x | {peak_k / peak_p:.2f} |",
+        f"{(k_steps / wall_k) / (p_steps / wall_p):.2f}x | {peak_k[1] / peak_p[1]:.2f} | "
+        f"{peak_k[0] / peak_p[0]:.2f} |",
     ]
     return rows
 
 
 def bench_workers(work: Path) -> list[str]:
-    """Rows of the 1-vs-2-workers table on a small study (4 values x 2 seeds)."""
+    """Rows of the workers table on a small study (4 values x 2 seeds).
+
+    One worker on one core (physics_processes=1) against two workers is the scaling of the
+    worker pool; one worker with the default physics processes shows what a lone worker gains
+    from the core it would otherwise leave idle.
+    """
     args = ["run", "study=clip_range", "budget.seeds=2", "budget.steps=16384",
             "budget.curve_every=1024", "save_models=false"]
+    runs = {"1 worker, 1 core (physics_processes=1)": ["workers=1", "physics_processes=1"],
+            "2 workers": ["workers=2"],
+            "1 worker, physics on both cores (default)": ["workers=1"]}
     times = {}
-    for workers in (1, 2):
-        wall, _, _ = measure(kraby(*args, f"workers={workers}",
-                                   f"storage=sqlite:///w{workers}.db"), work)
-        times[workers] = wall
+    for index, (label, extra) in enumerate(runs.items()):
+        wall, _, _ = measure(kraby(*args, *extra, f"storage=sqlite:///w{index}.db"), work)
+        times[label] = wall
+    base = next(iter(times.values()))
     return [
-        "| workers | wall time (s), 8 trials x 16,384 steps | speed-up |",
-        "|---:|---:|---:|",
-        f"| 1 | {times[1]:.1f} | 1.00x |",
-        f"| 2 | {times[2]:.1f} | {times[1] / times[2]:.2f}x |",
+        "| run | wall time (s), 8 trials x 16,384 steps | speed-up |",
+        "|---|---:|---:|",
+        *(f"| {label} | {wall:.1f} | {base / wall:.2f}x |" for label, wall in times.items()),
     ]
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable, Sequence
+from typing import Any
 
 from omegaconf import DictConfig
 from sqlalchemy import exc as sa_exc
@@ -49,10 +50,11 @@ def open_writer(cfg: DictConfig):  # noqa: ANN201 - a context manager of Store
                   heartbeat_grace=int(cfg.heartbeat_grace))
 
 
-def run_timing(cfg: DictConfig) -> dict[str, float]:
-    """Heartbeat period and database patience of a running command."""
+def run_options(cfg: DictConfig) -> dict[str, Any]:
+    """Heartbeat period, database patience and physics processes of a running command."""
     return {"heartbeat_seconds": float(cfg.heartbeat_interval),
-            "retry_seconds": float(cfg.db_retry_seconds)}
+            "retry_seconds": float(cfg.db_retry_seconds),
+            "physics_processes": cfg.physics_processes}
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -64,7 +66,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     plan = expand_study(cfg)
     with open_writer(cfg) as store:
         summary, complete, failed = run_plan(store, plan, worker_count(cfg), sys.stdout,
-                                             **run_timing(cfg))
+                                             **run_options(cfg))
     total = len(plan.specs)
     print(f"study {plan.name}: {complete}/{total} complete, {failed} failed"
           + (f", {total - complete - failed} left (rerun the same command to continue)"
@@ -80,7 +82,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     cfg = _compose(with_default(args.overrides, "ppo", "tuned"))
     plan = single_run(cfg)
     with open_writer(cfg) as store:
-        summary, _, _ = run_plan(store, plan, 1, sys.stdout, **run_timing(cfg))
+        summary, _, _ = run_plan(store, plan, 1, sys.stdout, **run_options(cfg))
         trial = _latest(store, plan.name, plan.specs[0].key)
     if trial is None:
         return 130 if summary.interrupted else 1

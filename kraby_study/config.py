@@ -131,7 +131,9 @@ class SearchConfig:
     seed: int = 0
     """Seed of the sampler, stored with the study."""
     startup_trials: int = 5
-    """Trials sampled at random, and left unpruned, before TPE and the median pruner start."""
+    """Trials sampled at random before TPE starts."""
+    pruner_startup_trials: int = 3
+    """Complete trials the median pruner waits for: it compares with their values."""
     checkpoints: int = 8
     """Intermediate values per training run, at equal env-step intervals (the pruner's steps)."""
     objective: str = "final_reward"
@@ -156,6 +158,9 @@ class KrabyConfig:
     """Database URL: a SQLite file (created on demand) or postgresql+psycopg://user@host/db."""
     workers: int | None = None
     """Worker processes; null means one per core."""
+    physics_processes: int | None = None
+    """Processes stepping each trial's legs; null: the cores the workers leave (cores // workers).
+    Results are the same for any number."""
     heartbeat_interval: int = 5
     """PostgreSQL: seconds between heartbeats of a running trial."""
     heartbeat_grace: int = 30
@@ -290,8 +295,9 @@ def validate(cfg: DictConfig) -> None:
     _require(cfg.heartbeat_grace > cfg.heartbeat_interval,
              f"heartbeat_grace ({cfg.heartbeat_grace}) must exceed heartbeat_interval "
              f"({cfg.heartbeat_interval})")
-    if cfg.workers is not None:
-        _require(int(cfg.workers) >= 1, f"workers must be at least 1, got {cfg.workers}")
+    for name in ("workers", "physics_processes"):
+        if cfg[name] is not None:
+            _require(int(cfg[name]) >= 1, f"{name} must be at least 1, got {cfg[name]}")
     _require(int(cfg.seed) >= 0, f"seed must be >= 0, got {cfg.seed}")
 
 

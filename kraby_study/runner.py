@@ -96,16 +96,21 @@ class Retrying:
 
 
 def run_trials(source: TrialSource, workers: int, progress: Progress,
-               heartbeat_seconds: float = 5.0, poll_seconds: float = 2.0) -> RunSummary:
+               heartbeat_seconds: float = 5.0, poll_seconds: float = 2.0,
+               physics_processes: int | None = None) -> RunSummary:
     """Run every trial the source hands out on ``workers`` processes.
+
+    Each trial steps its legs in ``physics_processes`` processes; None gives it the cores the
+    workers leave idle, so a lone trial uses the whole machine.
 
     When nothing is left to claim but other commands still run trials of the study (several
     machines on PostgreSQL), it keeps polling: a trial whose owner died comes back to the queue
     once its heartbeat is stale, and this command runs it.
     """
     summary = RunSummary()
-    # Cores the workers leave idle step their legs: a lone trial uses the whole machine.
-    pool = WorkerPool(workers, physics_processes=max(1, cores() // workers))
+    if physics_processes is None:
+        physics_processes = max(1, cores() // workers)
+    pool = WorkerPool(workers, physics_processes)
     deaths: dict[int, int] = {}
     last_beat = 0.0
     next_claim = 0.0

@@ -40,8 +40,9 @@ def validate_search(cfg: DictConfig) -> None:
     for name in ("trials", "checkpoints", "eval_episodes"):
         if int(search[name]) < 1:
             _fail(f"search.{name} must be at least 1, got {search[name]}")
-    if int(search.startup_trials) < 0:
-        _fail(f"search.startup_trials must be >= 0, got {search.startup_trials}")
+    for name in ("startup_trials", "pruner_startup_trials"):
+        if int(search[name]) < 0:
+            _fail(f"search.{name} must be >= 0, got {search[name]}")
     if not search.params:
         _fail("search.params is empty: the space needs at least one parameter")
     paths = [str(p.path) for p in search.params.values()]
@@ -157,7 +158,7 @@ def make_pruner(cfg: DictConfig) -> optuna.pruners.BasePruner:
     """The pruner of a search; its steps are env steps."""
     every = checkpoint_every(cfg)
     if cfg.search.pruner == "median":
-        return optuna.pruners.MedianPruner(n_startup_trials=int(cfg.search.startup_trials),
+        return optuna.pruners.MedianPruner(n_startup_trials=int(cfg.search.pruner_startup_trials),
                                            n_warmup_steps=every)
     if cfg.search.pruner == "hyperband":
         total = int(cfg.budget.steps) * int(cfg.budget.seeds)
@@ -256,5 +257,6 @@ def run_search(store: Store, cfg: DictConfig, workers: int, stream: TextIO,
           f"{cfg.search.sampler} sampler, {cfg.search.pruner} pruner", file=stream, flush=True)
     progress = Progress(study.study_name, source.total, done, stream, live)
     summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream),  # type: ignore[arg-type]
-                         slots, progress, heartbeat_seconds=float(cfg.heartbeat_interval))
+                         slots, progress, heartbeat_seconds=float(cfg.heartbeat_interval),
+                         physics_processes=cfg.physics_processes)
     return summary, study

@@ -86,7 +86,8 @@ def plan_counts(study: optuna.Study, plan: StudyPlan) -> tuple[int, int]:
 
 def run_plan(store: Store, plan: StudyPlan, workers: int, stream: TextIO,
              live: bool | None = None, heartbeat_seconds: float = 5.0,
-             retry_seconds: float = 60.0) -> tuple[RunSummary, int, int]:
+             retry_seconds: float = 60.0,
+             physics_processes: int | None = None) -> tuple[RunSummary, int, int]:
     """Queue, run and record a plan's trials; returns this command's summary and the totals."""
     kind = str(plan.definition.get("kind"))
     study = store.open_study(plan.name, kind, plan.definition, plan.fingerprint)
@@ -100,7 +101,8 @@ def run_plan(store: Store, plan: StudyPlan, workers: int, stream: TextIO,
           flush=True)
     source = Retrying(SweepSource(store, study, plan), retry_seconds, stream)
     summary = run_trials(source, min(workers, max(pending, 1)), progress,  # type: ignore[arg-type]
-                         heartbeat_seconds=heartbeat_seconds)
+                         heartbeat_seconds=heartbeat_seconds,
+                         physics_processes=physics_processes)
     complete, failed = plan_counts(study, plan)
     return summary, complete, failed
 

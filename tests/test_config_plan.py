@@ -96,6 +96,7 @@ def test_train_plan_is_one_run_named_by_its_settings() -> None:
     (["ppo.gamma=1.5"], "gamma"),
     (["ppo.batch_size=1000"], "does not divide"),
     (["workers=0"], "workers"),
+    (["physics_processes=0"], "physics_processes"),
     (["study=nope"], "study/nope"),
     (["budget.seeds=0"], "budget.seeds"),
     (["env.delta=2"], "delta"),

@@ -36,6 +36,7 @@ sampler: random
 pruner: median
 seed: 13  # the random sampler draws delta 0, 1, 0, 1, 1, 1
 startup_trials: 1
+pruner_startup_trials: 1
 checkpoints: 4
 params:
   delta: {path: env.delta, type: categorical, choices: [0.0, 1.0]}
@@ -175,6 +176,7 @@ def test_best_of_a_sweep_writes_the_best_value(workdir: Path,
     (["search.params.gamma.low=0.99", "search.params.gamma.high=0.5"], "above high"),
     (["search.params.learning_rate.low=0"], "log range"),
     (["search.params.nminibatches.choices=[3]"], "nminibatches 3"),
+    (["search.pruner_startup_trials=-1"], "pruner_startup_trials"),
 ])
 def test_bad_search_input_is_refused_before_anything_runs(
         workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str],

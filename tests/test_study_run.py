@@ -109,7 +109,8 @@ def test_changed_definition_is_refused_and_store_untouched(
 
 @pytest.mark.parametrize("bad", [
     ["ppo.ent_coeff=0.1"], ["ppo.n_steps=abc"], ["ppo.learning_rate=-1"], ["ppo.gamma=1.5"],
-    ["ppo.batch_size=100"], ["workers=0"], ["study=unknown"], ["budget=nope"],
+    ["ppo.batch_size=100"], ["workers=0"], ["physics_processes=0"], ["study=unknown"],
+    ["budget=nope"],
 ])
 def test_bad_input_exits_non_zero_and_leaves_the_store_byte_for_byte(
         stored: Path, capsys: pytest.CaptureFixture[str], bad: list[str]) -> None:
@@ -153,17 +154,21 @@ def test_train_stores_one_run_and_saves_its_model(
     assert PPO.load(model, device="cpu").policy is not None
 
 
-def test_same_seed_gives_the_same_curve(workdir: Path) -> None:
+def test_same_seed_gives_the_same_curve_with_any_number_of_physics_processes(
+        workdir: Path) -> None:
     from kraby_study.store import opened
 
-    curves = []
-    for name in ("a.db", "b.db"):
+    curves, scores = [], []
+    for name, processes in (("a.db", 1), ("b.db", 1), ("c.db", 3)):
         url = sqlite_url(workdir / name)
-        assert run_cli("train", "seed=7", f"storage={url}", *TINY) == 0
+        assert run_cli("train", "seed=7", f"storage={url}", f"physics_processes={processes}",
+                       *TINY) == 0
         with opened(url, create=False, writer=False) as store:
             study = store.load(store.study_names()[0])
             curves.append([(p["step"], p["mean_reward"]) for p in store.curves(study)])
-    assert curves[0] == curves[1] and len(curves[0]) == 4
+            scores.append(study.trials[0].value)
+    assert curves[0] == curves[1] == curves[2] and len(curves[0]) == 4
+    assert scores[0] == scores[1] == scores[2]
 
 
 def test_a_second_command_on_a_busy_sqlite_store_is_refused(workdir: Path) -> None:
