@@ -255,8 +255,9 @@ def build_parser() -> argparse.ArgumentParser:
     search.add_argument("--seed", type=_whole, help="sampler seed, stored with the study "
                         "(default 0)")
     search.epilog = ("each trial trains budget.seeds seeds of budget.steps env steps (budget=quick "
-                     "unless you choose one) and reports to the pruner at search.checkpoints "
-                     "env-step checkpoints per seed; the score is the mean over its seeds.\n\n"
+                     "unless you choose one); the score is the mean over its seeds. The pruner "
+                     "sees the mean reward at search.checkpoints equal env-step intervals of the "
+                     "first seed, then the mean score after each further seed.\n\n"
                      + EPILOG)
     best = parsers["best"]
     best.add_argument("--study-name", help="the study (default: the search's name, ppo_search)")

@@ -135,7 +135,9 @@ class SearchConfig:
     pruner_startup_trials: int = 3
     """Complete trials the median pruner waits for: it compares with their values."""
     checkpoints: int = 8
-    """Intermediate values per training run, at equal env-step intervals (the pruner's steps)."""
+    """Intervals of equal env steps in a trial's first seed; the mean reward of each but the
+    last is an intermediate value (the pruner's steps), as is the mean score after each seed
+    but the last."""
     objective: str = "final_reward"
     """final_reward: mean episode reward over the last 10 % of training; evaluation: mean
     reward of the deterministic policy on a fixed set of targets (reset options)."""

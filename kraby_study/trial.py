@@ -22,7 +22,7 @@ FINAL_FRACTION = 0.1
 """The final score averages the episodes that end in this last fraction of training."""
 
 CheckpointHook = Callable[[int, float], bool]
-"""Called with (env steps, mean episode reward since the last checkpoint); False stops the run."""
+"""Called with (env steps, intermediate value); False stops the run (a pruner's decision)."""
 ProgressHook = Callable[[int], None]
 """Called now and then with the env steps done so far."""
 
@@ -140,9 +140,13 @@ class _Run:
 
 
 def _train(spec: TrialSpec, seed: int, offset: int, on_checkpoint: CheckpointHook | None,
-           on_progress: ProgressHook | None, checkpoints: list[tuple[int, float]],
+           on_progress: ProgressHook | None, checkpoints: list[tuple[int, float]] | None,
            physics_processes: int) -> _Run:
-    """Train one seed; checkpoint and progress steps count from ``offset`` (earlier seeds)."""
+    """Train one seed; progress steps count from ``offset`` (earlier seeds).
+
+    With ``checkpoints`` (a list to fill), the mean episode reward since the last checkpoint is
+    reported every ``spec.checkpoint_every`` env steps before the end of the run.
+    """
     from stable_baselines3.common.callbacks import BaseCallback
 
     run = _Run()
@@ -166,7 +170,8 @@ def _train(spec: TrialSpec, seed: int, offset: int, on_checkpoint: CheckpointHoo
             if on_progress is not None and now - self.last_progress >= 1.0:
                 self.last_progress = now
                 on_progress(offset + self.num_timesteps)
-            if spec.checkpoint_every and self.num_timesteps >= self.next_checkpoint:
+            if (checkpoints is not None and spec.checkpoint_every
+                    and spec.steps > self.num_timesteps >= self.next_checkpoint):
                 if not self._checkpoint():
                     return False
             # SB3 trains in whole rollouts; stopping here gives every run the same experience
@@ -185,6 +190,7 @@ def _train(spec: TrialSpec, seed: int, offset: int, on_checkpoint: CheckpointHoo
             every = int(spec.checkpoint_every or 1)
             boundary = offset + (step // every) * every
             value = float(np.mean(recent))
+            assert checkpoints is not None
             checkpoints.append((boundary, value))
             if on_checkpoint is not None and not on_checkpoint(boundary, value):
                 run.pruned_at = boundary
@@ -235,8 +241,12 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
               physics_processes: int = 1) -> TrialResult:
     """Train PPO as the spec says; divergence and errors come back as a failed result.
 
-    A spec with repeats > 1 trains seeds seed .. seed + repeats - 1 one after the other; its
-    checkpoints count env steps across them, so a pruner can stop it after its first seed.
+    A spec with repeats > 1 trains seeds seed .. seed + repeats - 1 one after the other. Its
+    intermediate values (searches) are the mean episode reward every ``checkpoint_every`` env
+    steps of the first seed, then, at the end of each seed but the last, the mean score of the
+    seeds so far; steps count across seeds. So a pruner compares trials at equal experience, and
+    can stop a bad configuration during or after its first seed. (Within later seeds a learning
+    curve starts again from scratch and would compare with the others' first-seed curves.)
     ``physics_processes`` sets how many processes step the legs: speed only, the result is
     the same.
     """
@@ -245,12 +255,18 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
     checkpoints: list[tuple[int, float]] = []
     runs: list[_Run] = []
     for index in range(spec.repeats):
-        # Seed i's checkpoints count from i x the nominal budget: equal for every trial.
         run = _train(spec, spec.seed + index, index * spec.steps, on_checkpoint, on_progress,
-                     checkpoints, physics_processes)
+                     checkpoints if index == 0 else None, physics_processes)
         runs.append(run)
         if run.failure is not None or run.pruned_at is not None:
             break
+        if spec.checkpoint_every and index + 1 < spec.repeats:
+            step = (index + 1) * spec.steps
+            value = float(np.mean([r.score for r in runs]))
+            checkpoints.append((step, value))
+            if on_checkpoint is not None and not on_checkpoint(step, value):
+                run.pruned_at = step
+                break
     last = runs[-1]
     result = TrialResult(
         key=spec.key, status="complete",

@@ -103,6 +103,18 @@ def test_smoke_search_and_the_total_over_invocations(
     assert len(load(db, "tiny").trials) == 3
 
 
+def test_a_trial_of_three_seeds_reports_its_first_seed_then_each_seed_score(
+        spaces: Path) -> None:
+    assert run_cli("optuna", "--trials", "1", "search=tiny", "--pruner", "none", "--workers",
+                   "1", *TINY, "budget.seeds=3") == 0
+    trial = load(spaces / "studies" / "kraby.db", "tiny").trials[0]
+    steps = set(trial.intermediate_values)
+    # Every 128 steps of the first seed but its end, then after seeds 1 and 2 (not the last).
+    assert {512, 1024} <= steps <= {128, 256, 384, 512, 1024}
+    assert trial.user_attrs["env_steps"] == 3 * 512
+    assert all(-2.0 < v < 0.0 for v in trial.intermediate_values.values())
+
+
 def test_median_pruner_stops_bad_trials_in_a_controlled_case(spaces: Path) -> None:
     args = ["search=delta", "--trials", "6", "--workers", "1", *TINY,
             "budget.seeds=2", "budget.steps=1024"]
