@@ -41,7 +41,7 @@ def serve(conn: Connection) -> None:
     """Builds the share from the first request ``("init", config, bases)``, then serves."""
     try:
         operation, (config, bases) = conn.recv()
-    except EOFError:
+    except (EOFError, OSError):  # the owner is gone (a killed owner resets the pipe)
         return
     if operation != "init" or not isinstance(config, EnvConfig):
         conn.send(("error", f"expected ('init', (config, bases)), got {operation!r}"))
@@ -52,7 +52,7 @@ def serve(conn: Connection) -> None:
         while True:
             try:
                 operation, args = conn.recv()
-            except EOFError:
+            except (EOFError, OSError):  # the owner is gone (a killed owner resets the pipe)
                 return
             if operation == "close":
                 return
@@ -60,7 +60,10 @@ def serve(conn: Connection) -> None:
                 reply = ("ok", _handle(world, operation, args))
             except Exception as err:  # noqa: BLE001 - the caller raises it with its message
                 reply = ("error", f"{type(err).__name__}: {err}")
-            conn.send(reply)
+            try:
+                conn.send(reply)
+            except OSError:
+                return
     finally:
         world.close()
 

@@ -95,6 +95,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     print(line)
     if trial.user_attrs.get("model_path") and trial.value is not None:
         print(f"model: {trial.user_attrs['model_path']}")
+    if summary.interrupted:
+        return 130
     return 0 if trial.value is not None else 1
 
 

@@ -25,7 +25,7 @@ def serve(conn: Connection, physics_processes: int) -> None:
     while True:
         try:
             message = conn.recv()
-        except EOFError:
+        except (EOFError, OSError):  # the pool is gone (a killed parent resets the pipe)
             return
         if message is None:
             return
@@ -44,7 +44,10 @@ def serve(conn: Connection, physics_processes: int) -> None:
         except Exception as err:  # a bug or a bad environment must not kill the study
             last = traceback.format_exception_only(type(err), err)[-1].strip()
             result = TrialResult(key=spec.key, status="failed", failure=f"error: {last}")
-        conn.send(("result", trial_id, result))
+        try:
+            conn.send(("result", trial_id, result))
+        except OSError:
+            return
 
 
 def main() -> None:

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import time
+from pathlib import Path
+
 import numpy as np
 import pytest
 from stable_baselines3 import PPO
@@ -202,6 +207,39 @@ def test_share_processes_stop_with_the_env_and_their_death_is_an_error():
     process = other._world._remotes[0]._process
     other.close()
     assert process.poll() == 0
+
+
+def _running(pid: int) -> bool:
+    """Whether a process exists and has not exited (a zombie has, though not yet reaped)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_a_share_process_ends_quietly_when_its_owner_is_killed():
+    owner = subprocess.Popen(
+        [sys.executable, "-c",
+         "import sys, time\n"
+         "from kraby_envs import make_batched\n"
+         "env = make_batched(n_envs=4, processes=2)\n"
+         "env.reset()\n"
+         "share = env._world._remotes[0]\n"
+         "share.send('step', [[0.1, 0.2, 0.3]] * 2)\n"
+         "print(share._process.pid, flush=True)\n"
+         "time.sleep(60)\n"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert owner.stdout is not None and owner.stderr is not None
+    share = int(owner.stdout.readline())
+    time.sleep(0.5)  # the share answers the step; dying with it unread resets the pipe
+    owner.kill()
+    owner.wait()
+    deadline = time.monotonic() + 10
+    while _running(share) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _running(share)
+    # The share inherited the owner's stderr: a traceback would show here.
+    assert owner.stderr.read() == ""
 
 
 @pytest.mark.parametrize(
