@@ -164,7 +164,8 @@ class ShardedWorld:
         for position, index in enumerate(indices):
             by_share.setdefault(int(self._share_of[index]), []).append(position)
         pending = []
-        for share, positions in by_share.items():
+        # Requests to other processes go first, so they work while this one places its legs.
+        for share, positions in sorted(by_share.items(), key=lambda item: item[0] == 0):
             legs = [int(indices[p]) for p in positions]
             local = [int(self._local_index[i]) for i in legs]
             angles = [starts[p][0] for p in positions]
