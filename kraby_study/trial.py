@@ -103,17 +103,21 @@ def build_model(spec: TrialSpec, env: Any, seed: int) -> Any:
     """The PPO learner of a spec on a given vectorised environment."""
     import torch
     from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import Logger
 
     ppo = spec.settings["ppo"]
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[ppo["activation"]]
     arch = list(ppo["net_arch"])
-    return PPO(
+    model = PPO(
         "MlpPolicy", env, n_steps=ppo["n_steps"], batch_size=ppo["batch_size"],
         n_epochs=ppo["n_epochs"], gamma=ppo["gamma"], gae_lambda=ppo["gae_lambda"],
         clip_range=ppo["clip_range"], ent_coef=ppo["ent_coef"], vf_coef=ppo["vf_coef"],
         max_grad_norm=ppo["max_grad_norm"], learning_rate=ppo["learning_rate"],
         policy_kwargs={"net_arch": {"pi": arch, "vf": arch}, "activation_fn": activation},
         seed=seed, device="cpu", verbose=0)
+    # A logger with no outputs: SB3's default one makes an empty folder in /tmp per model.
+    model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
 
 
 def make_env(spec: TrialSpec, seed: int, processes: int = 1) -> Any:

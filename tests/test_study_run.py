@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import shutil
 import signal
+import tempfile
 import time
 from pathlib import Path
 
@@ -152,6 +153,18 @@ def test_train_stores_one_run_and_saves_its_model(
     assert model.is_file() and model.suffix == ".zip"
     from stable_baselines3 import PPO
     assert PPO.load(model, device="cpu").policy is not None
+
+
+def test_training_leaves_no_folder_per_run_in_the_temporary_folder(
+        workdir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # stable-baselines3's default logger makes an empty SB3-<time> folder per model there.
+    # (torch keeps one cache folder per user there, shared by every run: that one may stay.)
+    tmp = workdir / "tmp"
+    tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp))
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    assert run_cli("run", "study=clip_range", "study.values=[0.2]", "budget.seeds=1", *TINY) == 0
+    assert [p.name for p in tmp.iterdir() if not p.name.startswith("torchinductor_")] == []
 
 
 def test_same_seed_gives_the_same_curve_with_any_number_of_physics_processes(
