@@ -1,15 +1,16 @@
 """Benchmark: env steps spent and best score found, median pruner against no pruner.
 
 Run: python benchmarks/bench_pruning.py [--trials 30] [--seeds 2] [--steps 20480]
+     [--sampler tpe|random]
 
-Both searches use the same space (conf/search/ppo.yaml), the same seeded TPE sampler, the same
-budget (--seeds seeds of --steps env steps per trial; the default, 2 x 20,480, is the
-experience of one quick-budget seed split over two seeds) and the same number of trials, each
-in its own temporary store. They run at the same time, one worker each with one physics
-process, so each search is sequential: its TPE suggestions do not depend on which trial
-happens to finish first. The noise is the standard deviation of the objective (a mean over
---seeds seeds) over 5 such trials of one configuration (the tuned settings), so "best score
-within noise" can be judged.
+Both searches use the same space (conf/search/ppo.yaml), the same seeded sampler (TPE unless
+--sampler random), the same budget (--seeds seeds of --steps env steps per trial; the default,
+2 x 20,480, is the experience of one quick-budget seed split over two seeds) and the same
+number of trials, each in its own temporary store. They run at the same time, one worker each
+with one physics process, so each search is sequential: its suggestions do not depend on which
+trial happens to finish first. The noise is the standard deviation of the objective (a mean
+over --seeds seeds) over 5 such trials of one configuration (the tuned settings), so "best
+score within noise" can be judged.
 """
 
 from __future__ import annotations
@@ -25,14 +26,14 @@ import optuna
 from optuna.trial import TrialState
 
 
-def start_search(url: str, name: str, pruner: str, trials: int, seeds: int, steps: int,
-                 cwd: Path) -> subprocess.Popen[bytes]:
+def start_search(url: str, name: str, pruner: str, sampler: str, trials: int, seeds: int,
+                 steps: int, cwd: Path) -> subprocess.Popen[bytes]:
     """Start one search on one worker and one physics process."""
     return subprocess.Popen(
         [sys.executable, "-m", "kraby_study.cli", "optuna", "--trials", str(trials),
          "--workers", "1", "--storage", url, "--study-name", name, "--pruner", pruner,
-         "--seed", "0", "budget=quick", f"budget.seeds={seeds}", f"budget.steps={steps}",
-         "physics_processes=1", "save_models=false"],
+         "--sampler", sampler, "--seed", "0", "budget=quick", f"budget.seeds={seeds}",
+         f"budget.steps={steps}", "physics_processes=1", "save_models=false"],
         cwd=cwd, stdout=subprocess.DEVNULL)
 
 
@@ -65,22 +66,23 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=30)
     parser.add_argument("--seeds", type=int, default=2, help="seeds per trial")
     parser.add_argument("--steps", type=int, default=20480, help="env steps per seed")
+    parser.add_argument("--sampler", choices=["tpe", "random"], default="tpe")
     args = parser.parse_args()
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         cwd = Path(tmp)
         urls = {pruner: f"sqlite:///{cwd / pruner}.db" for pruner in ("none", "median")}
-        searches = {pruner: start_search(url, f"bench_{pruner}", pruner, args.trials,
-                                         args.seeds, args.steps, cwd)
+        searches = {pruner: start_search(url, f"bench_{pruner}", pruner, args.sampler,
+                                         args.trials, args.seeds, args.steps, cwd)
                     for pruner, url in urls.items()}
         for pruner, proc in searches.items():
             if proc.wait() != 0:
                 raise SystemExit(f"the {pruner} search failed ({proc.returncode})")
             rows[pruner] = summarise(urls[pruner], f"bench_{pruner}")
         sd = noise(f"sqlite:///{cwd / 'noise.db'}", args.seeds, args.steps, cwd)
-    print(f"{args.trials} trials, TPE seed 0, {args.seeds} seed(s) x {args.steps:,} env steps "
-          "per trial")
+    print(f"{args.trials} trials, {args.sampler} sampler seed 0, {args.seeds} seed(s) x "
+          f"{args.steps:,} env steps per trial")
     print("| pruner | trials | complete | pruned | failed | env steps | best score |")
     print("|---|---:|---:|---:|---:|---:|---:|")
     for pruner, (n, complete, pruned, failed, steps, best) in rows.items():
