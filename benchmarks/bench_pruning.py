@@ -1,7 +1,7 @@
 """Benchmark: env steps spent and best score found, median pruner against no pruner.
 
 Run: python benchmarks/bench_pruning.py [--trials 30] [--seeds 2] [--steps 20480]
-     [--sampler tpe|random]
+     [--sampler tpe|random] [--keep DIR]
 
 Both searches use the same space (conf/search/ppo.yaml), the same seeded sampler (TPE unless
 --sampler random), the same budget (--seeds seeds of --steps env steps per trial; the default,
@@ -67,11 +67,14 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=2, help="seeds per trial")
     parser.add_argument("--steps", type=int, default=20480, help="env steps per seed")
     parser.add_argument("--sampler", choices=["tpe", "random"], default="tpe")
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="write the stores (none.db, median.db, noise.db) here and keep them")
     args = parser.parse_args()
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
-        cwd = Path(tmp)
+        cwd = args.keep or Path(tmp)
+        cwd.mkdir(parents=True, exist_ok=True)
         urls = {pruner: f"sqlite:///{cwd / pruner}.db" for pruner in ("none", "median")}
         searches = {pruner: start_search(url, f"bench_{pruner}", pruner, args.sampler,
                                          args.trials, args.seeds, args.steps, cwd)

@@ -134,7 +134,10 @@ class SearchConfig:
     """Trials sampled at random before TPE starts."""
     pruner_startup_trials: int = 3
     """Complete trials the median pruner waits for: it compares with their values."""
-    checkpoints: int = 8
+    warmup: float = 0.25
+    """Fraction of the first seed during which no trial is pruned: the first updates' reward
+    says little about a configuration (it is mostly the untrained policy's)."""
+    checkpoints: int = 4
     """Intervals of equal env steps in a trial's first seed; the mean reward of each but the
     last is an intermediate value (the pruner's steps), as is the mean score after each seed
     but the last."""

@@ -43,6 +43,9 @@ def validate_search(cfg: DictConfig) -> None:
     for name in ("startup_trials", "pruner_startup_trials"):
         if int(search[name]) < 0:
             _fail(f"search.{name} must be >= 0, got {search[name]}")
+    if not 0 <= float(search.warmup) < 1:
+        _fail(f"search.warmup must be in [0, 1) (a fraction of the first seed), "
+              f"got {search.warmup}")
     if not search.params:
         _fail("search.params is empty: the space needs at least one parameter")
     paths = [str(p.path) for p in search.params.values()]
@@ -154,15 +157,20 @@ def checkpoint_every(cfg: DictConfig) -> int:
     return max(1, int(cfg.budget.steps) // int(cfg.search.checkpoints))
 
 
+def warmup_steps(cfg: DictConfig) -> int:
+    """Env steps before the first checkpoint at which a pruner may stop a trial."""
+    return max(checkpoint_every(cfg), int(float(cfg.search.warmup) * int(cfg.budget.steps)))
+
+
 def make_pruner(cfg: DictConfig) -> optuna.pruners.BasePruner:
     """The pruner of a search; its steps are env steps."""
-    every = checkpoint_every(cfg)
+    warmup = warmup_steps(cfg)
     if cfg.search.pruner == "median":
         return optuna.pruners.MedianPruner(n_startup_trials=int(cfg.search.pruner_startup_trials),
-                                           n_warmup_steps=every)
+                                           n_warmup_steps=warmup)
     if cfg.search.pruner == "hyperband":
         total = int(cfg.budget.steps) * int(cfg.budget.seeds)
-        return optuna.pruners.HyperbandPruner(min_resource=every, max_resource=total)
+        return optuna.pruners.HyperbandPruner(min_resource=warmup, max_resource=total)
     return optuna.pruners.NopPruner()
 
 

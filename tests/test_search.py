@@ -10,7 +10,7 @@ from conftest import TINY, load, run_cli
 from optuna.trial import TrialState
 
 from kraby_study.compose import compose_config
-from kraby_study.search import SearchSource, validate_search
+from kraby_study.search import SearchSource, make_pruner, validate_search
 
 TINY_SPACE = """\
 name: tiny
@@ -150,6 +150,25 @@ def test_checkpoint_prunes_a_trial_below_the_median_at_equal_steps(tmp_path: Pat
     assert source.checkpoint(bad._trial_id, 512, -0.9) is False
 
 
+@pytest.mark.parametrize("warmup,kept_at_512", [(0.25, True), (0.0, False)])
+def test_no_trial_is_pruned_during_the_warmup(tmp_path: Path, warmup: float,
+                                              kept_at_512: bool) -> None:
+    # 8 checkpoints of 512 steps; a quarter of the 4,096-step seed is 1,024 steps of warm-up.
+    cfg = compose_config(["budget.steps=4096", "search.checkpoints=8", "search.startup_trials=1",
+                          "search.pruner_startup_trials=1", f"search.warmup={warmup}",
+                          f"storage=sqlite:///{tmp_path}/k.db"])
+    study = optuna.create_study(direction="maximize", pruner=make_pruner(cfg))
+    done = study.ask()
+    for step in (512, 1024, 1536):
+        done.report(-0.1, step)
+    study.tell(done, -0.1)
+    source = SearchSource(store=None, study=study, cfg=cfg)  # type: ignore[arg-type]
+    bad = study.ask()
+    assert source.checkpoint(bad._trial_id, 512, -0.9) is kept_at_512
+    if kept_at_512:
+        assert source.checkpoint(bad._trial_id, 1024, -0.9) is False
+
+
 def test_best_round_trip(spaces: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert run_cli("optuna", "--trials", "2", "search=tiny", "--workers", "1", *TINY,
                    "budget.seeds=1") == 0
@@ -189,6 +208,8 @@ def test_best_of_a_sweep_writes_the_best_value(workdir: Path,
     (["search.params.learning_rate.low=0"], "log range"),
     (["search.params.nminibatches.choices=[3]"], "nminibatches 3"),
     (["search.pruner_startup_trials=-1"], "pruner_startup_trials"),
+    (["search.warmup=1"], "search.warmup"),
+    (["search.warmup=-0.25"], "search.warmup"),
 ])
 def test_bad_search_input_is_refused_before_anything_runs(
         workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str],
