@@ -1,16 +1,20 @@
 """Benchmark: env steps spent and best score found, median pruner against no pruner.
 
 Run: python benchmarks/bench_pruning.py [--trials 30] [--seeds 2] [--steps 20480]
-     [--sampler tpe|random] [--keep DIR]
+     [--sampler tpe|random] [--sampler-seeds 0 1 2] [--jobs 2] [--keep DIR]
 
-Both searches use the same space (conf/search/ppo.yaml), the same seeded sampler (TPE unless
---sampler random), the same budget (--seeds seeds of --steps env steps per trial; the default,
-2 x 20,480, is the experience of one quick-budget seed split over two seeds) and the same
-number of trials, each in its own temporary store. They run at the same time, one worker each
-with one physics process, so each search is sequential: its suggestions do not depend on which
-trial happens to finish first. The noise is the standard deviation of the objective (a mean
-over --seeds seeds) over 5 such trials of one configuration (the tuned settings), so "best
-score within noise" can be judged.
+For each sampler seed, two searches share everything but the pruner: the space
+(conf/search/ppo.yaml), the seeded sampler (TPE unless --sampler random), the budget (--seeds
+seeds of --steps env steps per trial; the default, 2 x 20,480, is the experience of one
+quick-budget seed split over two seeds) and the number of trials. Each search has its own
+temporary store and one worker with one physics process, so it is sequential: its suggestions
+do not depend on which trial happens to finish first, and the run is reproducible. --jobs
+searches run at a time.
+
+Two kinds of noise judge "best score within noise": the standard deviation of the objective (a
+mean over --seeds seeds) over 5 such trials of one configuration (the tuned settings), and the
+spread over sampler seeds of the difference in best score between the two searches of a seed,
+which is what the best score of a whole search varies by.
 """
 
 from __future__ import annotations
@@ -19,22 +23,39 @@ import argparse
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
 import optuna
 from optuna.trial import TrialState
 
+PRUNERS = ("none", "median")
 
-def start_search(url: str, name: str, pruner: str, sampler: str, trials: int, seeds: int,
-                 steps: int, cwd: Path) -> subprocess.Popen[bytes]:
-    """Start one search on one worker and one physics process."""
-    return subprocess.Popen(
-        [sys.executable, "-m", "kraby_study.cli", "optuna", "--trials", str(trials),
-         "--workers", "1", "--storage", url, "--study-name", name, "--pruner", pruner,
-         "--sampler", sampler, "--seed", "0", "budget=quick", f"budget.seeds={seeds}",
-         f"budget.steps={steps}", "physics_processes=1", "save_models=false"],
-        cwd=cwd, stdout=subprocess.DEVNULL)
+
+def search_command(url: str, name: str, pruner: str, sampler: str, sampler_seed: int,
+                   trials: int, seeds: int, steps: int) -> list[str]:
+    """One search on one worker and one physics process."""
+    return [sys.executable, "-m", "kraby_study.cli", "optuna", "--trials", str(trials),
+            "--workers", "1", "--storage", url, "--study-name", name, "--pruner", pruner,
+            "--sampler", sampler, "--seed", str(sampler_seed), "budget=quick",
+            f"budget.seeds={seeds}", f"budget.steps={steps}", "physics_processes=1",
+            "save_models=false"]
+
+
+def run_all(commands: list[list[str]], jobs: int, cwd: Path) -> None:
+    """Run the commands, ``jobs`` at a time; stop at the first that fails."""
+    waiting = list(commands)
+    running: list[subprocess.Popen[bytes]] = []
+    while waiting or running:
+        while waiting and len(running) < jobs:
+            running.append(subprocess.Popen(waiting.pop(0), cwd=cwd,
+                                            stdout=subprocess.DEVNULL))
+        time.sleep(1.0)
+        for proc in [p for p in running if p.poll() is not None]:
+            running.remove(proc)
+            if proc.returncode != 0:
+                raise SystemExit(f"a search failed ({proc.returncode}): {' '.join(proc.args)}")
 
 
 def noise(url: str, seeds: int, steps: int, cwd: Path) -> float:
@@ -51,11 +72,11 @@ def noise(url: str, seeds: int, steps: int, cwd: Path) -> float:
     return float(np.std(means, ddof=1))
 
 
-def summarise(url: str, name: str) -> tuple[int, int, int, int, int, float]:
-    """(trials, complete, pruned, failed, env steps, best score) of a search."""
+def summarise(url: str, name: str) -> tuple[int, int, int, int, float]:
+    """(complete, pruned, failed, env steps, best score) of a search."""
     trials = optuna.load_study(study_name=name, storage=url).trials
     complete = [t for t in trials if t.state == TrialState.COMPLETE]
-    return (len(trials), len(complete), sum(t.state == TrialState.PRUNED for t in trials),
+    return (len(complete), sum(t.state == TrialState.PRUNED for t in trials),
             sum(t.state == TrialState.FAIL for t in trials),
             sum(int(t.user_attrs.get("env_steps", 0)) for t in trials),
             max(float(t.value) for t in complete))
@@ -67,36 +88,44 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=2, help="seeds per trial")
     parser.add_argument("--steps", type=int, default=20480, help="env steps per seed")
     parser.add_argument("--sampler", choices=["tpe", "random"], default="tpe")
+    parser.add_argument("--sampler-seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--jobs", type=int, default=2, help="searches at a time")
     parser.add_argument("--keep", type=Path, default=None,
-                        help="write the stores (none.db, median.db, noise.db) here and keep them")
+                        help="write the stores here and keep them")
     args = parser.parse_args()
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         cwd = args.keep or Path(tmp)
         cwd.mkdir(parents=True, exist_ok=True)
-        urls = {pruner: f"sqlite:///{cwd / pruner}.db" for pruner in ("none", "median")}
-        searches = {pruner: start_search(url, f"bench_{pruner}", pruner, args.sampler,
-                                         args.trials, args.seeds, args.steps, cwd)
-                    for pruner, url in urls.items()}
-        for pruner, proc in searches.items():
-            if proc.wait() != 0:
-                raise SystemExit(f"the {pruner} search failed ({proc.returncode})")
-            rows[pruner] = summarise(urls[pruner], f"bench_{pruner}")
+        stores = {(seed, pruner): (f"sqlite:///{cwd / f'{pruner}_{seed}'}.db",
+                                   f"bench_{pruner}_{seed}")
+                  for seed in args.sampler_seeds for pruner in PRUNERS}
+        # The slower, unpruned searches first, so the last ones to finish are short.
+        order = sorted(stores, key=lambda k: (k[1] != "none", k[0]))
+        run_all([search_command(*stores[k], k[1], args.sampler, k[0], args.trials, args.seeds,
+                                args.steps) for k in order], args.jobs, cwd)
+        rows = {k: summarise(*stores[k]) for k in stores}
         sd = noise(f"sqlite:///{cwd / 'noise.db'}", args.seeds, args.steps, cwd)
-    print(f"{args.trials} trials, {args.sampler} sampler seed 0, {args.seeds} seed(s) x "
+    print(f"{args.trials} trials per search, {args.sampler} sampler, {args.seeds} seed(s) x "
           f"{args.steps:,} env steps per trial")
-    print("| pruner | trials | complete | pruned | failed | env steps | best score |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
-    for pruner, (n, complete, pruned, failed, steps, best) in rows.items():
-        print(f"| {pruner} | {n} | {complete} | {pruned} | {failed} | {steps:,} | {best:.4f} |")
-    steps_none, best_none = rows["none"][4:]
-    steps_median, best_median = rows["median"][4:]
-    print(f"env steps saved by the median pruner: {1 - steps_median / steps_none:.0%} "
-          f"(goal >= 40 %)")
-    print(f"best score difference: {best_median - best_none:+.4f}; noise (sd of the objective, "
-          f"a mean over {args.seeds} seed(s) of {args.steps:,} steps, at the tuned settings, "
-          f"5 samples): {sd:.4f}")
+    print("| sampler seed | pruner | complete | pruned | failed | env steps | best score |")
+    print("|---:|---|---:|---:|---:|---:|---:|")
+    for seed in args.sampler_seeds:
+        for pruner in PRUNERS:
+            complete, pruned, failed, steps, best = rows[seed, pruner]
+            print(f"| {seed} | {pruner} | {complete} | {pruned} | {failed} | {steps:,} | "
+                  f"{best:.4f} |")
+    saved = [1 - rows[s, "median"][3] / rows[s, "none"][3] for s in args.sampler_seeds]
+    total = 1 - (sum(rows[s, "median"][3] for s in args.sampler_seeds)
+                 / sum(rows[s, "none"][3] for s in args.sampler_seeds))
+    diffs = np.array([rows[s, "median"][4] - rows[s, "none"][4] for s in args.sampler_seeds])
+    print(f"env steps saved by the median pruner: {total:.0%} over all seeds "
+          f"({', '.join(f'{x:.0%}' for x in saved)}; goal >= 40 %)")
+    spread = f", sd {np.std(diffs, ddof=1):.4f}" if len(diffs) > 1 else ""
+    print(f"best score, median minus none: mean {diffs.mean():+.4f} "
+          f"({', '.join(f'{d:+.4f}' for d in diffs)}{spread})")
+    print(f"noise of the objective (sd, a mean over {args.seeds} seed(s) of {args.steps:,} "
+          f"steps, at the tuned settings, 5 samples): {sd:.4f}")
 
 
 if __name__ == "__main__":

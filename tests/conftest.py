@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import sqlite3
 import subprocess
 import sys
 import time
@@ -57,6 +58,22 @@ def load(path: Path, name: str) -> optuna.Study:
     return optuna.load_study(study_name=name, storage=sqlite_url(path))
 
 
+def has_study(path: Path, name: str) -> bool:
+    """Whether a command has created the study in the store, read without writing anything.
+
+    Loading a study through Optuna creates its tables when they are missing: polling a store
+    that a command is still creating would race that command's own creation of them.
+    """
+    if not path.exists():
+        return False
+    try:
+        with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as conn:
+            row = conn.execute("SELECT 1 FROM studies WHERE study_name = ?", (name,)).fetchone()
+    except sqlite3.Error:
+        return False
+    return row is not None
+
+
 def children(pid: int, workers_only: bool = True) -> list[int]:
     """Direct child processes of a process (Linux): its trial workers by default."""
     out: list[int] = []
@@ -75,13 +92,20 @@ def _cmdline(pid: int) -> bytes:
         return b""
 
 
-def wait_for(predicate: Callable[[], bool], timeout: float = 180.0) -> None:
-    """Poll until the predicate holds; fail the test after ``timeout`` seconds."""
+def wait_for(predicate: Callable[[], bool], timeout: float = 180.0,
+             proc: subprocess.Popen[str] | None = None) -> None:
+    """Poll until the predicate holds; fail the test after ``timeout`` seconds, or as soon as
+    ``proc`` (the command being watched) has ended, with what it printed."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if predicate():
             return
+        if proc is not None and proc.poll() is not None:
+            out = proc.stdout.read() if proc.stdout else ""
+            raise AssertionError(f"the command ended first (exit {proc.returncode}):\n{out}")
         time.sleep(0.1)
+    if proc is not None:
+        proc.kill()
     raise AssertionError("timed out")
 
 

@@ -14,6 +14,7 @@ from conftest import (
     TINY,
     children,
     file_digest,
+    has_study,
     load,
     run_cli,
     spawn_cli,
@@ -198,17 +199,13 @@ def test_a_second_command_on_a_busy_sqlite_store_is_refused(workdir: Path) -> No
 
 
 def _complete_count(db: Path, name: str) -> int:
-    try:
-        return len(_complete_keys(db, name))
-    except Exception:
-        return 0
+    return len(_complete_keys(db, name)) if has_study(db, name) else 0
 
 
 def _running_trials(db: Path, name: str) -> int:
-    try:
-        return len(load(db, name).get_trials(deepcopy=False, states=(TrialState.RUNNING,)))
-    except Exception:
+    if not has_study(db, name):
         return 0
+    return len(load(db, name).get_trials(deepcopy=False, states=(TrialState.RUNNING,)))
 
 
 SLOWER = [a if not a.startswith("budget.steps") else "budget.steps=4096" for a in TINY]
@@ -218,7 +215,7 @@ SLOWER = [a if not a.startswith("budget.steps") else "budget.steps=4096" for a i
 def test_killing_a_worker_mid_study_loses_and_duplicates_nothing(workdir: Path) -> None:
     db = workdir / "studies" / "kraby.db"
     proc = spawn_cli("run", "study=clip_range", "workers=2", *SLOWER, cwd=workdir)
-    wait_for(lambda: _running_trials(db, "clip_range") == 2)
+    wait_for(lambda: _running_trials(db, "clip_range") == 2, proc=proc)
     time.sleep(1.0)
     workers = children(proc.pid)
     assert workers, "no worker processes found"
@@ -236,8 +233,8 @@ def test_killing_a_worker_mid_study_loses_and_duplicates_nothing(workdir: Path) 
 def test_resume_after_the_command_is_killed(workdir: Path) -> None:
     db = workdir / "studies" / "kraby.db"
     proc = spawn_cli("run", "study=clip_range", "workers=2", *SLOWER, cwd=workdir)
-    wait_for(lambda: _complete_count(db, "clip_range") >= 2)
-    wait_for(lambda: _running_trials(db, "clip_range") >= 1)
+    wait_for(lambda: _complete_count(db, "clip_range") >= 2, proc=proc)
+    wait_for(lambda: _running_trials(db, "clip_range") >= 1, proc=proc)
     for pid in [proc.pid, *children(proc.pid, workers_only=False)]:
         os.kill(pid, signal.SIGKILL)
     proc.wait()
@@ -267,8 +264,8 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_completes(workdir: Path) -> None:
     proc = subprocess.Popen([sys.executable, "-m", "kraby_study.cli", "run", "study=clip_range",
                              "workers=2", *SLOWER], cwd=workdir, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, start_new_session=True)
-    wait_for(lambda: _complete_count(db, "clip_range") >= 1)
-    wait_for(lambda: _running_trials(db, "clip_range") >= 1)
+    wait_for(lambda: _complete_count(db, "clip_range") >= 1, proc=proc)
+    wait_for(lambda: _running_trials(db, "clip_range") >= 1, proc=proc)
     os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C sends: the whole group
     out, _ = proc.communicate(timeout=120)
     assert proc.returncode == 130, out
