@@ -260,7 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "unless you choose one); the score is the mean over its seeds. The pruner "
                      "sees the mean reward at search.checkpoints equal env-step intervals of the "
                      "first seed, then the mean score after each further seed; it stops no "
-                     "trial in the first search.warmup (a quarter) of the first seed.\n\n"
+                     "trial in the first search.warmup (half) of the first seed.\n\n"
                      + EPILOG)
     best = parsers["best"]
     best.add_argument("--study-name", help="the study (default: the search's name, ppo_search)")

@@ -134,7 +134,7 @@ class SearchConfig:
     """Trials sampled at random before TPE starts."""
     pruner_startup_trials: int = 3
     """Complete trials the median pruner waits for: it compares with their values."""
-    warmup: float = 0.25
+    warmup: float = 0.5
     """Fraction of the first seed during which no trial is pruned: the first updates' reward
     says little about a configuration (it is mostly the untrained policy's)."""
     checkpoints: int = 4
