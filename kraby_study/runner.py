@@ -108,10 +108,10 @@ class _CtrlC:
         self.pressed = False
         self._previous: Any = None
 
-    def __enter__(self) -> _CtrlC:
+    def install(self) -> None:
+        """Catch SIGINT (only the main thread may set a handler)."""
         if threading.current_thread() is threading.main_thread():
             self._previous = signal.signal(signal.SIGINT, self._note)
-        return self
 
     def _note(self, signum: int, frame: Any) -> None:
         if self.pressed:
@@ -123,7 +123,8 @@ class _CtrlC:
         if self.pressed:
             raise KeyboardInterrupt
 
-    def __exit__(self, *exc: object) -> None:
+    def restore(self) -> None:
+        """Give SIGINT back to the handler it had before."""
         if self._previous is not None:
             signal.signal(signal.SIGINT, self._previous)
 
@@ -147,67 +148,69 @@ def run_trials(source: TrialSource, workers: int, progress: Progress,
     deaths: dict[int, int] = {}
     last_beat = 0.0
     next_claim = 0.0
-    with _CtrlC() as ctrl_c:
-        try:
-            while True:
-                ctrl_c.check()
-                while pool.idle() > 0 and time.monotonic() >= next_claim:
-                    claimed = source.next_trial()
-                    if claimed is None:
-                        next_claim = time.monotonic() + poll_seconds
-                        break
-                    trial_id, spec = claimed
-                    pool.submit(trial_id, spec)
-                    progress.start(source.label(spec), spec.steps * spec.repeats)
-                running = pool.running()
-                if not running:
-                    if not source.running_elsewhere():
-                        break
-                    while time.monotonic() < next_claim and not ctrl_c.pressed:
-                        time.sleep(0.1)
-                    continue
-                if time.monotonic() - last_beat >= heartbeat_seconds:
-                    source.heartbeat(list(running))
-                    last_beat = time.monotonic()
-                for event in pool.events(timeout=0.5):
-                    spec = running.get(event.trial_id)
-                    if spec is None:
-                        continue
-                    if event.kind == "progress":
-                        progress.step(source.label(spec), int(event.payload))
-                    elif event.kind == "checkpoint":
-                        step, value = event.payload
-                        pool.reply(event, source.checkpoint(event.trial_id, step, value))
-                    elif event.kind == "result":
-                        result: TrialResult = event.payload
-                        outcome = source.record(event.trial_id, spec, result)
-                        _count(summary, result.status)
-                        progress.finish(source.label(spec), outcome)
-                    elif event.kind == "died":
-                        _, code = event.payload
-                        deaths[event.trial_id] = deaths.get(event.trial_id, 0) + 1
-                        label = source.label(spec)
-                        if deaths[event.trial_id] >= MAX_WORKER_DEATHS:
-                            failure = (f"error: its worker died {MAX_WORKER_DEATHS} times "
-                                       f"(last exit code {code})")
-                            result = TrialResult(key=spec.key, status="failed", failure=failure)
-                            progress.finish(label, source.record(event.trial_id, spec, result))
-                            _count(summary, "failed")
-                        else:
-                            # Same trial, new worker: the trial stays claimed, so nothing is lost.
-                            progress.finish(label, f"interrupted (worker exit code {code}), rerun")
-                            pool.submit(event.trial_id, spec)
-                            progress.start(label, spec.steps * spec.repeats)
-        except KeyboardInterrupt:
-            summary.interrupted = True
+    ctrl_c = _CtrlC()
+    try:
+        ctrl_c.install()
+        while True:
+            ctrl_c.check()
+            while pool.idle() > 0 and time.monotonic() >= next_claim:
+                claimed = source.next_trial()
+                if claimed is None:
+                    next_claim = time.monotonic() + poll_seconds
+                    break
+                trial_id, spec = claimed
+                pool.submit(trial_id, spec)
+                progress.start(source.label(spec), spec.steps * spec.repeats)
             running = pool.running()
-            pool.close(terminate=True)
-            for trial_id, spec in running.items():
-                source.interrupted(trial_id, spec, "interrupted: stopped by the user")
-                progress.finish(source.label(spec), "interrupted, queued for the next run")
-        finally:
-            pool.close()
-            progress.close()
+            if not running:
+                if not source.running_elsewhere():
+                    break
+                while time.monotonic() < next_claim and not ctrl_c.pressed:
+                    time.sleep(0.1)
+                continue
+            if time.monotonic() - last_beat >= heartbeat_seconds:
+                source.heartbeat(list(running))
+                last_beat = time.monotonic()
+            for event in pool.events(timeout=0.5):
+                spec = running.get(event.trial_id)
+                if spec is None:
+                    continue
+                if event.kind == "progress":
+                    progress.step(source.label(spec), int(event.payload))
+                elif event.kind == "checkpoint":
+                    step, value = event.payload
+                    pool.reply(event, source.checkpoint(event.trial_id, step, value))
+                elif event.kind == "result":
+                    result: TrialResult = event.payload
+                    outcome = source.record(event.trial_id, spec, result)
+                    _count(summary, result.status)
+                    progress.finish(source.label(spec), outcome)
+                elif event.kind == "died":
+                    _, code = event.payload
+                    deaths[event.trial_id] = deaths.get(event.trial_id, 0) + 1
+                    label = source.label(spec)
+                    if deaths[event.trial_id] >= MAX_WORKER_DEATHS:
+                        result = TrialResult(key=spec.key, status="failed",
+                                             failure=f"error: its worker died {MAX_WORKER_DEATHS} "
+                                             f"times (last exit code {code})")
+                        progress.finish(label, source.record(event.trial_id, spec, result))
+                        _count(summary, "failed")
+                    else:
+                        # Same trial, new worker: the trial stays claimed, so nothing is lost.
+                        progress.finish(label, f"interrupted (worker exit code {code}), rerun")
+                        pool.submit(event.trial_id, spec)
+                        progress.start(label, spec.steps * spec.repeats)
+    except KeyboardInterrupt:
+        summary.interrupted = True
+        running = pool.running()
+        pool.close(terminate=True)
+        for trial_id, spec in running.items():
+            source.interrupted(trial_id, spec, "interrupted: stopped by the user")
+            progress.finish(source.label(spec), "interrupted, queued for the next run")
+    finally:
+        ctrl_c.restore()
+        pool.close()
+        progress.close()
     return summary
 
 
