@@ -16,7 +16,7 @@ import json
 import os
 import warnings
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from typing import IO, Any
 
 import optuna
@@ -33,6 +33,9 @@ FINGERPRINT = "kraby_fingerprint"
 PLANNED = "kraby_planned"
 RETRY_OF = "retry_of"
 INTERRUPTED = "interrupted"
+# PostgreSQL advisory-lock keys: LOCK_BASE while a command creates the tables, LOCK_BASE plus a
+# study's id while one queues that study's trials ("krab" in ASCII, shifted).
+LOCK_BASE = 0x6B726162 * 1000
 
 # Heartbeats and stale-trial failing are marked experimental by Optuna; they are what several
 # machines on one study rely on, so the warning would only alarm users.
@@ -66,6 +69,18 @@ def requeue(study: optuna.Study, trial: FrozenTrial) -> None:
     study.enqueue_trial(params=dict(params), user_attrs=attrs)
 
 
+@contextmanager
+def advisory_lock(engine: sa.Engine, key: int) -> Iterator[None]:
+    """Hold a PostgreSQL session lock, shared by every command on the server, for a block."""
+    with engine.connect() as conn:
+        conn.execute(sa.text("SELECT pg_advisory_lock(:k)"), {"k": key})
+        try:
+            yield
+        finally:
+            conn.execute(sa.text("SELECT pg_advisory_unlock(:k)"), {"k": key})
+            conn.commit()
+
+
 class Store:
     """A study store at a database URL: Optuna's tables plus the learning curves."""
 
@@ -89,10 +104,11 @@ class Store:
             {"connect_args": {"timeout": 60}} if self.db_path is not None
             else {"pool_pre_ping": True})
         try:
-            self.storage = RDBStorage(url, engine_kwargs=engine_kwargs,
-                                      skip_table_creation=not create, **heartbeat)
-            if create:
-                metadata.create_all(self.storage.engine)
+            with self._schema_lock(create):
+                self.storage = RDBStorage(url, engine_kwargs=engine_kwargs,
+                                          skip_table_creation=not create, **heartbeat)
+                if create:
+                    metadata.create_all(self.storage.engine)
         except (sa.exc.SQLAlchemyError, optuna.exceptions.OptunaError, RuntimeError,
                 ValueError) as err:
             self.close()
@@ -100,6 +116,23 @@ class Store:
             cause = err.__cause__ if isinstance(err, optuna.exceptions.OptunaError) else None
             raise StoreError(f"cannot open the store {url}: {first_line(cause or err)}") from None
         self.engine = self.storage.engine
+
+    @contextmanager
+    def _schema_lock(self, create: bool) -> Iterator[None]:
+        """Serialise creating the tables across commands on one server.
+
+        PostgreSQL's CREATE TABLE races with itself: commands starting at once on an empty
+        database would fail with a duplicate type. SQLite needs nothing: the file lock serialises.
+        """
+        if self.db_path is not None or not create:
+            yield
+            return
+        engine = sa.create_engine(self.url, poolclass=sa.pool.NullPool)
+        try:
+            with advisory_lock(engine, LOCK_BASE):
+                yield
+        finally:
+            engine.dispose()
 
     def _lock(self) -> None:
         assert self.db_path is not None
@@ -152,14 +185,17 @@ class Store:
                    sampler: optuna.samplers.BaseSampler | None = None,
                    pruner: optuna.pruners.BasePruner | None = None) -> optuna.Study:
         """Create a study, or load it after checking it was defined the same way."""
-        study = optuna.create_study(study_name=name, storage=self.storage, sampler=sampler,
-                                    pruner=pruner, direction="maximize", load_if_exists=True)
-        stored = study.user_attrs.get(FINGERPRINT)
-        if stored is None:
-            study.set_user_attr(KIND, kind)
-            study.set_user_attr(DEFINITION, definition)
-            study.set_user_attr(FINGERPRINT, fingerprint)
-        elif stored != fingerprint:
+        # On a server, commands starting at once must not both take the study as new.
+        with nullcontext() if self.db_path is not None else advisory_lock(self.engine, LOCK_BASE):
+            study = optuna.create_study(study_name=name, storage=self.storage, sampler=sampler,
+                                        pruner=pruner, direction="maximize",
+                                        load_if_exists=True)
+            stored = study.user_attrs.get(FINGERPRINT)
+            if stored is None:
+                study.set_user_attr(KIND, kind)
+                study.set_user_attr(DEFINITION, definition)
+                study.set_user_attr(FINGERPRINT, fingerprint)
+        if stored is not None and stored != fingerprint:
             old = study.user_attrs.get(DEFINITION, {})
             changed = describe_change(old, definition)
             raise StoreError(f"study {name!r} in {self.url} was defined differently ({changed}); "
@@ -172,14 +208,8 @@ class Store:
         if self.exclusive:
             yield
             return
-        key = 0x6B726162 * 1000 + study._study_id
-        with self.engine.connect() as conn:
-            conn.execute(sa.text("SELECT pg_advisory_lock(:k)"), {"k": key})
-            try:
-                yield
-            finally:
-                conn.execute(sa.text("SELECT pg_advisory_unlock(:k)"), {"k": key})
-                conn.commit()
+        with advisory_lock(self.engine, LOCK_BASE + study._study_id):
+            yield
 
     # trials ----------------------------------------------------------------------------------
 

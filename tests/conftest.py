@@ -8,7 +8,7 @@ import sqlite3
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import optuna
@@ -93,19 +93,22 @@ def _cmdline(pid: int) -> bytes:
 
 
 def wait_for(predicate: Callable[[], bool], timeout: float = 180.0,
-             proc: subprocess.Popen[str] | None = None) -> None:
+             proc: subprocess.Popen[str] | Sequence[subprocess.Popen[str]] | None = None) -> None:
     """Poll until the predicate holds; fail the test after ``timeout`` seconds, or as soon as
-    ``proc`` (the command being watched) has ended, with what it printed."""
+    one of ``proc`` (the commands being watched) has ended, with what it printed."""
+    procs = [] if proc is None else [proc] if isinstance(proc, subprocess.Popen) else list(proc)
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if predicate():
             return
-        if proc is not None and proc.poll() is not None:
-            out = proc.stdout.read() if proc.stdout else ""
-            raise AssertionError(f"the command ended first (exit {proc.returncode}):\n{out}")
+        for ended in (p for p in procs if p.poll() is not None):
+            out = ended.stdout.read() if ended.stdout else ""
+            for p in procs:
+                p.kill()
+            raise AssertionError(f"a command ended first (exit {ended.returncode}):\n{out}")
         time.sleep(0.1)
-    if proc is not None:
-        proc.kill()
+    for p in procs:
+        p.kill()
     raise AssertionError("timed out")
 
 

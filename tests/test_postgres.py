@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
 import time
 import uuid
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import optuna
@@ -39,9 +42,9 @@ params:
 """
 
 
-@pytest.fixture
-def pg_url() -> Iterator[str]:
-    """A fresh, empty database on the test server, dropped afterwards."""
+@contextmanager
+def _fresh_database() -> Iterator[str]:
+    """A new, empty database on the test server, dropped afterwards."""
     assert SERVER is not None
     name = f"kraby_{uuid.uuid4().hex[:10]}"
     admin = sa.create_engine(SERVER, isolation_level="AUTOCOMMIT")
@@ -58,11 +61,29 @@ def pg_url() -> Iterator[str]:
         admin.dispose()
 
 
+@pytest.fixture
+def pg_url() -> Iterator[str]:
+    with _fresh_database() as url:
+        yield url
+
+
 def _trials(url: str, name: str) -> list[optuna.trial.FrozenTrial]:
+    """The study's trials, read without creating anything: Optuna creates missing tables when it
+    opens a storage, which would race the commands' own creation of them."""
+    engine = sa.create_engine(url, poolclass=sa.pool.NullPool)
     try:
-        return optuna.load_study(study_name=name, storage=url).get_trials(deepcopy=False)
-    except KeyError:
-        return []
+        with engine.connect() as conn:
+            if not sa.inspect(conn).has_table("studies") or conn.execute(
+                    sa.text("SELECT 1 FROM studies WHERE study_name = :n"), {"n": name}
+            ).first() is None:
+                return []
+    finally:
+        engine.dispose()
+    storage = optuna.storages.RDBStorage(url, skip_table_creation=True)
+    try:
+        return optuna.load_study(study_name=name, storage=storage).get_trials(deepcopy=False)
+    finally:
+        storage.engine.dispose()
 
 
 def _kill_tree(proc) -> None:  # type: ignore[no-untyped-def]
@@ -76,7 +97,8 @@ def _kill_tree(proc) -> None:  # type: ignore[no-untyped-def]
 
 def _three_commands_one_killed(args: list[str], cwd: Path, url: str, name: str) -> list[str]:
     procs = [spawn_cli(*args, cwd=cwd) for _ in range(3)]
-    wait_for(lambda: sum(t.state == TrialState.RUNNING for t in _trials(url, name)) >= 3)
+    wait_for(lambda: sum(t.state == TrialState.RUNNING for t in _trials(url, name)) >= 3,
+             proc=procs)
     time.sleep(0.5)
     _kill_tree(procs[0])
     outputs = []
@@ -132,6 +154,29 @@ def test_a_sweep_on_postgresql_runs_and_lists(workdir: Path, pg_url: str,
     capsys.readouterr()
     assert run_cli("list", f"storage={pg_url}") == 0
     assert "4/4" in capsys.readouterr().out
+
+
+OPEN_STUDY = """\
+import sys
+from kraby_study.store import Store
+store = Store(sys.argv[1])
+store.open_study("shared", "sweep", {"values": [1, 2]}, "fingerprint-1")
+store.close()
+"""
+
+
+def test_commands_starting_at_once_on_an_empty_database_all_open_it() -> None:
+    # Without a lock, concurrent table creation fails on PostgreSQL with a duplicate type.
+    for _ in range(3):
+        with _fresh_database() as url:
+            procs = [subprocess.Popen([sys.executable, "-c", OPEN_STUDY, url], text=True,
+                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+                     for _ in range(3)]
+            outputs = [(p.communicate(timeout=120)[0], p.returncode) for p in procs]
+            assert [code for _, code in outputs] == [0, 0, 0], outputs
+            studies = optuna.storages.RDBStorage(url, skip_table_creation=True)
+            assert [s.study_name for s in studies.get_all_studies()] == ["shared"]
+            studies.engine.dispose()
 
 
 def test_an_unreachable_server_is_one_line_and_non_zero(
