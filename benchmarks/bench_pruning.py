@@ -58,13 +58,16 @@ def run_all(commands: list[list[str]], jobs: int, cwd: Path) -> None:
                 raise SystemExit(f"a search failed ({proc.returncode}): {' '.join(proc.args)}")
 
 
-def noise(url: str, seeds: int, steps: int, cwd: Path) -> float:
+def noise_command(url: str, seeds: int, steps: int) -> list[str]:
+    """5 x ``seeds`` seeds of the tuned settings, on one worker, for the noise of the objective."""
+    return [sys.executable, "-m", "kraby_study.cli", "run", "study=n_envs", "study.values=[32]",
+            "budget=quick", f"budget.seeds={5 * seeds}", f"budget.steps={steps}",
+            f"storage={url}", "workers=1", "save_models=false"]
+
+
+def noise(url: str, seeds: int) -> float:
     """Standard deviation of the objective (a mean over ``seeds`` seeds) at the tuned settings,
     over 5 groups of ``seeds`` seeds."""
-    subprocess.run([sys.executable, "-m", "kraby_study.cli", "run", "study=n_envs",
-                    "study.values=[32]", "budget=quick", f"budget.seeds={5 * seeds}",
-                    f"budget.steps={steps}", f"storage={url}", "save_models=false"],
-                   cwd=cwd, check=True, stdout=subprocess.DEVNULL)
     study = optuna.load_study(study_name="n_envs", storage=url)
     scores = sorted((t.user_attrs["seed"], t.value) for t in study.trials if t.value is not None)
     values = np.array([v for _, v in scores])
@@ -102,10 +105,12 @@ def main() -> None:
                   for seed in args.sampler_seeds for pruner in PRUNERS}
         # The slower, unpruned searches first, so the last ones to finish are short.
         order = sorted(stores, key=lambda k: (k[1] != "none", k[0]))
-        run_all([search_command(*stores[k], k[1], args.sampler, k[0], args.trials, args.seeds,
-                                args.steps) for k in order], args.jobs, cwd)
+        noise_url = f"sqlite:///{cwd / 'noise.db'}"
+        run_all([*(search_command(*stores[k], k[1], args.sampler, k[0], args.trials,
+                                  args.seeds, args.steps) for k in order),
+                 noise_command(noise_url, args.seeds, args.steps)], args.jobs, cwd)
         rows = {k: summarise(*stores[k]) for k in stores}
-        sd = noise(f"sqlite:///{cwd / 'noise.db'}", args.seeds, args.steps, cwd)
+        sd = noise(noise_url, args.seeds)
     print(f"{args.trials} trials per search, {args.sampler} sampler, {args.seeds} seed(s) x "
           f"{args.steps:,} env steps per trial")
     print("| sampler seed | pruner | complete | pruned | failed | env steps | best score |")
