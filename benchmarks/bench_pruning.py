@@ -2,6 +2,7 @@
 
 Run: python benchmarks/bench_pruning.py [--trials 30] [--seeds 2] [--steps 20480]
      [--sampler tpe|random] [--sampler-seeds 0 1 2] [--jobs 2] [--keep DIR]
+     python benchmarks/bench_pruning.py --summarise DIR [--sampler-seeds ...] (stores kept in DIR)
 
 For each sampler seed, two searches share everything but the pruner: the space
 (conf/search/ppo.yaml), the seeded sampler (TPE unless --sampler random), the budget (--seeds
@@ -28,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import optuna
-from optuna.trial import TrialState
+from optuna.trial import FrozenTrial, TrialState
 
 PRUNERS = ("none", "median")
 
@@ -75,9 +76,19 @@ def noise(url: str, seeds: int) -> float:
     return float(np.std(means, ddof=1))
 
 
-def summarise(url: str, name: str) -> tuple[int, int, int, int, float]:
-    """(complete, pruned, failed, env steps, best score) of a search."""
-    trials = optuna.load_study(study_name=name, storage=url).trials
+def finished(url: str, name: str) -> list[FrozenTrial]:
+    """A search's trials in order, up to the first that has not finished."""
+    out: list[FrozenTrial] = []
+    for trial in sorted(optuna.load_study(study_name=name, storage=url).trials,
+                        key=lambda t: t.number):
+        if trial.state not in (TrialState.COMPLETE, TrialState.PRUNED, TrialState.FAIL):
+            break
+        out.append(trial)
+    return out
+
+
+def summarise(trials: list[FrozenTrial]) -> tuple[int, int, int, int, float]:
+    """(complete, pruned, failed, env steps, best score) of a search's trials."""
     complete = [t for t in trials if t.state == TrialState.COMPLETE]
     return (len(complete), sum(t.state == TrialState.PRUNED for t in trials),
             sum(t.state == TrialState.FAIL for t in trials),
@@ -95,22 +106,33 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2, help="searches at a time")
     parser.add_argument("--keep", type=Path, default=None,
                         help="write the stores here and keep them")
+    parser.add_argument("--summarise", type=Path, default=None, metavar="DIR",
+                        help="run nothing: compare the stores kept in DIR (by --keep) on the "
+                             "trials both searches of a seed have finished")
     args = parser.parse_args()
+    if args.summarise is not None and not args.summarise.is_dir():
+        parser.error(f"--summarise: no directory {args.summarise}")
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     with tempfile.TemporaryDirectory() as tmp:
-        cwd = args.keep or Path(tmp)
+        cwd = args.summarise or args.keep or Path(tmp)
         cwd.mkdir(parents=True, exist_ok=True)
         stores = {(seed, pruner): (f"sqlite:///{cwd / f'{pruner}_{seed}'}.db",
                                    f"bench_{pruner}_{seed}")
                   for seed in args.sampler_seeds for pruner in PRUNERS}
-        # The slower, unpruned searches first, so the last ones to finish are short.
-        order = sorted(stores, key=lambda k: (k[1] != "none", k[0]))
         noise_url = f"sqlite:///{cwd / 'noise.db'}"
-        run_all([*(search_command(*stores[k], k[1], args.sampler, k[0], args.trials,
-                                  args.seeds, args.steps) for k in order),
-                 noise_command(noise_url, args.seeds, args.steps)], args.jobs, cwd)
-        rows = {k: summarise(*stores[k]) for k in stores}
-        sd = noise(noise_url, args.seeds)
+        if args.summarise is None:
+            # The slower, unpruned searches first, so the last ones to finish are short.
+            order = sorted(stores, key=lambda k: (k[1] != "none", k[0]))
+            run_all([*(search_command(*stores[k], k[1], args.sampler, k[0], args.trials,
+                                      args.seeds, args.steps) for k in order),
+                     noise_command(noise_url, args.seeds, args.steps)], args.jobs, cwd)
+        done = {k: finished(*stores[k]) for k in stores}
+        compared = {seed: min(len(done[seed, p]) for p in PRUNERS) for seed in args.sampler_seeds}
+        rows = {k: summarise(done[k][:compared[k[0]]]) for k in stores}
+        sd = noise(noise_url, args.seeds) if (cwd / "noise.db").exists() else None
+    if any(n < args.trials for n in compared.values()):
+        print("compared on the trials both searches finished: "
+              + ", ".join(f"seed {s}: {n}" for s, n in compared.items()))
     print(f"{args.trials} trials per search, {args.sampler} sampler, {args.seeds} seed(s) x "
           f"{args.steps:,} env steps per trial")
     print("| sampler seed | pruner | complete | pruned | failed | env steps | best score |")
@@ -129,8 +151,9 @@ def main() -> None:
     spread = f", sd {np.std(diffs, ddof=1):.4f}" if len(diffs) > 1 else ""
     print(f"best score, median minus none: mean {diffs.mean():+.4f} "
           f"({', '.join(f'{d:+.4f}' for d in diffs)}{spread})")
-    print(f"noise of the objective (sd, a mean over {args.seeds} seed(s) of {args.steps:,} "
-          f"steps, at the tuned settings, 5 samples): {sd:.4f}")
+    if sd is not None:
+        print(f"noise of the objective (sd, a mean over {args.seeds} seed(s) of {args.steps:,} "
+              f"steps, at the tuned settings, 5 samples): {sd:.4f}")
 
 
 if __name__ == "__main__":
