@@ -16,7 +16,7 @@ import json
 import os
 import warnings
 from collections.abc import Iterator
-from contextlib import contextmanager, nullcontext
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from typing import IO, Any
 
 import optuna
@@ -33,8 +33,8 @@ FINGERPRINT = "kraby_fingerprint"
 PLANNED = "kraby_planned"
 RETRY_OF = "retry_of"
 INTERRUPTED = "interrupted"
-# PostgreSQL advisory-lock keys: LOCK_BASE while a command creates the tables, LOCK_BASE plus a
-# study's id while one queues that study's trials ("krab" in ASCII, shifted).
+# PostgreSQL advisory-lock keys: LOCK_BASE while a command creates the tables or defines a study,
+# LOCK_BASE plus a study's id while one queues that study's trials ("krab" in ASCII, shifted).
 LOCK_BASE = 0x6B726162 * 1000
 
 # Heartbeats and stale-trial failing are marked experimental by Optuna; they are what several
@@ -186,7 +186,7 @@ class Store:
                    pruner: optuna.pruners.BasePruner | None = None) -> optuna.Study:
         """Create a study, or load it after checking it was defined the same way."""
         # On a server, commands starting at once must not both take the study as new.
-        with nullcontext() if self.db_path is not None else advisory_lock(self.engine, LOCK_BASE):
+        with self._server_lock(LOCK_BASE):
             study = optuna.create_study(study_name=name, storage=self.storage, sampler=sampler,
                                         pruner=pruner, direction="maximize",
                                         load_if_exists=True)
@@ -202,14 +202,14 @@ class Store:
                              "choose another name (study.name=...) or another storage")
         return study
 
-    @contextmanager
-    def plan_lock(self, study: optuna.Study) -> Iterator[None]:
+    def plan_lock(self, study: optuna.Study) -> AbstractContextManager[None]:
         """Serialise queueing a study's trials across machines (a locked SQLite file already is)."""
-        if self.exclusive:
-            yield
-            return
-        with advisory_lock(self.engine, LOCK_BASE + study._study_id):
-            yield
+        return self._server_lock(LOCK_BASE + study._study_id)
+
+    def _server_lock(self, key: int) -> AbstractContextManager[None]:
+        """An advisory lock shared by every command on a PostgreSQL server; nothing on SQLite,
+        where the file lock already makes a command the only writer."""
+        return nullcontext() if self.db_path is not None else advisory_lock(self.engine, key)
 
     # trials ----------------------------------------------------------------------------------
 

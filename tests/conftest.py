@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import sqlite3
 import subprocess
 import sys
 import time
@@ -13,8 +12,10 @@ from pathlib import Path
 
 import optuna
 import pytest
+import sqlalchemy as sa
 
 from kraby_study.cli import main
+from kraby_study.config import sqlite_path
 
 # Tiny nets and budgets: a trial takes about a second.
 TINY = ["budget=smoke", "budget.steps=512", "budget.curve_every=64", "ppo.n_envs=4",
@@ -58,20 +59,30 @@ def load(path: Path, name: str) -> optuna.Study:
     return optuna.load_study(study_name=name, storage=sqlite_url(path))
 
 
-def has_study(path: Path, name: str) -> bool:
+def has_study(url: str, name: str) -> bool:
     """Whether a command has created the study in the store, read without writing anything.
 
     Loading a study through Optuna creates its tables when they are missing: polling a store
-    that a command is still creating would race that command's own creation of them.
+    that a command is still creating would race that command's own creation of them. A SQLite
+    file is opened read-only, and any error there (no file or table yet) reads as not created.
     """
-    if not path.exists():
-        return False
+    path = sqlite_path(url)
+    if path is not None:
+        if not path.exists():
+            return False
+        url = f"sqlite:///file:{path}?mode=ro&uri=true"
+    engine = sa.create_engine(url, poolclass=sa.pool.NullPool)
     try:
-        with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as conn:
-            row = conn.execute("SELECT 1 FROM studies WHERE study_name = ?", (name,)).fetchone()
-    except sqlite3.Error:
+        with engine.connect() as conn:
+            return sa.inspect(conn).has_table("studies") and conn.execute(
+                sa.text("SELECT 1 FROM studies WHERE study_name = :n"), {"n": name}
+            ).first() is not None
+    except sa.exc.DBAPIError:
+        if path is None:
+            raise
         return False
-    return row is not None
+    finally:
+        engine.dispose()
 
 
 def children(pid: int, workers_only: bool = True) -> list[int]:

@@ -18,7 +18,7 @@ from pathlib import Path
 import optuna
 import pytest
 import sqlalchemy as sa
-from conftest import TINY, children, run_cli, spawn_cli, wait_for
+from conftest import TINY, children, has_study, run_cli, spawn_cli, wait_for
 from optuna.trial import TrialState
 
 from kraby_study.ledger import attempts_by_key, superseded
@@ -68,17 +68,9 @@ def pg_url() -> Iterator[str]:
 
 
 def _trials(url: str, name: str) -> list[optuna.trial.FrozenTrial]:
-    """The study's trials, read without creating anything: Optuna creates missing tables when it
-    opens a storage, which would race the commands' own creation of them."""
-    engine = sa.create_engine(url, poolclass=sa.pool.NullPool)
-    try:
-        with engine.connect() as conn:
-            if not sa.inspect(conn).has_table("studies") or conn.execute(
-                    sa.text("SELECT 1 FROM studies WHERE study_name = :n"), {"n": name}
-            ).first() is None:
-                return []
-    finally:
-        engine.dispose()
+    """The study's trials, once a command has created it (read without creating tables)."""
+    if not has_study(url, name):
+        return []
     storage = optuna.storages.RDBStorage(url, skip_table_creation=True)
     try:
         return optuna.load_study(study_name=name, storage=storage).get_trials(deepcopy=False)

@@ -199,11 +199,11 @@ def test_a_second_command_on_a_busy_sqlite_store_is_refused(workdir: Path) -> No
 
 
 def _complete_count(db: Path, name: str) -> int:
-    return len(_complete_keys(db, name)) if has_study(db, name) else 0
+    return len(_complete_keys(db, name)) if has_study(sqlite_url(db), name) else 0
 
 
 def _running_trials(db: Path, name: str) -> int:
-    if not has_study(db, name):
+    if not has_study(sqlite_url(db), name):
         return 0
     return len(load(db, name).get_trials(deepcopy=False, states=(TrialState.RUNNING,)))
 
