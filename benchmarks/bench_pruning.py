@@ -66,14 +66,20 @@ def noise_command(url: str, seeds: int, steps: int) -> list[str]:
             f"storage={url}", "workers=1", "save_models=false"]
 
 
-def noise(url: str, seeds: int) -> float:
+def noise(url: str, seeds: int) -> tuple[float, int] | None:
     """Standard deviation of the objective (a mean over ``seeds`` seeds) at the tuned settings,
-    over 5 groups of ``seeds`` seeds."""
-    study = optuna.load_study(study_name="n_envs", storage=url)
+    over the groups of ``seeds`` seeds finished (5 when the noise job ran to its end), and how
+    many groups; None with fewer than 2 (a run stopped before or during its noise job)."""
+    try:
+        study = optuna.load_study(study_name="n_envs", storage=url)
+    except KeyError:
+        return None
     scores = sorted((t.user_attrs["seed"], t.value) for t in study.trials if t.value is not None)
     values = np.array([v for _, v in scores])
+    if len(values) < 2 * seeds:
+        return None
     means = values[: len(values) // seeds * seeds].reshape(-1, seeds).mean(axis=1)
-    return float(np.std(means, ddof=1))
+    return float(np.std(means, ddof=1)), len(means)
 
 
 def finished(url: str, name: str) -> list[FrozenTrial]:
@@ -153,7 +159,7 @@ def main() -> None:
           f"({', '.join(f'{d:+.4f}' for d in diffs)}{spread})")
     if sd is not None:
         print(f"noise of the objective (sd, a mean over {args.seeds} seed(s) of {args.steps:,} "
-              f"steps, at the tuned settings, 5 samples): {sd:.4f}")
+              f"steps, at the tuned settings, {sd[1]} samples): {sd[0]:.4f}")
 
 
 if __name__ == "__main__":
