@@ -16,6 +16,10 @@ Two kinds of noise judge "best score within noise": the standard deviation of th
 mean over --seeds seeds) over 5 such trials of one configuration (the tuned settings), and the
 spread over sampler seeds of the difference in best score between the two searches of a seed,
 which is what the best score of a whole search varies by.
+
+It also prints what a median rule that knew every trial's final score would have saved on the
+unpruned search's trials: the most the median pruner can save there without stopping a trial that
+would end above the median.
 """
 
 from __future__ import annotations
@@ -102,6 +106,39 @@ def summarise(trials: list[FrozenTrial]) -> tuple[int, int, int, int, float]:
             max(float(t.value) for t in complete))
 
 
+def first_prunable_step(seeds: int, steps: int) -> tuple[int, int]:
+    """(first env step at which the searches' median pruner may stop a trial, complete trials
+    it needs first), from the same config the searches composed."""
+    from kraby_study.compose import compose_config
+    from kraby_study.search import checkpoint_every, warmup_steps
+
+    cfg = compose_config(["budget=quick", f"budget.seeds={seeds}", f"budget.steps={steps}"])
+    every = checkpoint_every(cfg)
+    return -(-warmup_steps(cfg) // every) * every, int(cfg.search.pruner_startup_trials)
+
+
+def flawless_median(trials: list[FrozenTrial], first_step: int, startup: int) -> tuple[int, int]:
+    """(env steps, trials stopped) of the unpruned search's trials under a median rule that knows
+    each trial's final score: after ``startup`` complete trials, a trial that would end below the
+    median of the trials kept so far is stopped at ``first_step``; every other trial, and every
+    failed one, spends what it spent. What the median pruner could save on these trials without
+    ever stopping one that would end above the median (taking TPE's choices as they were, though
+    pruning changes them)."""
+    kept: list[float] = []
+    spent = stopped = 0
+    for trial in trials:
+        steps = int(trial.user_attrs.get("env_steps", 0))
+        if trial.state != TrialState.COMPLETE:
+            spent += steps
+        elif len(kept) >= startup and float(trial.value) < float(np.median(kept)):
+            spent += min(first_step, steps)
+            stopped += 1
+        else:
+            spent += steps
+            kept.append(float(trial.value))
+    return spent, stopped
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=30)
@@ -157,6 +194,13 @@ def main() -> None:
     spread = f", sd {np.std(diffs, ddof=1):.4f}" if len(diffs) > 1 else ""
     print(f"best score, median minus none: mean {diffs.mean():+.4f} "
           f"({', '.join(f'{d:+.4f}' for d in diffs)}{spread})")
+    first_step, startup = first_prunable_step(args.seeds, args.steps)
+    bounds = {s: flawless_median(done[s, "none"][:compared[s]], first_step, startup)
+              for s in args.sampler_seeds}
+    print(f"a median rule that knew every final score (stopping at {first_step:,} env steps "
+          f"after {startup} complete trials) would have saved: "
+          + ", ".join(f"seed {s}: {1 - spent / rows[s, 'none'][3]:.0%} ({n} stopped)"
+                      for s, (spent, n) in bounds.items()))
     if sd is not None:
         print(f"noise of the objective (sd, a mean over {args.seeds} seed(s) of {args.steps:,} "
               f"steps, at the tuned settings, {sd[1]} samples): {sd[0]:.4f}")
