@@ -44,7 +44,7 @@ def search_command(url: str, name: str, pruner: str, sampler: str, sampler_seed:
     return [sys.executable, "-m", "kraby_study.cli", "optuna", "--trials", str(trials),
             "--workers", "1", "--storage", url, "--study-name", name, "--pruner", pruner,
             "--sampler", sampler, "--seed", str(sampler_seed), "budget=quick",
-            f"budget.seeds={seeds}", f"budget.steps={steps}", "physics_processes=1",
+            f"budget.seeds={seeds}", f"budget.steps={steps}", "shards=1",
             "save_models=false"]
 
 
@@ -109,8 +109,8 @@ def summarise(trials: list[FrozenTrial]) -> tuple[int, int, int, int, float]:
 def first_prunable_step(seeds: int, steps: int) -> tuple[int, int]:
     """(first env step at which the searches' median pruner may stop a trial, complete trials
     it needs first), from the same config the searches composed."""
-    from kraby_study.compose import compose_config
-    from kraby_study.search import checkpoint_every, warmup_steps
+    from kraby_study.config.compose import compose_config
+    from kraby_study.plan.space import checkpoint_every, warmup_steps
 
     cfg = compose_config(["budget=quick", f"budget.seeds={seeds}", f"budget.steps={steps}"])
     every = checkpoint_every(cfg)

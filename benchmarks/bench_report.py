@@ -20,7 +20,7 @@ import optuna
 
 from kraby_study.report import write_report
 from kraby_study.report.synthetic import add_search, add_sweep, sweep_runs
-from kraby_study.store import Store
+from kraby_study.store.connection import Store
 
 SWEEPS = [
     ("ent_coef", "ppo.ent_coef", [1e-8, 1e-6, 1e-4, 1e-3, 3e-3, 0.01, 0.03, 0.1, 0.3, 1.0]),

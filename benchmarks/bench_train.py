@@ -139,15 +139,15 @@ def bench_train(steps: int, work: Path) -> list[str]:
 def bench_workers(work: Path) -> list[str]:
     """Rows of the workers table on a small study (4 values x 2 seeds).
 
-    One worker on one core (physics_processes=1) against two workers is the scaling of the
-    worker pool; one worker with the default physics processes shows what a lone worker gains
-    from the core it would otherwise leave idle.
+    One worker on one core (shards=1) against two workers is the scaling of the worker pool;
+    one worker with the default shards shows what a lone worker gains from the core it would
+    otherwise leave idle.
     """
     args = ["run", "study=clip_range", "budget.seeds=2", "budget.steps=16384",
             "budget.curve_every=1024", "save_models=false"]
-    runs = {"1 worker, 1 core (physics_processes=1)": ["workers=1", "physics_processes=1"],
+    runs = {"1 worker, 1 core (shards=1)": ["workers=1", "shards=1"],
             "2 workers": ["workers=2"],
-            "1 worker, physics on both cores (default)": ["workers=1"]}
+            "1 worker, 2 shards on both cores (default)": ["workers=1"]}
     times = {}
     for index, (label, extra) in enumerate(runs.items()):
         wall, _, _ = measure(kraby(*args, *extra, f"storage=sqlite:///w{index}.db"), work)

@@ -9,7 +9,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from .config import ENV_KWARGS, EnvConfig, validate_env_kwargs
+from .config import ENV_KWARGS, LegConfig, validate_env_kwargs
 from .observation import OBSERVATIONS
 
 ENV_ID = "KrabyOneLeg-v0"
@@ -42,9 +42,9 @@ __all__ = [
     "ENV_KWARGS",
     "MAX_EPISODE_STEPS",
     "OBSERVATIONS",
-    "EnvConfig",
     "KrabyBatchedVecEnv",
     "KrabyOneLegEnv",
+    "LegConfig",
     "make_batched",
     "validate_env_kwargs",
 ]

@@ -1,10 +1,10 @@
 """``KrabyBatchedVecEnv``: many Kraby legs in one physics world, as an SB3 ``VecEnv``.
 
 All legs share one PyBullet client and one ``stepSimulation`` per sub-step; their bases
-sit on a grid far enough apart that they never touch. With ``processes > 1`` the grid is
-split into that many shares stepped in parallel (see :mod:`kraby_envs.sharded`). Leg ``i``
-behaves exactly like a ``KrabyOneLegEnv`` reset with seed ``seed + i`` and driven by the
-same actions.
+sit on a grid far enough apart that they never touch. With ``shards > 1`` the grid is
+split into that many shards stepped in parallel, one process each (see
+:mod:`kraby_envs.sharded`). Leg ``i`` behaves exactly like a ``KrabyOneLegEnv`` reset
+with seed ``seed + i`` and driven by the same actions.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from .config import ENV_KWARGS, EnvConfig, make_config
+from .config import ENV_KWARGS, LegConfig, make_config
 from .observation import observation_space
 from .sharded import ShardedWorld
 from .world import draw_start, leg_info
@@ -37,7 +37,7 @@ def _positive_int(name: str, value: Any) -> int:
 
 
 class KrabyBatchedVecEnv(VecEnv):
-    """``n_envs`` Kraby legs simulated in one PyBullet world (or one per process).
+    """``n_envs`` Kraby legs simulated in one PyBullet world (or one per shard).
 
     Episodes end after ``max_episode_steps`` (a time limit, never a terminal state); the
     leg is then reset at once and its step ``info`` carries ``terminal_observation``,
@@ -49,8 +49,9 @@ class KrabyBatchedVecEnv(VecEnv):
         n_envs: Number of legs.
         max_episode_steps: Episode length.
         leg_spacing: Distance between neighbouring bases (m), at least 0.6.
-        processes: Processes that step the legs in parallel, this one included (at most
-            ``n_envs`` are used). Every leg moves bit for bit the same for any number.
+        shards: Shards that step the legs in parallel, one process each, this process's
+            included (at most ``n_envs`` are used); 1 keeps every leg in this process.
+            Every leg moves bit for bit the same for any number.
         **env_kwargs: Keyword arguments of :class:`kraby_envs.KrabyOneLegEnv`.
 
     Raises:
@@ -63,15 +64,15 @@ class KrabyBatchedVecEnv(VecEnv):
         *,
         max_episode_steps: int = 32,
         leg_spacing: float = 1.0,
-        processes: int = 1,
+        shards: int = 1,
         **env_kwargs: Any,
     ) -> None:
         n_envs = _positive_int("n_envs", n_envs)
         self.max_episode_steps = _positive_int("max_episode_steps", max_episode_steps)
-        self.config: EnvConfig = make_config(**env_kwargs)
+        self.config: LegConfig = make_config(**env_kwargs)
         self.render_mode = self.config.render_mode
-        processes = _positive_int("processes", processes)
-        self._world = ShardedWorld(n_envs, self.config, leg_spacing, processes)
+        shards = _positive_int("shards", shards)
+        self._world = ShardedWorld(n_envs, self.config, leg_spacing, shards)
         self._rngs: list[np.random.Generator | None] = [None] * n_envs
         self._actions = np.zeros((n_envs, 3))
         # float32 sums and int32 lengths, as VecMonitor accumulates them.
@@ -213,6 +214,7 @@ def make_batched(
     n_envs: int = 32,
     seed: int | None = 0,
     max_episode_steps: int = 32,
+    shards: int = 1,
     **env_kwargs: Any,
 ) -> KrabyBatchedVecEnv:
     """Builds the batched VecEnv; leg ``i`` is seeded like ``reset(seed=seed + i)``.
@@ -221,14 +223,17 @@ def make_batched(
         n_envs: Number of legs.
         seed: Base seed, or None for OS entropy.
         max_episode_steps: Episode length.
-        **env_kwargs: ``leg_spacing``, ``processes`` and the keyword arguments of
-            ``KrabyOneLegEnv``.
+        shards: Shards that step the legs in parallel, one process each (at most
+            ``n_envs`` are used); 1 keeps every leg in this process.
+        **env_kwargs: ``leg_spacing`` and the keyword arguments of ``KrabyOneLegEnv``.
 
     Returns:
         The VecEnv, seeded for its first reset.
     """
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int | np.integer)):
         raise ValueError(f"seed must be an integer or None, got {seed!r}")
-    env = KrabyBatchedVecEnv(n_envs, max_episode_steps=max_episode_steps, **env_kwargs)
+    env = KrabyBatchedVecEnv(
+        n_envs, max_episode_steps=max_episode_steps, shards=shards, **env_kwargs
+    )
     env.seed(seed)
     return env

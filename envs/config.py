@@ -36,7 +36,7 @@ def _integer(name: str, value: Any, low: int, high: int) -> int:
 
 
 @dataclass(frozen=True)
-class EnvConfig:
+class LegConfig:
     """Everything a user may vary in the Kraby leg environments.
 
     Attributes:
@@ -44,8 +44,10 @@ class EnvConfig:
         delta: Scale of the target box, in [0, 1].
         time_step: Physics time step (s), in (0, 0.1].
         frameskip: Physics sub-steps per env step, an integer in [1, 1000].
-        max_torque: Maximum motor torque (N m), > 0.
+        max_torque: Maximum motor torque (N m), > 0; by default the most the simulation
+            gives each servo.
         max_velocity: Joint speed for action 1 (rad/s), > 0; also normalises velocities.
+            By default the top speed of the Herkulex DRS-0101 servo.
         reset_angle_range: Half-width of the start-angle interval (rad), in [0, pi].
         render_mode: None or ``"rgb_array"``.
         render_width: Width of rendered images (pixels).
@@ -98,16 +100,16 @@ class EnvConfig:
         """Simulated seconds per env step."""
         return self.time_step * self.frameskip
 
-    def replace(self, **changes: Any) -> EnvConfig:
+    def replace(self, **changes: Any) -> LegConfig:
         """Returns a validated copy with ``changes`` applied (see :func:`validate_env_kwargs`)."""
         return make_config(**{**dataclasses.asdict(self), **changes})
 
 
-ENV_KWARGS: tuple[str, ...] = tuple(field.name for field in dataclasses.fields(EnvConfig))
+ENV_KWARGS: tuple[str, ...] = tuple(field.name for field in dataclasses.fields(LegConfig))
 
 
-def make_config(**kwargs: Any) -> EnvConfig:
-    """Builds an :class:`EnvConfig`, rejecting unknown names with a ValueError.
+def make_config(**kwargs: Any) -> LegConfig:
+    """Builds a :class:`LegConfig`, rejecting unknown names with a ValueError.
 
     Raises:
         ValueError: Naming the offending argument and what is allowed.
@@ -115,7 +117,7 @@ def make_config(**kwargs: Any) -> EnvConfig:
     unknown = sorted(set(kwargs) - set(ENV_KWARGS))
     if unknown:
         raise ValueError(f"unknown env argument(s) {unknown}; allowed: {list(ENV_KWARGS)}")
-    return EnvConfig(**kwargs)
+    return LegConfig(**kwargs)
 
 
 def validate_env_kwargs(**kwargs: Any) -> None:

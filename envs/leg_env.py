@@ -8,11 +8,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .config import EnvConfig, make_config
+from .config import LegConfig, make_config
 from .observation import observation_space
 from .world import LegWorld, leg_info
 
-_DEFAULTS = EnvConfig()
+_DEFAULTS = LegConfig()
 
 
 class KrabyOneLegEnv(gym.Env[np.ndarray, np.ndarray]):

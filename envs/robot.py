@@ -1,6 +1,6 @@
 """The Kraby leg as a PyBullet body: physical constants, URDF loading and the ground plane.
 
-Every number here comes from ROBOT.md; the kinematic chain itself lives in
+Every number here comes from docs/robot.md; the kinematic chain itself lives in
 ``assets/kraby_leg.urdf``.
 """
 
@@ -21,10 +21,6 @@ TIP_LINK_NAME = "tip"
 JOINT_LOWER = np.array([-0.46, -1.57, -1.57])
 JOINT_UPPER = np.array([0.46, 1.57, 1.57])
 
-MAX_VELOCITY = 6.308
-"""Top speed of the Herkulex DRS-0101 servo (rad/s)."""
-MAX_TORQUE = 1.57
-"""Maximum torque the simulation gives each servo (N m)."""
 GRAVITY = -9.81
 
 GROUND_CLEAR_LINKS: tuple[str, ...] = ("body", "servo_0", "bracket", "servo_1", "servo_2")

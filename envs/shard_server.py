@@ -1,9 +1,9 @@
-"""The process behind one share of a :class:`kraby_envs.sharded.ShardedWorld`.
+"""The process behind one shard of a :class:`kraby_envs.sharded.ShardedWorld`.
 
 Run as ``python -m kraby_envs.shard_server FD``, where FD is the inherited end of a
 ``multiprocessing`` pipe. It answers each request ``(operation, arguments)`` with
 ``("ok", value)`` or ``("error", message)`` and exits when the pipe closes, so it never
-outlives the process that started it. It imports no torch: a share costs one interpreter
+outlives the process that started it. It imports no torch: a shard costs one interpreter
 and one physics client.
 """
 
@@ -14,7 +14,7 @@ import sys
 from multiprocessing.connection import Connection
 from typing import Any
 
-from .config import EnvConfig
+from .config import LegConfig
 from .world import LegWorld
 
 
@@ -27,8 +27,6 @@ def _handle(world: LegWorld, operation: str, args: tuple[Any, ...]) -> Any:
         for index, start, target in zip(indices, angles, targets, strict=True):
             world.place_leg(index, start, target)
         return world.read_state(indices)
-    if operation == "read":
-        return world.read_state(args[0])
     if operation == "config":
         world.set_config(args[0])
         return None
@@ -38,12 +36,12 @@ def _handle(world: LegWorld, operation: str, args: tuple[Any, ...]) -> Any:
 
 
 def serve(conn: Connection) -> None:
-    """Builds the share from the first request ``("init", config, bases)``, then serves."""
+    """Builds the shard from the first request ``("init", config, bases)``, then serves."""
     try:
         operation, (config, bases) = conn.recv()
     except (EOFError, OSError):  # the owner is gone (a killed owner resets the pipe)
         return
-    if operation != "init" or not isinstance(config, EnvConfig):
+    if operation != "init" or not isinstance(config, LegConfig):
         conn.send(("error", f"expected ('init', (config, bases)), got {operation!r}"))
         return
     world = LegWorld(len(bases), config, bases=bases)

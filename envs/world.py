@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ._bullet import p
-from .config import EnvConfig
+from .config import LegConfig
 from .observation import build_observations
 from .robot import GRAVITY, create_ground, load_leg, skip_impossible_contacts
 from .task import TARGET_CENTRE, apply_reset_options, sample_start, squared_distance
@@ -35,7 +35,7 @@ def grid_positions(n_legs: int, spacing: float) -> np.ndarray:
 
 
 def draw_start(
-    rng: np.random.Generator, config: EnvConfig, options: Mapping[str, Any] | None = None
+    rng: np.random.Generator, config: LegConfig, options: Mapping[str, Any] | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """The start angles and target of one episode: drawn from ``rng``, then ``options``.
 
@@ -47,7 +47,7 @@ def draw_start(
 
 
 def observe_legs(
-    config: EnvConfig,
+    config: LegConfig,
     state: tuple[np.ndarray, np.ndarray, np.ndarray],
     targets: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -74,7 +74,7 @@ class LegWorld:
         n_legs: Number of legs.
         config: Environment configuration.
         leg_spacing: Distance between neighbouring bases on the grid (m).
-        bases: Base positions (n_legs, 3) instead of the grid: a share of a larger world
+        bases: Base positions (n_legs, 3) instead of the grid: a shard of a larger world
             keeps its legs where the whole world has them, so that every leg computes
             bit for bit the same motion whichever world it is simulated in.
     """
@@ -82,7 +82,7 @@ class LegWorld:
     def __init__(
         self,
         n_legs: int,
-        config: EnvConfig,
+        config: LegConfig,
         leg_spacing: float = 1.0,
         bases: np.ndarray | None = None,
     ) -> None:
@@ -131,7 +131,7 @@ class LegWorld:
                 for base, target in zip(self.bases, self.targets, strict=True)
             ]
 
-    def set_config(self, config: EnvConfig) -> None:
+    def set_config(self, config: LegConfig) -> None:
         """Applies a new configuration; the observation variant is fixed at construction."""
         if config.observation != self.config.observation:
             raise ValueError("observation cannot change after construction: it fixes the space")

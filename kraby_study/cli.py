@@ -9,16 +9,15 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from omegaconf import DictConfig
-from sqlalchemy import exc as sa_exc
 
-from kraby_study.compose import compose_config
-from kraby_study.config import ConfigError, worker_count
-from kraby_study.messages import first_line
-from kraby_study.runner import DatabaseLost
-from kraby_study.store import StoreError
+from kraby_study.config.compose import compose_config
+from kraby_study.config.validate import worker_count
+from kraby_study.errors import ConfigError, DatabaseLost, StoreError, first_line
+from kraby_study.store.connection import LOST_DATABASE
 
 OVERRIDES_HELP = ("Hydra overrides, e.g. study=ent_coef budget=quick ppo.n_steps=64 workers=2 "
                   "storage=sqlite:///studies/kraby.db")
@@ -27,105 +26,24 @@ EPILOG = """\
 config groups (conf/): env=leg, ppo=start|tuned, budget=full|quick|smoke,
 study=observation|batch_size|n_steps|n_epochs|gamma|clip_range|learning_rate|gae_lambda|
 ent_coef|n_envs, search=ppo (the Optuna space).
-Any setting can be overridden with key=value (ppo.gamma=0.8).
-Your own YAML files in ./conf/<group>/ extend these groups.
+Any setting can be overridden with key=value (ppo.gamma=0.8); a flag such as --storage URL is
+the same as its key=value form (storage=URL), on every command that takes it.
+Your own YAML files in ./conf/<group>/ extend these groups and win over packaged files of the
+same name.
 """
 
 
-def _compose(overrides: Sequence[str]) -> DictConfig:
-    return compose_config(list(overrides))
+@dataclass(frozen=True)
+class Flag:
+    """A command-line flag that is another spelling of one setting."""
 
-
-def with_default(overrides: Sequence[str], group: str, option: str) -> list[str]:
-    """The overrides, choosing ``group=option`` first unless the user chose that group."""
-    chosen = any(o.startswith(f"{group}=") for o in overrides)
-    return list(overrides) if chosen else [f"{group}={option}", *overrides]
-
-
-def open_writer(cfg: DictConfig):  # noqa: ANN201 - a context manager of Store
-    """The store a command writes to, with the configured heartbeat timing."""
-    from kraby_study.store import opened
-
-    return opened(cfg.storage, heartbeat_interval=int(cfg.heartbeat_interval),
-                  heartbeat_grace=int(cfg.heartbeat_grace))
-
-
-def run_options(cfg: DictConfig) -> dict[str, Any]:
-    """Heartbeat period, database patience and physics processes of a running command."""
-    return {"heartbeat_seconds": float(cfg.heartbeat_interval),
-            "retry_seconds": float(cfg.db_retry_seconds),
-            "physics_processes": cfg.physics_processes}
-
-
-def cmd_run(args: argparse.Namespace) -> int:
-    """Run a study's sweep: every value x seed, resumable."""
-    from kraby_study.plan import expand_study
-    from kraby_study.sweep import run_plan
-
-    cfg = _compose(args.overrides)
-    plan = expand_study(cfg)
-    with open_writer(cfg) as store:
-        summary, complete, failed = run_plan(store, plan, worker_count(cfg), sys.stdout,
-                                             **run_options(cfg))
-    total = len(plan.specs)
-    print(f"study {plan.name}: {complete}/{total} complete, {failed} failed"
-          + (f", {total - complete - failed} left (rerun the same command to continue)"
-             if complete + failed < total else ""))
-    return 130 if summary.interrupted else 0
-
-
-def cmd_train(args: argparse.Namespace) -> int:
-    """One training run, stored like a trial, its model saved."""
-    from kraby_study.plan import single_run
-    from kraby_study.sweep import run_plan
-
-    cfg = _compose(with_default(args.overrides, "ppo", "tuned"))
-    plan = single_run(cfg)
-    with open_writer(cfg) as store:
-        summary, _, _ = run_plan(store, plan, 1, sys.stdout, **run_options(cfg))
-        trial = _latest(store, plan.name, plan.specs[0].key)
-    if trial is None:
-        return 130 if summary.interrupted else 1
-    status = trial.user_attrs.get("status", trial.state.name.lower())
-    line = f"train {plan.name} seed {cfg.seed}: {status}"
-    if trial.value is not None:
-        line += f", final score {trial.value:.4g} over {trial.user_attrs.get('env_steps')} steps"
-    if trial.user_attrs.get("failure"):
-        line += f" ({trial.user_attrs['failure']})"
-    print(line)
-    if trial.user_attrs.get("model_path") and trial.value is not None:
-        print(f"model: {trial.user_attrs['model_path']}")
-    if summary.interrupted:
-        return 130
-    return 0 if trial.value is not None else 1
-
-
-def _latest(store: object, name: str, key: str) -> object | None:
-    from kraby_study.ledger import attempts_by_key
-
-    study = store.load(name)  # type: ignore[attr-defined]
-    return attempts_by_key(study.get_trials(deepcopy=False)).get(key)
-
-
-def cmd_list(args: argparse.Namespace) -> int:
-    """The studies in the store with their progress."""
-    from kraby_study.ledger import study_progress
-    from kraby_study.store import opened
-
-    cfg = _compose(args.overrides)
-    with opened(cfg.storage, create=False, writer=False) as store:
-        names = store.study_names()
-        if not names:
-            print(f"no studies in {cfg.storage}")
-            return 0
-        rows = [study_progress(store.load(name)) for name in names]
-    header = ("study", "kind", "complete", "failed", "pruned", "running", "best so far")
-    table = [header] + [(p.name, p.kind, f"{p.complete}/{p.total}", str(p.failed),
-                         str(p.pruned), str(p.running), p.best) for p in rows]
-    widths = [max(len(row[i]) for row in table) for i in range(len(header))]
-    for row in table:
-        print("  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)))
-    return 0
+    name: str
+    """The flag, e.g. --storage."""
+    key: str
+    """The setting it sets, e.g. storage (search.trials for --trials)."""
+    help: str
+    kind: Callable[[str], Any] = str
+    choices: tuple[str, ...] | None = None
 
 
 def _positive_int(text: str) -> int:
@@ -145,26 +63,144 @@ def _whole(text: str) -> int:
         raise argparse.ArgumentTypeError(f"invalid whole number: {text!r}") from None
 
 
-def search_overrides(args: argparse.Namespace) -> list[str]:
-    """The optuna command's flags as Hydra overrides, placed before the user's own."""
-    flags = [("trials", "search.trials"), ("workers", "workers"), ("storage", "storage"),
-             ("study_name", "search.name"), ("sampler", "search.sampler"),
-             ("pruner", "search.pruner"), ("seed", "search.seed")]
-    overrides = [f"{key}={getattr(args, attr)}" for attr, key in flags
-                 if getattr(args, attr) is not None]
-    return with_default(overrides + list(args.overrides), "budget", "quick")
+STORAGE = Flag("--storage", "storage", "database URL, as storage=URL (default "
+               "sqlite:///studies/kraby.db)")
+WORKERS = Flag("--workers", "workers", "trials at once, each in its own worker process, as "
+               "workers=N (default: one per core)", _positive_int)
+STUDY_NAME = Flag("--study-name", "study", "the stored study, as study=NAME (default: the "
+                  "search's name, ppo_search)")
+SEARCH_FLAGS = [
+    Flag("--trials", "search.trials", "total trials of the study, as search.trials=N: "
+         "rerunning tops it up to this number, so --trials 50 twice gives 50, not 100 "
+         "(default 50)", _positive_int),
+    WORKERS, STORAGE,
+    Flag("--study-name", "search.name", "name of the search in the store, as search.name=NAME "
+         "(default ppo_search)"),
+    Flag("--sampler", "search.sampler", "default tpe (seeded), as search.sampler=...",
+         choices=("tpe", "random")),
+    Flag("--pruner", "search.pruner", "stops bad trials at env-step checkpoints, as "
+         "search.pruner=... (default median)", choices=("median", "hyperband", "none")),
+    Flag("--seed", "search.seed", "sampler seed, stored with the study, as search.seed=S "
+         "(default 0)", _whole),
+]
+OUT = Flag("--out", "out", "report folder, as out=DIR (default reports)")
+
+
+def flag_overrides(args: argparse.Namespace, flags: Sequence[Flag]) -> list[str]:
+    """The flags given, as key=value overrides, placed before the user's own overrides."""
+    out = []
+    for flag in flags:
+        value = getattr(args, flag.name.lstrip("-").replace("-", "_"), None)
+        if value is not None:
+            out.append(f"{flag.key}={value}")
+    return out + list(args.overrides)
+
+
+def with_default(overrides: Sequence[str], group: str, option: str) -> list[str]:
+    """The overrides, choosing ``group=option`` first unless the user chose that group."""
+    chosen = any(o.startswith(f"{group}=") for o in overrides)
+    return list(overrides) if chosen else [f"{group}={option}", *overrides]
+
+
+def stored_study(overrides: Sequence[str]) -> tuple[str | None, list[str]]:
+    """``study=NAME`` names a stored study for best and report (a search or a renamed sweep
+    too), not the Hydra group of study files: it is taken out before composing."""
+    names = [o.split("=", 1)[1] for o in overrides if o.startswith("study=")]
+    if len(names) > 1:
+        raise ConfigError("give one study=NAME (or --study-name NAME)")
+    return (names[0] if names else None), [o for o in overrides if not o.startswith("study=")]
+
+
+def open_writer(cfg: DictConfig):  # noqa: ANN201 - a context manager of Store
+    """The store a command writes to, with the configured heartbeat timing."""
+    from kraby_study.store.connection import opened
+
+    return opened(cfg.storage, heartbeat_interval=int(cfg.heartbeat_interval),
+                  heartbeat_grace=int(cfg.heartbeat_grace))
+
+
+def run_options(cfg: DictConfig) -> dict[str, Any]:
+    """Heartbeat period, database patience and shards of a running command."""
+    return {"heartbeat_seconds": float(cfg.heartbeat_interval),
+            "retry_seconds": float(cfg.db_retry_seconds), "shards": cfg.shards}
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """Run a study's sweep: every value x seed, resumable."""
+    from kraby_study.plan.sweep import expand_study
+    from kraby_study.run.sweep_source import run_plan
+
+    cfg = compose_config(flag_overrides(args, [STORAGE, WORKERS]))
+    plan = expand_study(cfg)
+    with open_writer(cfg) as store:
+        summary, counts = run_plan(store, plan, worker_count(cfg), sys.stdout,
+                                   **run_options(cfg))
+    total = len(plan.specs)
+    print(f"study {plan.name}: {counts.complete}/{total} complete, {counts.failed} failed"
+          + (f", {total - counts.ended} left (rerun the same command to continue)"
+             if counts.ended < total else ""))
+    return 130 if summary.interrupted else 0
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    """One training run, stored like a trial, its model saved."""
+    from kraby_study.plan.sweep import single_run
+    from kraby_study.records import Outcome, TrialAttrs, latest_by_key, outcome
+    from kraby_study.run.sweep_source import run_plan
+
+    cfg = compose_config(with_default(flag_overrides(args, [STORAGE]), "ppo", "tuned"))
+    plan = single_run(cfg)
+    with open_writer(cfg) as store:
+        summary, _ = run_plan(store, plan, 1, sys.stdout, **run_options(cfg))
+        trial = latest_by_key(store.load(plan.name).trials()).get(plan.specs[0].key)
+    if trial is None:
+        return 130 if summary.interrupted else 1
+    attrs = TrialAttrs.of(trial)
+    line = f"train {plan.name} seed {cfg.seed}: {outcome(trial)}"
+    if trial.value is not None:
+        line += f", final score {trial.value:.4g} over {attrs.env_steps} steps"
+    if attrs.failure:
+        line += f" ({attrs.failure})"
+    print(line)
+    if attrs.model_path and trial.value is not None:
+        print(f"model: {attrs.model_path}")
+    if summary.interrupted:
+        return 130
+    return 0 if outcome(trial) == Outcome.COMPLETE else 1
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    """The studies in the store with their progress."""
+    from kraby_study.store.connection import opened
+    from kraby_study.summary import study_progress
+
+    cfg = compose_config(flag_overrides(args, [STORAGE]))
+    with opened(cfg.storage, create=False, writer=False) as store:
+        names = store.study_names()
+        if not names:
+            print(f"no studies in {cfg.storage}")
+            return 0
+        rows = [study_progress(store.load(name)) for name in names]
+    header = ("study", "kind", "complete", "failed", "pruned", "running", "best so far")
+    table = [header] + [(p.name, p.kind, f"{p.complete}/{p.total}", str(p.failed),
+                         str(p.pruned), str(p.running), p.best) for p in rows]
+    widths = [max(len(row[i]) for row in table) for i in range(len(header))]
+    for row in table:
+        print("  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)))
+    return 0
 
 
 def cmd_optuna(args: argparse.Namespace) -> int:
     """An Optuna search over conf/search/<space>.yaml, into the same store."""
-    from kraby_study.ledger import study_progress
-    from kraby_study.search import run_search, validate_search
+    from kraby_study.plan.space import validate_search
+    from kraby_study.run.search_source import run_search
+    from kraby_study.summary import study_progress
 
-    cfg = _compose(search_overrides(args))
+    cfg = compose_config(with_default(flag_overrides(args, SEARCH_FLAGS), "budget", "quick"))
     validate_search(cfg)
     with open_writer(cfg) as store:
-        summary, study = run_search(store, cfg, worker_count(cfg), sys.stdout)
-        state = study_progress(study)
+        summary, ledger = run_search(store, cfg, worker_count(cfg), sys.stdout)
+        state = study_progress(ledger)
     print(f"search {state.name}: {state.complete} complete, {state.pruned} pruned, "
           f"{state.failed} failed of {state.total}; best {state.best}")
     return 130 if summary.interrupted else 0
@@ -174,20 +210,18 @@ def cmd_best(args: argparse.Namespace) -> int:
     """Print a study's best settings and write them as a ppo config file."""
     from pathlib import Path
 
-    from kraby_study.best import find_best, write_config
-    from kraby_study.compose import USER_CONF_DIR
-    from kraby_study.store import opened
+    from kraby_study.best import require_best, write_config
+    from kraby_study.config.compose import USER_CONF_DIR
+    from kraby_study.store.connection import opened
 
-    overrides = list(args.overrides)
-    if args.storage:
-        overrides.insert(0, f"storage={args.storage}")
-    cfg = _compose(overrides)
-    name = args.study_name or str(cfg.search.name)
+    chosen, overrides = stored_study(flag_overrides(args, [STORAGE, STUDY_NAME]))
+    cfg = compose_config(overrides)
+    name = chosen or str(cfg.search.name)
     config_name = args.name or f"best_{name}"
     if not config_name.replace("_", "").replace("-", "").isalnum():
         raise ConfigError(f"--name {config_name!r}: use letters, digits, _ and -")
     with opened(cfg.storage, create=False, writer=False) as store:
-        best = find_best(store.load(name))
+        best = require_best(store.load(name))
     path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
     write_config(best, path)
     print(f"best: {best.description}")
@@ -200,15 +234,10 @@ def cmd_report(args: argparse.Namespace) -> int:
     """Redraw the figures and tables of the stored studies."""
     from kraby_study.report import run_report
 
-    # study=NAME names a stored study here (a search or a renamed sweep too), not the Hydra
-    # group of study files, so it is taken out before composing.
-    names = [o.split("=", 1)[1] for o in args.overrides if o.startswith("study=")]
-    overrides = [o for o in args.overrides if not o.startswith("study=")]
-    if len(names) > 1:
-        raise ConfigError("report takes one study=NAME (or none for every study)")
-    cfg = _compose(overrides)
-    return run_report(cfg.storage, cfg.out, study=names[0] if names else None,
-                      fmt=args.format, stream=sys.stdout, policy=not args.no_policy)
+    chosen, overrides = stored_study(flag_overrides(args, [STORAGE, STUDY_NAME, OUT]))
+    cfg = compose_config(overrides)
+    return run_report(cfg.storage, cfg.out, study=chosen, fmt=args.format, stream=sys.stdout,
+                      policy=not args.no_policy)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -235,37 +264,27 @@ def build_parser() -> argparse.ArgumentParser:
         ("report", cmd_report, "redraw every figure and table of the stored studies into out= "
          "(default reports/): study=NAME for one"),
     ]
+    flags: dict[str, list[Flag]] = {
+        "run": [STORAGE, WORKERS], "train": [STORAGE], "list": [STORAGE],
+        "optuna": SEARCH_FLAGS, "best": [STORAGE, STUDY_NAME], "report": [STORAGE, STUDY_NAME, OUT],
+    }
     parsers = {}
     for name, func, text in commands:
         command = sub.add_parser(name, help=text, description=text, epilog=EPILOG,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
         command.add_argument("overrides", nargs="*", metavar="KEY=VALUE", help=OVERRIDES_HELP)
+        for flag in flags[name]:
+            command.add_argument(flag.name, type=flag.kind, choices=flag.choices, help=flag.help)
         command.set_defaults(func=func)
         parsers[name] = command
-    search = parsers["optuna"]
-    search.add_argument("--trials", type=_positive_int, help="total trials of the study: "
-                        "rerunning tops it up to this number, so --trials 50 twice gives 50, "
-                        "not 100 (default 50)")
-    search.add_argument("--workers", type=_positive_int,
-                        help="worker processes (default: one per core)")
-    search.add_argument("--storage", help="database URL (default sqlite:///studies/kraby.db)")
-    search.add_argument("--study-name", help="name of the search in the store (default "
-                        "ppo_search)")
-    search.add_argument("--sampler", choices=["tpe", "random"], help="default tpe (seeded)")
-    search.add_argument("--pruner", choices=["median", "hyperband", "none"],
-                        help="stops bad trials at env-step checkpoints (default median)")
-    search.add_argument("--seed", type=_whole, help="sampler seed, stored with the study "
-                        "(default 0)")
-    search.epilog = ("each trial trains budget.seeds seeds of budget.steps env steps (budget=quick "
-                     "unless you choose one); the score is the mean over its seeds. The pruner "
-                     "sees the mean reward at search.checkpoints equal env-step intervals of the "
-                     "first seed, then the mean score after each further seed; it stops no "
-                     "trial in the first search.warmup (half) of the first seed.\n\n"
-                     + EPILOG)
-    best = parsers["best"]
-    best.add_argument("--study-name", help="the study (default: the search's name, ppo_search)")
-    best.add_argument("--name", help="config name to write (default best_<study>)")
-    best.add_argument("--storage", help="database URL (default sqlite:///studies/kraby.db)")
+    parsers["optuna"].epilog = (
+        "each trial trains budget.seeds seeds of budget.steps env steps (budget=quick unless you "
+        "choose one); the score is the mean over its seeds. The pruner sees the mean reward at "
+        "search.checkpoints equal env-step intervals of the first seed, then the mean score "
+        "after each further seed; it stops no trial in the first search.warmup (half) of the "
+        "first seed.\n\n" + EPILOG)
+    parsers["best"].add_argument("--name", help="config name to write in ./conf/ppo/ (default "
+                                 "best_<study>)")
     report = parsers["report"]
     report.add_argument("--format", choices=["png", "svg"], default="png",
                         help="figure format (default png)")
@@ -294,7 +313,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except DatabaseLost as err:
         print(f"kraby-study: error: {err}", file=sys.stderr)
         return 1
-    except sa_exc.OperationalError as err:
+    except LOST_DATABASE as err:
         # A database that fails outside the retried calls (while a study is being opened).
         print(f"kraby-study: error: database error: {first_line(err)}", file=sys.stderr)
         return 1

@@ -1,6 +1,18 @@
-"""One-line messages from exceptions whose text may span lines (or be empty)."""
+"""The errors a command reports in one line, and how a line is made of any exception."""
 
 from __future__ import annotations
+
+
+class ConfigError(ValueError):
+    """A configuration a user gave that cannot be run; its message is one line."""
+
+
+class StoreError(RuntimeError):
+    """The store cannot be used as asked; its message is one line."""
+
+
+class DatabaseLost(RuntimeError):
+    """The database stayed out of reach longer than the command was told to wait."""
 
 
 def first_line(err: BaseException) -> str:

@@ -7,7 +7,9 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import optuna
@@ -15,7 +17,7 @@ import pytest
 import sqlalchemy as sa
 
 from kraby_study.cli import main
-from kraby_study.config import sqlite_path
+from kraby_study.store.connection import study_exists
 
 # Tiny nets and budgets: a trial takes about a second.
 TINY = ["budget=smoke", "budget.steps=512", "budget.curve_every=64", "ppo.n_envs=4",
@@ -54,35 +56,57 @@ def file_digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest() if path.exists() else ""
 
 
-def load(path: Path, name: str) -> optuna.Study:
-    """A stored study."""
-    return optuna.load_study(study_name=name, storage=sqlite_url(path))
+def load(store: Path | str, name: str) -> optuna.Study:
+    """A stored study, from a SQLite file or a database URL (tables never created)."""
+    url = sqlite_url(store) if isinstance(store, Path) else store
+    storage = optuna.storages.RDBStorage(url, skip_table_creation=True)
+    try:
+        study = optuna.load_study(study_name=name, storage=storage)
+        study.get_trials()  # read while the connection is open
+        return study
+    finally:
+        storage.engine.dispose()
+
+
+SERVER = os.environ.get("KRABY_TEST_POSTGRES_URL")
+"""A PostgreSQL server for the tests that need one (CI starts one: see .ci/postgres.sh)."""
+
+
+@contextmanager
+def fresh_database() -> Iterator[str]:
+    """A new, empty database on the test server, dropped afterwards."""
+    assert SERVER is not None
+    name = f"kraby_{uuid.uuid4().hex[:10]}"
+    admin = sa.create_engine(SERVER, isolation_level="AUTOCOMMIT")
+    with admin.connect() as conn:
+        conn.execute(sa.text(f"CREATE DATABASE {name}"))
+    url = sa.engine.make_url(SERVER).set(database=name).render_as_string(hide_password=False)
+    try:
+        yield url
+    finally:
+        with admin.connect() as conn:
+            conn.execute(sa.text("SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
+                                 "WHERE datname = :n"), {"n": name})
+            conn.execute(sa.text(f"DROP DATABASE IF EXISTS {name}"))
+        admin.dispose()
+
+
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=[
+    pytest.mark.postgres,
+    pytest.mark.skipif(not SERVER, reason="KRABY_TEST_POSTGRES_URL is not set")])])
+def store_url(request: pytest.FixtureRequest, workdir: Path) -> Iterator[str]:
+    """The store of a test, once per backend: the default SQLite file of the working
+    directory, then a fresh PostgreSQL database."""
+    if request.param == "sqlite":
+        yield sqlite_url(workdir / "studies" / "kraby.db")
+    else:
+        with fresh_database() as url:
+            yield url
 
 
 def has_study(url: str, name: str) -> bool:
-    """Whether a command has created the study in the store, read without writing anything.
-
-    Loading a study through Optuna creates its tables when they are missing: polling a store
-    that a command is still creating would race that command's own creation of them. A SQLite
-    file is opened read-only, and any error there (no file or table yet) reads as not created.
-    """
-    path = sqlite_path(url)
-    if path is not None:
-        if not path.exists():
-            return False
-        url = f"sqlite:///file:{path}?mode=ro&uri=true"
-    engine = sa.create_engine(url, poolclass=sa.pool.NullPool)
-    try:
-        with engine.connect() as conn:
-            return sa.inspect(conn).has_table("studies") and conn.execute(
-                sa.text("SELECT 1 FROM studies WHERE study_name = :n"), {"n": name}
-            ).first() is not None
-    except sa.exc.DBAPIError:
-        if path is None:
-            raise
-        return False
-    finally:
-        engine.dispose()
+    """Whether a command has created the study in the store, read without writing anything."""
+    return study_exists(url, name)
 
 
 def children(pid: int, workers_only: bool = True) -> list[int]:
@@ -92,7 +116,7 @@ def children(pid: int, workers_only: bool = True) -> list[int]:
     for thread in task.iterdir() if task.exists() else []:
         out.extend(int(c) for c in (thread / "children").read_text().split())
     if workers_only:
-        out = [c for c in out if b"kraby_study.worker" in _cmdline(c)]
+        out = [c for c in out if b"kraby_study.run.worker" in _cmdline(c)]
     return out
 
 

@@ -166,11 +166,11 @@ def _play(venv: KrabyBatchedVecEnv, n_steps: int) -> list[np.ndarray]:
     return seen
 
 
-def test_legs_move_bit_for_bit_the_same_in_any_number_of_processes():
+def test_legs_move_bit_for_bit_the_same_in_any_number_of_shards():
     runs = []
-    for processes in (1, 3):
-        venv = make_batched(n_envs=8, seed=4, processes=processes)
-        assert venv._world.processes == processes
+    for shards in (1, 3):
+        venv = make_batched(n_envs=8, seed=4, shards=shards)
+        assert venv._world.shards == shards
         runs.append(_play(venv, 80))
         venv.close()
     assert len(runs[0]) == len(runs[1])
@@ -178,11 +178,11 @@ def test_legs_move_bit_for_bit_the_same_in_any_number_of_processes():
         np.testing.assert_array_equal(one, three)
 
 
-def test_a_share_process_renders_its_legs():
+def test_a_shard_process_renders_its_legs():
     images = []
-    for processes in (1, 2):
+    for shards in (1, 2):
         # 3 m apart, no other leg is in the camera's view.
-        venv = make_batched(n_envs=2, seed=0, processes=processes, leg_spacing=3.0,
+        venv = make_batched(n_envs=2, seed=0, shards=shards, leg_spacing=3.0,
                             render_mode="rgb_array",
                             render_width=40, render_height=30)
         venv.reset()
@@ -193,17 +193,17 @@ def test_a_share_process_renders_its_legs():
     assert images[1][1].shape == (30, 40, 3) and differ.mean() < 0.01
 
 
-def test_share_processes_stop_with_the_env_and_their_death_is_an_error():
-    venv = make_batched(n_envs=4, seed=0, processes=2)
+def test_shard_processes_stop_with_the_env_and_their_death_is_an_error():
+    venv = make_batched(n_envs=4, seed=0, shards=2)
     venv.reset()
-    share = venv._world._remotes[0]._process
-    assert share.poll() is None
-    share.kill()
-    share.wait()
-    with pytest.raises(RuntimeError, match="physics share process stopped"):
+    shard = venv._world._remotes[0]._process
+    assert shard.poll() is None
+    shard.kill()
+    shard.wait()
+    with pytest.raises(RuntimeError, match="shard process stopped"):
         venv.step(random_actions(1, 4)[0])
     venv.close()
-    other = make_batched(n_envs=4, seed=0, processes=2)
+    other = make_batched(n_envs=4, seed=0, shards=2)
     process = other._world._remotes[0]._process
     other.close()
     assert process.poll() == 0
@@ -217,28 +217,28 @@ def _running(pid: int) -> bool:
         return False
 
 
-def test_a_share_process_ends_quietly_when_its_owner_is_killed():
+def test_a_shard_process_ends_quietly_when_its_owner_is_killed():
     owner = subprocess.Popen(
         [sys.executable, "-c",
          "import sys, time\n"
          "from kraby_envs import make_batched\n"
-         "env = make_batched(n_envs=4, processes=2)\n"
+         "env = make_batched(n_envs=4, shards=2)\n"
          "env.reset()\n"
-         "share = env._world._remotes[0]\n"
-         "share.send('step', [[0.1, 0.2, 0.3]] * 2)\n"
-         "print(share._process.pid, flush=True)\n"
+         "shard = env._world._remotes[0]\n"
+         "shard.send('step', [[0.1, 0.2, 0.3]] * 2)\n"
+         "print(shard._process.pid, flush=True)\n"
          "time.sleep(60)\n"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert owner.stdout is not None and owner.stderr is not None
-    share = int(owner.stdout.readline())
-    time.sleep(0.5)  # the share answers the step; dying with it unread resets the pipe
+    shard = int(owner.stdout.readline())
+    time.sleep(0.5)  # the shard answers the step; dying with it unread resets the pipe
     owner.kill()
     owner.wait()
     deadline = time.monotonic() + 10
-    while _running(share) and time.monotonic() < deadline:
+    while _running(shard) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not _running(share)
-    # The share inherited the owner's stderr: a traceback would show here.
+    assert not _running(shard)
+    # The shard inherited the owner's stderr: a traceback would show here.
     assert owner.stderr.read() == ""
 
 
@@ -253,7 +253,7 @@ def test_a_share_process_ends_quietly_when_its_owner_is_killed():
         ({"delta": 3.0}, "delta"),
         ({"observation": "pixels"}, "observation"),
         ({"wings": 2}, "wings"),
-        ({"processes": 0}, "processes"),
+        ({"shards": 0}, "shards"),
     ],
 )
 def test_bad_arguments_raise_value_error_naming_them(kwargs, name):

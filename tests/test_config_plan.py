@@ -3,42 +3,70 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
+import yaml
 from conftest import write_study_file
 
-from kraby_study.compose import compose_config
-from kraby_study.config import ConfigError
-from kraby_study.plan import expand_study, single_run
+from kraby_study.config.compose import compose_config
+from kraby_study.errors import ConfigError
+from kraby_study.plan.sweep import expand_study, single_run
+from kraby_study.records import sweep_key, train_key
 
-STUDIES = {
-    "observation": 4, "batch_size": 8, "n_steps": 7, "n_epochs": 6, "gamma": 8,
-    "clip_range": 4, "learning_rate": 5, "gae_lambda": 7, "ent_coef": 5, "n_envs": 4,
-}
-
-
-def test_every_study_file_is_listed_here() -> None:
-    conf = Path(__file__).resolve().parents[1] / "conf" / "study"
-    assert {p.stem for p in conf.glob("*.yaml")} == set(STUDIES)
+CONF = Path(__file__).resolve().parents[1] / "conf"
+STUDY_FILES = sorted((CONF / "study").glob("*.yaml"))
 
 
-@pytest.mark.parametrize("name,n_values", sorted(STUDIES.items()))
-def test_every_study_composes_and_expands_to_values_times_seeds(name: str,
-                                                                 n_values: int) -> None:
-    cfg = compose_config([f"study={name}"])
-    plan = expand_study(cfg)
-    assert len(plan.values) == n_values
-    assert len(plan.specs) == n_values * 10
-    assert {s.steps for s in plan.specs} == {250_000}
+def read_yaml(path: Path) -> dict[str, Any]:
+    return yaml.safe_load(path.read_text())
+
+
+def budget(name: str) -> dict[str, Any]:
+    """A budget file: name, steps, seeds, curve_every."""
+    return read_yaml(CONF / "budget" / f"{name}.yaml")
+
+
+def study(name: str) -> dict[str, Any]:
+    """The ``study:`` block of a study file: name, parameter, values."""
+    return read_yaml(CONF / "study" / f"{name}.yaml")["study"]
+
+
+def test_every_study_file_is_named_after_its_file() -> None:
+    assert STUDY_FILES
+    for path in STUDY_FILES:
+        assert read_yaml(path)["study"]["name"] == path.stem, path.name
+
+
+@pytest.mark.parametrize("name", [p.stem for p in STUDY_FILES])
+def test_every_study_composes_and_expands_to_values_times_seeds(name: str) -> None:
+    declared, full = study(name), budget("full")  # the default budget
+    seeds = [read_yaml(CONF / "config.yaml")["seed"] + i for i in range(full["seeds"])]
+    plan = expand_study(compose_config([f"study={name}"]))
+    assert (plan.name, plan.parameter) == (name, declared["parameter"])
+    assert plan.values == declared["values"]
+    assert len(plan.specs) == len(declared["values"]) * full["seeds"]
+    assert {s.steps for s in plan.specs} == {full["steps"]}
+    assert {s.curve_every for s in plan.specs} == {full["curve_every"]}
+    assert sorted({s.seed for s in plan.specs}) == seeds
+    # One key per (value, seed), naming the value's index in the file; keys never repeat.
     assert len({s.key for s in plan.specs}) == len(plan.specs)
-    assert sorted({s.seed for s in plan.specs}) == list(range(10))
+    assert {s.key: (s.value, s.seed) for s in plan.specs} == {
+        sweep_key(i, seed): (value, seed)
+        for i, value in enumerate(declared["values"]) for seed in seeds}
+    # Each run trains with its value.
+    root, leaf = declared["parameter"].split(".")
+    for spec in plan.specs:
+        assert spec.settings[root][leaf] == spec.value, spec.key
 
 
 def test_budget_sets_steps_and_seeds() -> None:
+    smoke = budget("smoke")
     plan = expand_study(compose_config(["study=gamma", "budget=smoke", "seed=5"]))
-    assert len(plan.specs) == 8 * 2
-    assert {s.seed for s in plan.specs} == {5, 6}
-    assert {s.steps for s in plan.specs} == {4096}
+    assert len(plan.specs) == len(study("gamma")["values"]) * smoke["seeds"]
+    assert {s.seed for s in plan.specs} == set(range(5, 5 + smoke["seeds"]))
+    assert {s.steps for s in plan.specs} == {smoke["steps"]}
+    assert {s.curve_every for s in plan.specs} == {smoke["curve_every"]}
 
 
 def test_batch_size_study_uses_and_stores_the_documented_batches() -> None:
@@ -71,13 +99,19 @@ def test_studies_fix_the_documented_settings() -> None:
 
 
 def test_overrides_apply_after_the_study_file() -> None:
-    cfg = compose_config(["study=gamma", "ppo.n_steps=64"])
+    cfg = compose_config(["study=gamma", "ppo.n_steps=64"])  # the file sets n_steps 32
     assert cfg.ppo.n_steps == 64
+    plan = expand_study(cfg)
+    for spec in plan.specs:  # the runs train with it (one minibatch: the whole rollout)
+        ppo = spec.settings["ppo"]
+        assert (ppo["n_steps"], ppo["batch_size"]) == (64, 64 * ppo["n_envs"])
+    # Another definition: the store refuses to mix it with the study's runs at n_steps 32.
+    assert plan.fingerprint != expand_study(compose_config(["study=gamma"])).fingerprint
 
 
 def test_observation_study_sweeps_the_environment() -> None:
     plan = expand_study(compose_config(["study=observation", "budget=smoke"]))
-    assert [s.settings["env"]["observation"] for s in plan.specs[::2]] == [
+    assert [s.settings["env"]["observation"] for s in plan.specs[::budget("smoke")["seeds"]]] == [
         "default", "with_tip", "with_tip_to_target", "sin_angles"]
 
 
@@ -85,8 +119,16 @@ def test_train_plan_is_one_run_named_by_its_settings() -> None:
     a = single_run(compose_config(["ppo=tuned", "seed=3"]))
     b = single_run(compose_config(["ppo=tuned", "seed=4"]))
     c = single_run(compose_config(["ppo=tuned", "ppo.gamma=0.5"]))
-    assert len(a.specs) == 1 and a.specs[0].seed == 3
+    d = single_run(compose_config(["ppo=tuned", "seed=3", "budget.steps=8192"]))
+    assert len(a.specs) == 1
+    (run,) = a.specs
+    assert (run.seed, run.key, run.study) == (3, train_key(3), a.name)
+    assert run.steps == budget("full")["steps"]
+    assert run.settings["ppo"]["gamma"] == compose_config(["ppo=tuned"]).ppo.gamma
+    assert c.specs[0].settings["ppo"]["gamma"] == 0.5
+    # Seeds of the same settings and budget share a study; other settings or budgets do not.
     assert a.name == b.name != c.name
+    assert d.name != a.name and d.specs[0].steps == 8192
 
 
 @pytest.mark.parametrize("overrides,expected", [
@@ -96,7 +138,7 @@ def test_train_plan_is_one_run_named_by_its_settings() -> None:
     (["ppo.gamma=1.5"], "gamma"),
     (["ppo.batch_size=1000"], "does not divide"),
     (["workers=0"], "workers"),
-    (["physics_processes=0"], "physics_processes"),
+    (["shards=0"], "shards"),
     (["study=nope"], "study/nope"),
     (["budget.seeds=0"], "budget.seeds"),
     (["env.delta=2"], "delta"),
@@ -126,6 +168,8 @@ def test_a_user_study_file_in_the_working_directory_is_found(
     plan = expand_study(compose_config(["study=vf", "budget=smoke"]))
     assert plan.values == [0.25, 0.5, 1.0]
     assert {s.settings["ppo"]["n_steps"] for s in plan.specs} == {32}
+    assert {(s.value, s.settings["ppo"]["vf_coef"]) for s in plan.specs} == {
+        (0.25, 0.25), (0.5, 0.5), (1.0, 1.0)}
 
 
 def test_a_study_value_that_breaks_a_rule_names_the_value(

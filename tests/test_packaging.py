@@ -14,8 +14,8 @@ ROOT = Path(__file__).resolve().parents[1]
 CHECK = """
 import pathlib, sys
 import kraby_conf, kraby_envs, kraby_study
-from kraby_study.compose import compose_config
-from kraby_study.plan import expand_study
+from kraby_study.config.compose import compose_config
+from kraby_study.plan.sweep import expand_study
 target = pathlib.Path(sys.argv[1]).resolve()
 for module in (kraby_conf, kraby_envs, kraby_study):
     assert target in pathlib.Path(module.__file__).resolve().parents, module.__file__

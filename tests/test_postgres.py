@@ -10,21 +10,28 @@ import signal
 import subprocess
 import sys
 import time
-import uuid
 from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import optuna
 import pytest
 import sqlalchemy as sa
-from conftest import TINY, children, has_study, run_cli, spawn_cli, wait_for
+from conftest import (
+    SERVER,
+    TINY,
+    children,
+    fresh_database,
+    has_study,
+    run_cli,
+    spawn_cli,
+    wait_for,
+)
 from optuna.trial import TrialState
 
-from kraby_study.ledger import attempts_by_key, superseded
-from kraby_study.runner import DatabaseLost, Retrying
+from kraby_study.errors import DatabaseLost
+from kraby_study.records import counted, latest_by_key
+from kraby_study.run.runner import Retrying
 
-SERVER = os.environ.get("KRABY_TEST_POSTGRES_URL")
 pytestmark = [pytest.mark.postgres,
               pytest.mark.skipif(not SERVER, reason="KRABY_TEST_POSTGRES_URL is not set")]
 
@@ -42,28 +49,9 @@ params:
 """
 
 
-@contextmanager
-def _fresh_database() -> Iterator[str]:
-    """A new, empty database on the test server, dropped afterwards."""
-    assert SERVER is not None
-    name = f"kraby_{uuid.uuid4().hex[:10]}"
-    admin = sa.create_engine(SERVER, isolation_level="AUTOCOMMIT")
-    with admin.connect() as conn:
-        conn.execute(sa.text(f"CREATE DATABASE {name}"))
-    url = sa.engine.make_url(SERVER).set(database=name).render_as_string(hide_password=False)
-    try:
-        yield url
-    finally:
-        with admin.connect() as conn:
-            conn.execute(sa.text("SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
-                                 "WHERE datname = :n"), {"n": name})
-            conn.execute(sa.text(f"DROP DATABASE IF EXISTS {name}"))
-        admin.dispose()
-
-
 @pytest.fixture
 def pg_url() -> Iterator[str]:
-    with _fresh_database() as url:
+    with fresh_database() as url:
         yield url
 
 
@@ -76,6 +64,11 @@ def _trials(url: str, name: str) -> list[optuna.trial.FrozenTrial]:
         return optuna.load_study(study_name=name, storage=storage).get_trials(deepcopy=False)
     finally:
         storage.engine.dispose()
+
+
+def superseded(trials: list[optuna.trial.FrozenTrial]) -> set[int]:
+    """Numbers of the attempts that do not count: a later attempt replaced them."""
+    return {t.number for t in trials} - {t.number for t in counted(trials)}
 
 
 def _kill_tree(proc) -> None:  # type: ignore[no-untyped-def]
@@ -110,7 +103,7 @@ def test_three_commands_share_one_sweep_and_a_killed_trial_runs_again(
     trials = _trials(pg_url, "clip_range")
     complete = sorted(t.user_attrs["key"] for t in trials if t.state == TrialState.COMPLETE)
     assert complete == sorted(f"v{v}-s{s}" for v in range(4) for s in range(2))
-    latest = attempts_by_key(trials)
+    latest = latest_by_key(trials)
     assert all(t.state == TrialState.COMPLETE for t in latest.values())
     failed = [t for t in trials if t.state == TrialState.FAIL]
     assert len(failed) == 1, "exactly the killed command's trial failed"
@@ -150,9 +143,11 @@ def test_a_sweep_on_postgresql_runs_and_lists(workdir: Path, pg_url: str,
 
 OPEN_STUDY = """\
 import sys
-from kraby_study.store import Store
+from kraby_study.records import StudyAttrs
+from kraby_study.store.connection import Store
 store = Store(sys.argv[1])
-store.open_study("shared", "sweep", {"values": [1, 2]}, "fingerprint-1")
+store.define("shared", StudyAttrs(kind="sweep", definition={"values": [1, 2]},
+                                  fingerprint="fingerprint-1"))
 store.close()
 """
 
@@ -160,7 +155,7 @@ store.close()
 def test_commands_starting_at_once_on_an_empty_database_all_open_it() -> None:
     # Without a lock, concurrent table creation fails on PostgreSQL with a duplicate type.
     for _ in range(3):
-        with _fresh_database() as url:
+        with fresh_database() as url:
             procs = [subprocess.Popen([sys.executable, "-c", OPEN_STUDY, url], text=True,
                                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
                      for _ in range(3)]

@@ -16,11 +16,12 @@ from optuna.distributions import FloatDistribution
 from optuna.trial import TrialState, create_trial
 from scipy import stats
 
-from kraby_study.config import ConfigError
+from kraby_study.errors import ConfigError, StoreError
+from kraby_study.records import Outcome, StudyAttrs, TrialAttrs
 from kraby_study.report import ReportIndex, run_report, write_report
-from kraby_study.report.stats import t_interval, welch_p
 from kraby_study.report.synthetic import Run, add_sweep, learning_curve, write_curves
-from kraby_study.store import DEFINITION, KIND, PLANNED, Store, StoreError
+from kraby_study.stats import t_interval, welch_p
+from kraby_study.store.connection import Store
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 SWEEP_FIGURES = ["learning_curves", "final_score", "wallclock", "training_time"]
@@ -36,7 +37,7 @@ def _runs(scores: dict[float, list[float | None]], times: dict[float, list[float
     for value, finals in scores.items():
         for seed, (final, wall) in enumerate(zip(finals, times[value], strict=True)):
             if final is None:
-                runs.append(Run(value=value, seed=seed, status="failed", wall_time=wall,
+                runs.append(Run(value=value, seed=seed, outcome=Outcome.FAILED, wall_time=wall,
                                 failure="diverged: ValueError: nan in the actions"))
             else:
                 runs.append(Run(value=value, seed=seed, final_score=final, wall_time=wall,
@@ -57,8 +58,8 @@ def sweep_store(tmp_path_factory: pytest.TempPathFactory) -> str:
             curve_every=100)
         runs = _runs({0.8: [-1.0, -1.2], 0.9: [-0.5, -0.7], 0.95: [-0.6, -0.4]},
                      {0.8: [5.0, 6.0], 0.9: [5.0, 6.0], 0.95: [5.0, 6.0]})
-        runs[-1].status = "pending"
-        runs[-2].status = "pending"
+        runs[-1].outcome = Outcome.PENDING
+        runs[-2].outcome = Outcome.PENDING
         add_sweep(store, "gamma", "ppo.gamma", [0.8, 0.9, 0.95], runs, steps=4000,
                   curve_every=100)
         _add_train(store)
@@ -68,17 +69,16 @@ def sweep_store(tmp_path_factory: pytest.TempPathFactory) -> str:
 
 
 def _add_train(store: Store) -> None:
-    study = optuna.create_study(study_name="train-abc", storage=store.storage,
-                                direction="maximize")
-    study.set_user_attr(KIND, "train")
-    study.set_user_attr(DEFINITION, {"kind": "train", "steps": 4000, "curve_every": 100})
-    study.set_user_attr(PLANNED, 2)
+    definition = {"kind": "train", "steps": 4000, "curve_every": 100}
+    ledger = store.define("train-abc", StudyAttrs(kind="train", definition=definition,
+                                                  fingerprint="abc", planned=2))
     rng = np.random.default_rng(1)
     for seed, final in enumerate([-0.5, -0.6]):
-        study.add_trial(create_trial(state=TrialState.COMPLETE, value=final, user_attrs={
-            "key": f"s{seed}", "seed": seed, "status": "complete", "final_score": final,
-            "wall_time": 4.0, "env_steps": 4000, "model_path": None}))
-    write_curves(store, study, {n: learning_curve(-0.5, 4000, 40, 4.0, rng) for n in (0, 1)})
+        attrs = TrialAttrs(key=f"s{seed}", seed=seed, final_score=final, wall_time=4.0,
+                           env_steps=4000)
+        ledger.add_trials([create_trial(state=TrialState.COMPLETE, value=final,
+                                        user_attrs=attrs.stored())])
+    write_curves(ledger, {n: learning_curve(-0.5, 4000, 40, 4.0, rng) for n in (0, 1)})
 
 
 def _search_store(path: Path, complete: int = 12) -> str:
@@ -87,7 +87,7 @@ def _search_store(path: Path, complete: int = 12) -> str:
     store = Store(url)
     study = optuna.create_study(study_name="tpe", storage=store.storage, direction="maximize",
                                 sampler=optuna.samplers.RandomSampler(seed=0))
-    study.set_user_attr(KIND, "search")
+    study.set_user_attr("kraby_kind", "search")
     for number in range(complete + 4):
         trial = study.ask()
         lr = trial.suggest_float("learning_rate", 1e-4, 1.0, log=True)
@@ -96,13 +96,13 @@ def _search_store(path: Path, complete: int = 12) -> str:
         act = trial.suggest_categorical("activation", ["tanh", "relu"])
         score = -abs(math.log10(lr) + 2) - abs(gamma - 0.8) - 0.01 * epochs - (act == "relu")
         if number == 3:
-            store.set_attrs(trial._trial_id, {"failure": "diverged: NaN loss"})
+            trial.set_user_attr("failure", "diverged: NaN loss")
             study.tell(trial, state=TrialState.FAIL)
             continue
         for step in (1000, 2000, 3000, 4000):
             trial.report(score * (2 - step / 4000), step)
             if number % 4 == 1 and step == 2000:
-                store.set_attrs(trial._trial_id, {"pruned_at": step})
+                trial.set_user_attr("pruned_at", step)
                 break
         else:
             study.tell(trial, score)

@@ -9,8 +9,13 @@ import pytest
 from conftest import TINY, load, run_cli
 from optuna.trial import TrialState
 
-from kraby_study.compose import compose_config
-from kraby_study.search import SearchSource, make_pruner, validate_search
+from kraby_study.config.compose import compose_config
+from kraby_study.plan.space import make_pruner, validate_search
+from kraby_study.records import Outcome, StudyAttrs
+from kraby_study.run.result import TrialResult
+from kraby_study.run.search_source import SearchSource
+from kraby_study.store.connection import opened
+from kraby_study.store.ledger import StudyLedger
 
 TINY_SPACE = """\
 name: tiny
@@ -138,16 +143,23 @@ def test_median_pruner_stops_bad_trials_in_a_controlled_case(spaces: Path) -> No
 def test_checkpoint_prunes_a_trial_below_the_median_at_equal_steps(tmp_path: Path) -> None:
     cfg = compose_config(["search.startup_trials=1", "budget=smoke",
                           f"storage=sqlite:///{tmp_path}/k.db"])
-    study = optuna.create_study(direction="maximize",
-                                pruner=optuna.pruners.MedianPruner(n_startup_trials=1))
-    done = study.ask()
-    for step, value in ((512, -0.2), (1024, -0.1)):
-        done.report(value, step)
-    study.tell(done, -0.1)
-    source = SearchSource(store=None, study=study, cfg=cfg)  # type: ignore[arg-type]
-    good, bad = study.ask(), study.ask()
-    assert source.checkpoint(good._trial_id, 512, -0.15) is True
-    assert source.checkpoint(bad._trial_id, 512, -0.9) is False
+    with opened(cfg.storage) as store:
+        ledger = _one_done(store.define("s", StudyAttrs(kind="search"),
+                                        pruner=optuna.pruners.MedianPruner(n_startup_trials=1)),
+                           ((512, -0.2), (1024, -0.1)))
+        source = SearchSource(ledger, cfg)
+        good, bad = ledger.ask({}), ledger.ask({})
+        assert source.checkpoint(good.number, 512, -0.15) is True
+        assert source.checkpoint(bad.number, 512, -0.9) is False
+
+
+def _one_done(ledger: StudyLedger, values: tuple[tuple[int, float], ...]) -> StudyLedger:
+    """The study with one complete trial that reported these (step, value) checkpoints."""
+    done = ledger.ask({})
+    for step, value in values:
+        ledger.checkpoint(done.number, step, value)
+    ledger.record(done.number, TrialResult(outcome=Outcome.COMPLETE, final_score=-0.1))
+    return ledger
 
 
 @pytest.mark.parametrize("warmup,kept_at_512", [(0.25, True), (0.0, False)])
@@ -157,16 +169,14 @@ def test_no_trial_is_pruned_during_the_warmup(tmp_path: Path, warmup: float,
     cfg = compose_config(["budget.steps=4096", "search.checkpoints=8", "search.startup_trials=1",
                           "search.pruner_startup_trials=1", f"search.warmup={warmup}",
                           f"storage=sqlite:///{tmp_path}/k.db"])
-    study = optuna.create_study(direction="maximize", pruner=make_pruner(cfg))
-    done = study.ask()
-    for step in (512, 1024, 1536):
-        done.report(-0.1, step)
-    study.tell(done, -0.1)
-    source = SearchSource(store=None, study=study, cfg=cfg)  # type: ignore[arg-type]
-    bad = study.ask()
-    assert source.checkpoint(bad._trial_id, 512, -0.9) is kept_at_512
-    if kept_at_512:
-        assert source.checkpoint(bad._trial_id, 1024, -0.9) is False
+    with opened(cfg.storage) as store:
+        ledger = _one_done(store.define("s", StudyAttrs(kind="search"), pruner=make_pruner(cfg)),
+                           ((512, -0.1), (1024, -0.1), (1536, -0.1)))
+        source = SearchSource(ledger, cfg)
+        bad = ledger.ask({})
+        assert source.checkpoint(bad.number, 512, -0.9) is kept_at_512
+        if kept_at_512:
+            assert source.checkpoint(bad.number, 1024, -0.9) is False
 
 
 def test_best_round_trip(spaces: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -238,7 +248,7 @@ def test_evaluation_objective_scores_the_deterministic_policy(spaces: Path) -> N
     trial = load(spaces / "studies" / "kraby.db", "tiny").trials[0]
     assert trial.state == TrialState.COMPLETE
     # The evaluation is its own number: not the training reward of the last 10 %.
-    from kraby_study.evaluation import evaluation_targets
+    from kraby_study.run.evaluation import evaluation_targets
     assert trial.value < 0 and trial.value == trial.user_attrs["final_score"]
     assert trial.user_attrs["train_reward"] < 0
     assert trial.value != trial.user_attrs["train_reward"]
@@ -251,8 +261,8 @@ def test_evaluation_is_deterministic_for_a_model(tmp_path: Path) -> None:
     from stable_baselines3 import PPO
 
     import kraby_envs
-    from kraby_study.evaluation import evaluate
-    from kraby_study.plan import resolved_settings
+    from kraby_study.plan.sweep import resolved_settings
+    from kraby_study.run.evaluation import evaluate
 
     settings = resolved_settings(compose_config(["ppo=tuned"]))
     env = gym.make(kraby_envs.ENV_ID)

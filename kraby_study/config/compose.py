@@ -7,12 +7,17 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from hydra import compose, initialize_config_module
+from hydra.core.config_search_path import ConfigSearchPath
 from hydra.core.global_hydra import GlobalHydra
+from hydra.core.plugins import Plugins
 from hydra.errors import HydraException
+from hydra.plugins.search_path_plugin import SearchPathPlugin
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from kraby_study.config import ConfigError, register_schema, validate
+from kraby_study.config.schema import register_schema
+from kraby_study.config.validate import validate
+from kraby_study.errors import ConfigError
 
 CONFIG_MODULE = "kraby_conf"
 USER_CONF_DIR = "conf"
@@ -52,24 +57,34 @@ def _one_line(err: BaseException) -> str:
     return re.sub(r"\s+", " ", "; ".join(parts) or type(err).__name__)
 
 
-def _search_path_override(cwd: Path) -> list[str]:
-    user_dir = (cwd / USER_CONF_DIR).resolve()
+def user_conf_dir(cwd: Path | None = None) -> Path | None:
+    """The working folder's ./conf/, unless it is missing or is the packaged tree itself (a
+    command run from an editable checkout)."""
+    user_dir = ((cwd or Path.cwd()) / USER_CONF_DIR).resolve()
     if not user_dir.is_dir():
-        return []
+        return None
     packaged = Path(__import__(CONFIG_MODULE).__file__).resolve().parent
-    if user_dir == packaged:
-        return []
-    return [f"hydra.searchpath=[file://{user_dir}]"]
+    return None if user_dir == packaged else user_dir
+
+
+class UserConfFirst(SearchPathPlugin):
+    """Puts the working folder's ./conf/ before the packaged tree in Hydra's search path, so a
+    user's file wins over a packaged one of the same name (``best`` writes ./conf/ppo/...)."""
+
+    def manipulate_search_path(self, search_path: ConfigSearchPath) -> None:
+        user_dir = user_conf_dir()
+        if user_dir is not None:
+            search_path.prepend(provider="kraby-user", path=f"file://{user_dir}")
 
 
 def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
     """Compose conf/config.yaml with overrides; raise ConfigError with a one-line message."""
     register_schema()
+    Plugins.instance().register(UserConfFirst)
     GlobalHydra.instance().clear()
-    all_overrides = [*_search_path_override(Path.cwd()), *overrides]
     try:
         with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3"):
-            cfg = compose(config_name="config", overrides=all_overrides)
+            cfg = compose(config_name="config", overrides=list(overrides))
     except (HydraException, OmegaConfBaseException, ValueError) as err:
         raise ConfigError(_one_line(err)) from None
     finally:

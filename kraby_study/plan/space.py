@@ -1,22 +1,25 @@
-"""Optuna searches: the declared space, the sampler and pruner, and the search's trial source."""
+"""A search's plan: the declared space as Optuna distributions, its checks, sampler and pruner.
+
+Pure: no training and no database. The search's trials are asked for through the store.
+"""
 
 from __future__ import annotations
 
-import json
-from typing import Any, TextIO
+from typing import Any
 
 import optuna
 from omegaconf import DictConfig
-from optuna.trial import FrozenTrial
+from optuna.distributions import (
+    BaseDistribution,
+    CategoricalDistribution,
+    FloatDistribution,
+    IntDistribution,
+)
 
-from kraby_study.config import ConfigError, rollout_size, to_container, validate_env, validate_ppo
-from kraby_study.ledger import superseded
-from kraby_study.plan import fingerprint, model_path, resolved_settings, with_value
-from kraby_study.progress import Progress
-from kraby_study.runner import Retrying, RunSummary, run_trials
-from kraby_study.source import StudySource, rerun_orphans
-from kraby_study.spec import TrialSpec
-from kraby_study.store import PLANNED, Store
+from kraby_study.config.validate import rollout_size, to_container, validate_env, validate_ppo
+from kraby_study.errors import ConfigError
+from kraby_study.plan.sweep import resolved_settings, with_value
+from kraby_study.records import value_key
 
 SAMPLERS = ("tpe", "random")
 PRUNERS = ("median", "hyperband", "none")
@@ -72,7 +75,7 @@ def _validate_param(cfg: DictConfig, name: str, param: DictConfig) -> None:
         if not param.choices:
             _fail(f"{where}: a categorical parameter needs choices")
         choices = list(to_container(param.choices))
-        if len({json.dumps(c) for c in choices}) != len(choices):
+        if len({value_key(c) for c in choices}) != len(choices):
             _fail(f"{where}: a choice is listed twice")
         samples = choices
     else:
@@ -112,17 +115,17 @@ def _validate_batches(cfg: DictConfig) -> None:
                           f"{n_steps} x {n_envs} = {rollout} into batches of at least 2")
 
 
-def sample(trial: optuna.Trial, cfg: DictConfig) -> dict[str, Any]:
-    """Ask the sampler for one value per parameter of the space."""
-    params: dict[str, Any] = {}
+def distributions(cfg: DictConfig) -> dict[str, BaseDistribution]:
+    """The space as Optuna distributions, one per parameter, in the order of the space file."""
+    space: dict[str, BaseDistribution] = {}
     for name, p in cfg.search.params.items():
         if p.type == "float":
-            params[name] = trial.suggest_float(name, float(p.low), float(p.high), log=p.log)
+            space[str(name)] = FloatDistribution(float(p.low), float(p.high), log=bool(p.log))
         elif p.type == "int":
-            params[name] = trial.suggest_int(name, int(p.low), int(p.high), log=p.log)
+            space[str(name)] = IntDistribution(int(p.low), int(p.high), log=bool(p.log))
         else:
-            params[name] = trial.suggest_categorical(name, list(to_container(p.choices)))
-    return params
+            space[str(name)] = CategoricalDistribution(list(to_container(p.choices)))
+    return space
 
 
 def apply_params(cfg: DictConfig, params: dict[str, Any]) -> DictConfig:
@@ -183,88 +186,3 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
     return {"kind": "search", "search": search, "settings": settings,
             "steps": int(cfg.budget.steps), "seeds": int(cfg.budget.seeds),
             "curve_every": int(cfg.budget.curve_every), "seed": int(cfg.seed)}
-
-
-class SearchSource(StudySource):
-    """Asks the sampler for trials until the study holds its total; prunes at checkpoints."""
-
-    def __init__(self, store: Store, study: optuna.Study, cfg: DictConfig) -> None:
-        super().__init__(store, study)
-        self.cfg = cfg
-        self.total = int(cfg.search.trials)
-
-    def _counted(self) -> int:
-        return len(self.counted(self.study.get_trials(deepcopy=False)))
-
-    def next_trial(self) -> tuple[int, TrialSpec] | None:
-        while True:
-            with self.store.plan_lock(self.study):
-                waiting = self.study.get_trials(deepcopy=False,
-                                                states=(optuna.trial.TrialState.WAITING,))
-                if not waiting and self._counted() >= self.total:
-                    return None
-                trial = self.study.ask()
-            params = sample(trial, self.cfg)
-            try:
-                trial_cfg = apply_params(self.cfg, params)
-            except ConfigError as err:
-                self.store.set_attrs(trial._trial_id, {"failure": f"error: {err}"})
-                self.study.tell(trial, state=optuna.trial.TrialState.FAIL)
-                continue
-            spec = self._spec(trial, trial_cfg, params)
-            self.store.heartbeat(trial._trial_id)
-            self.store.set_attrs(trial._trial_id, {
-                "key": spec.key, "seed": spec.seed, "settings": spec.settings,
-                "steps": spec.steps, "model_path": spec.model_path})
-            return trial._trial_id, spec
-
-    def _spec(self, trial: optuna.Trial, trial_cfg: DictConfig,
-              params: dict[str, Any]) -> TrialSpec:
-        cfg = self.cfg
-        key = str(trial.user_attrs.get("key", f"t{trial.number}"))
-        return TrialSpec(
-            study=self.study.study_name, key=key, seed=int(cfg.seed),
-            steps=int(cfg.budget.steps), curve_every=int(cfg.budget.curve_every),
-            settings=resolved_settings(trial_cfg), params=params,
-            model_path=model_path(cfg, self.study.study_name, key),
-            checkpoint_every=checkpoint_every(cfg), repeats=int(cfg.budget.seeds),
-            objective=str(cfg.search.objective), eval_episodes=int(cfg.search.eval_episodes))
-
-    def label(self, spec: TrialSpec) -> str:
-        return f"trial {spec.key}"
-
-    def checkpoint(self, trial_id: int, step: int, value: float) -> bool:
-        trial = optuna.Trial(self.study, trial_id)
-        trial.report(value, step)
-        return not trial.should_prune()
-
-    def counted(self, trials: list[FrozenTrial]) -> list[FrozenTrial]:
-        replaced = superseded(trials)
-        return [t for t in trials if t.number not in replaced]
-
-
-def run_search(store: Store, cfg: DictConfig, workers: int, stream: TextIO,
-               live: bool | None = None) -> tuple[RunSummary, optuna.Study]:
-    """Run a search until its study holds ``search.trials`` trials."""
-    definition = search_definition(cfg)
-    study = store.open_study(str(cfg.search.name), "search", definition,
-                             fingerprint(definition), sampler=make_sampler(cfg),
-                             pruner=make_pruner(cfg))
-    study.set_user_attr("sampler", str(cfg.search.sampler))
-    study.set_user_attr("sampler_seed", int(cfg.search.seed))
-    study.set_user_attr(PLANNED, int(cfg.search.trials))
-    rerun_orphans(store, study, stream)
-    source = SearchSource(store, study, cfg)
-    done = source._counted() - len(study.get_trials(
-        deepcopy=False, states=(optuna.trial.TrialState.WAITING,
-                                optuna.trial.TrialState.RUNNING)))
-    left = max(0, source.total - done)
-    slots = max(1, min(workers, left))
-    print(f"search {study.study_name}: {source.total} trials, {done} done, {left} to run on "
-          f"{slots} worker(s); {cfg.budget.seeds} seed(s) x {cfg.budget.steps:,} steps each, "
-          f"{cfg.search.sampler} sampler, {cfg.search.pruner} pruner", file=stream, flush=True)
-    progress = Progress(study.study_name, source.total, done, stream, live)
-    summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream),  # type: ignore[arg-type]
-                         slots, progress, heartbeat_seconds=float(cfg.heartbeat_interval),
-                         physics_processes=cfg.physics_processes)
-    return summary, study

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 
@@ -22,19 +22,17 @@ class TrialSpec:
     """Environment steps per learning-curve point."""
     settings: dict[str, Any]
     """Resolved env and ppo settings; ppo.batch_size is always a number here."""
-    param: str | None = None
-    """Dotted path of the swept setting, if any."""
     value: Any = None
     """Value of the swept setting."""
     model_path: str | None = None
     """Where to save the final model (SB3 zip), or None."""
     checkpoint_every: int | None = None
     """Report progress to a pruner every this many environment steps (searches only)."""
-    params: dict[str, Any] = field(default_factory=dict)
-    """Searched parameters by name (searches only)."""
-    repeats: int = 1
-    """Training runs with seeds seed, seed + 1, ...; the score is their mean (searches)."""
+    seeds: int = 1
+    """Training runs, with seeds seed, seed + 1, ...; the score is their mean (searches)."""
     objective: str = "final_reward"
     """final_reward (mean reward over the last 10 % of training) or evaluation."""
     eval_episodes: int = 16
     """Fixed targets of the evaluation objective."""
+    label: str = ""
+    """How progress lines name the run, e.g. 'clip_range=0.2 seed 1'."""

@@ -11,16 +11,16 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from kraby_study.config import (
-    ConfigError,
+from kraby_study.config.validate import (
     resolved_batch_size,
-    sqlite_path,
     to_container,
     validate_env,
     validate_ppo,
 )
-from kraby_study.messages import first_line
-from kraby_study.spec import TrialSpec
+from kraby_study.errors import ConfigError, first_line
+from kraby_study.plan.spec import TrialSpec
+from kraby_study.records import param_name, sweep_key, train_key, value_key, value_label
+from kraby_study.store.connection import sqlite_path
 
 SWEEPABLE_ROOTS = ("env", "ppo")
 
@@ -99,7 +99,7 @@ def expand_study(cfg: DictConfig) -> StudyPlan:
     values = list(to_container(study["values"]))
     if not values:
         raise ConfigError(f"study {study.name!r} lists no values")
-    if len({json.dumps(v) for v in values}) != len(values):
+    if len({value_key(v) for v in values}) != len(values):
         raise ConfigError(f"study {study.name!r} lists a value twice")
     specs = []
     for index, value in enumerate(values):
@@ -111,12 +111,12 @@ def expand_study(cfg: DictConfig) -> StudyPlan:
             raise ConfigError(f"study {study.name}, value {value!r}: {err}") from None
         settings = resolved_settings(trial_cfg)
         for seed in run_seeds(cfg):
-            key = f"v{index}-s{seed}"
+            key = sweep_key(index, seed)
             specs.append(TrialSpec(
                 study=str(study.name), key=key, seed=seed, steps=int(cfg.budget.steps),
-                curve_every=int(cfg.budget.curve_every), settings=settings,
-                param=str(study.parameter), value=value,
-                model_path=model_path(cfg, str(study.name), key)))
+                curve_every=int(cfg.budget.curve_every), settings=settings, value=value,
+                model_path=model_path(cfg, str(study.name), key),
+                label=f"{param_name(str(study.parameter))}={value_label(value)} seed {seed}"))
     base = resolved_settings(cfg)
     root, leaf = str(study.parameter).split(".", 1)
     base[root].pop(leaf, None)
@@ -147,9 +147,9 @@ def single_run(cfg: DictConfig) -> StudyPlan:
                   "curve_every": int(cfg.budget.curve_every)}
     name = f"train-{fingerprint(definition)[:8]}"
     seed = int(cfg.seed)
-    key = f"s{seed}"
+    key = train_key(seed)
     spec = TrialSpec(study=name, key=key, seed=seed, steps=int(cfg.budget.steps),
                      curve_every=int(cfg.budget.curve_every), settings=settings,
-                     model_path=model_path(cfg, name, key))
+                     model_path=model_path(cfg, name, key), label=f"seed {seed}")
     return StudyPlan(name=name, parameter="seed", values=[seed], specs=[spec],
                      definition=definition)

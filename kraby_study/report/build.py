@@ -6,13 +6,12 @@ The store is read first (one query per table per study) and closed before anythi
 from __future__ import annotations
 
 import re
+import tempfile
 import time
 from pathlib import Path
 from typing import Any, TextIO
 
-from sqlalchemy.engine import make_url
-
-from kraby_study.config import ConfigError, sqlite_path
+from kraby_study.errors import ConfigError, first_line
 from kraby_study.report import search_output, sweep_output
 from kraby_study.report.document import (
     Block,
@@ -24,17 +23,12 @@ from kraby_study.report.document import (
     to_html,
     to_markdown,
 )
+from kraby_study.report.load import StudyData, check_format, load_study, select_studies
 from kraby_study.report.results import ReportIndex, StudyReport
-from kraby_study.report.search import build_search
-from kraby_study.report.source import (
-    StudyData,
-    check_format,
-    load_study,
-    report_store,
-    select_studies,
-)
-from kraby_study.report.stats import INTERVAL_NAME, TEST_NAME
-from kraby_study.report.sweep import build_sweep
+from kraby_study.report.search_tables import build_search
+from kraby_study.report.sweep_tables import build_sweep
+from kraby_study.stats import INTERVAL_NAME, TEST_NAME
+from kraby_study.store.connection import opened_for_reading, shown_url, sqlite_path
 
 TITLE = "kraby-study report"
 Candidates = list[tuple[str, dict[str, Any], str]]
@@ -102,7 +96,7 @@ def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
         sweep = build_sweep(data)
         report = sweep_output.write_sweep(sweep, folder, rel, fmt)
         candidates = sweep_output.policy_candidates(sweep)
-    elif len(data.study.directions) > 1:
+    elif data.ledger.objectives > 1:
         folder.mkdir(parents=True, exist_ok=True)
         report = StudyReport(name=data.name, kind=data.kind, folder=folder,
                              status=f"{len(data.trials)} trials", finished=True)
@@ -122,10 +116,6 @@ def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
     return report
 
 
-def _shown_url(url: str) -> str:
-    return make_url(url).render_as_string(hide_password=True)
-
-
 def _overview(reports: list[StudyReport]) -> Table:
     rows = [[r.name, r.kind, r.status if r.finished else f"partly finished: {r.status}",
              f"{r.folder.name}/"] for r in reports]
@@ -136,7 +126,7 @@ def index_blocks(url: str, reports: list[StudyReport]) -> list[Block]:
     """The index page: what the numbers mean, an overview, then every study's section."""
     blocks: list[Block] = [
         Heading(TITLE, 1),
-        Text(f"Store: {_shown_url(url)}. {len(reports)} stud{'y' if len(reports) == 1 else 'ies'}"
+        Text(f"Store: {shown_url(url)}. {len(reports)} stud{'y' if len(reports) == 1 else 'ies'}"
              " reported."),
         Text("Final score: mean episode reward over the last 10 % of a run's training "
              "(reward = minus the squared tip-target distance in m^2, summed over the episode). "
@@ -148,6 +138,24 @@ def index_blocks(url: str, reports: list[StudyReport]) -> list[Block]:
     for report in reports:
         blocks += report.blocks
     return blocks
+
+
+def check_folder(out: Path) -> None:
+    """Refuse an output folder that cannot be created or written, before any work.
+
+    Raises:
+        ConfigError: The folder is a file, cannot be created, or cannot be written; one line.
+    """
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"report folder {out} is a file")
+    existing = next((p for p in [out, *out.parents] if p.exists()), Path("."))
+    if not existing.is_dir():
+        raise ConfigError(f"cannot create the report folder {out}: {existing} is a file")
+    try:
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as err:
+        raise ConfigError(f"cannot write the report folder {out}: {first_line(err)}") from None
 
 
 def write_report(url: str, out: Path | str, study: str | None = None, fmt: str = "png",
@@ -172,11 +180,13 @@ def write_report(url: str, out: Path | str, study: str | None = None, fmt: str =
     start = time.perf_counter()
     fmt = check_format(fmt)
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"report folder {out} is a file")
-    with report_store(url) as store:
+    check_folder(out)
+    with opened_for_reading(url) as store:
         studies = [load_study(store, name) for name in select_studies(store, study)]
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(f"cannot create the report folder {out}: {first_line(err)}") from None
     taken: set[str] = set()
     reports = []
     for data in studies:

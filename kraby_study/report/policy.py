@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from kraby_study.config import EnvConfig, env_kwargs
+from kraby_study.config.schema import EnvConfig
+from kraby_study.config.validate import env_kwargs
 
 FRAME_SIZE = (160, 120)
 """Width and height of a rendered frame (pixels), before the caption strip."""

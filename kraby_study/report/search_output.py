@@ -12,7 +12,7 @@ from kraby_study.report import search_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
 from kraby_study.report.results import StudyReport
-from kraby_study.report.search import Search, format_param, top_trials
+from kraby_study.report.search_tables import Search, format_param, top_trials
 from kraby_study.report.style import number, styled
 
 TITLES = {"history": "optimization history", "importances": "parameter importances",
@@ -66,9 +66,7 @@ def _tables(search: Search, folder: Path) -> list[Path]:
     frames: list[tuple[str, pd.DataFrame]] = [("trials.csv", search.trials),
                                               ("top_trials.csv", top_trials(search))]
     if not search.data.curves.empty:
-        ids = {t._trial_id: t.number for t in search.data.trials}
-        curves = search.data.curves.assign(trial=search.data.curves["trial_id"].map(ids))
-        frames.append(("curves.csv", curves.drop(columns=["trial_id"])[
+        frames.append(("curves.csv", search.data.curves.rename(columns={"number": "trial"})[
             ["trial", "step", "mean_reward", "wall_time", "episodes"]]))
     if search.importances:
         frames.append(("importances.csv", pd.DataFrame(

@@ -17,7 +17,7 @@ from matplotlib.colors import Normalize
 from matplotlib.lines import Line2D
 from optuna.distributions import BaseDistribution, CategoricalDistribution
 
-from kraby_study.report.search import Search, is_log, numeric_array
+from kraby_study.report.search_tables import Search, is_log, numeric_array
 from kraby_study.report.style import (
     BEST_COLOUR,
     FAILED_COLOUR,

@@ -20,11 +20,10 @@ from optuna.distributions import (
     FloatDistribution,
     IntDistribution,
 )
-from optuna.study import StudyDirection
 from optuna.trial import FrozenTrial
 
-from kraby_study.report.source import StudyData
-from kraby_study.report.sweep import outcome
+from kraby_study.records import Outcome, best_trial, outcome
+from kraby_study.report.load import StudyData
 
 TOP = 10
 """Rows of the top-trials table."""
@@ -55,16 +54,13 @@ class Search:
     @property
     def complete(self) -> list[FrozenTrial]:
         """Complete trials with a value."""
-        return [t for t in self.data.trials if outcome(t) == "complete" and t.value is not None]
+        return [t for t in self.data.trials
+                if outcome(t) == Outcome.COMPLETE and t.value is not None]
 
     @property
     def best(self) -> FrozenTrial | None:
         """The best complete trial."""
-        done = self.complete
-        if not done:
-            return None
-        pick = max if self.maximize else min
-        return pick(done, key=lambda t: float(t.value))
+        return best_trial(self.data.trials, self.maximize)
 
     def counts(self) -> dict[str, int]:
         """Trials complete, pruned, failed and pending (planned trials not started are pending)."""
@@ -102,16 +98,19 @@ def param_columns(trials: list[FrozenTrial]) -> tuple[list[str], dict[str, BaseD
     return names, distributions
 
 
-def importances(study: optuna.Study, trials: list[FrozenTrial],
+def importances(maximize: bool, trials: list[FrozenTrial],
                 params: list[str]) -> tuple[dict[str, float] | None, str]:
     """PED-ANOVA importances of the parameters (Optuna's default evaluator, no scikit-learn),
     or None and the reason they cannot be computed."""
-    done = [t for t in trials if outcome(t) == "complete" and t.value is not None]
+    done = [t for t in trials if outcome(t) == Outcome.COMPLETE and t.value is not None]
     if len(done) < 2:
         return None, f"parameter importances need at least 2 complete trials ({len(done)} so far)"
     varying = [p for p in params if len({repr(t.params.get(p)) for t in done}) > 1]
     if not varying:
         return None, "no parameter varies across the complete trials"
+    # An in-memory copy of the trials read: the evaluator reads a study, not the store.
+    study = optuna.create_study(direction="maximize" if maximize else "minimize")
+    study.add_trials(done)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -133,7 +132,7 @@ def trial_rows(trials: list[FrozenTrial], params: list[str]) -> pd.DataFrame:
         if steps is None and trial.intermediate_values:
             steps = max(trial.intermediate_values)
         rows.append({
-            "number": trial.number, "outcome": state,
+            "number": trial.number, "outcome": state.value,
             "value": float(trial.value) if state == "complete" and trial.value is not None
             else math.nan,
             "env_steps": steps, "wall_time": attrs.get("wall_time", _duration(trial)),
@@ -157,9 +156,9 @@ def _duration(trial: FrozenTrial) -> float | None:
 
 def build_search(data: StudyData) -> Search:
     """The tables of a search study."""
-    maximize = data.study.directions[0] == StudyDirection.MAXIMIZE
+    maximize = data.ledger.maximize
     params, distributions = param_columns(data.trials)
-    imp, note = importances(data.study, data.trials, params)
+    imp, note = importances(maximize, data.trials, params)
     return Search(data=data, maximize=maximize, trials=trial_rows(data.trials, params),
                   params=params, distributions=distributions, importances=imp,
                   importance_note=note)

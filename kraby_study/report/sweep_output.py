@@ -8,13 +8,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from kraby_study.records import Outcome
 from kraby_study.report import sweep_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
 from kraby_study.report.results import StudyReport
-from kraby_study.report.stats import ALPHA, INTERVAL_NAME, TEST_NAME
 from kraby_study.report.style import number, styled
-from kraby_study.report.sweep import Sweep
+from kraby_study.report.sweep_tables import Sweep
+from kraby_study.stats import ALPHA, INTERVAL_NAME, TEST_NAME
 
 MARK_TEXT = {"best": "best", "tie": "\u2248 best", "": ""}
 CAPTIONS = {
@@ -51,12 +52,13 @@ def _with_interval(mean: float, low: float, high: float) -> str:
 
 def summary_table(sweep: Sweep) -> Table:
     """The summary as a table of formatted cells, best and tied rows marked."""
-    header = [sweep.name, "complete", "failed", "pending", "final score", "95 % CI", "sd",
+    header = [sweep.name, "complete", "failed", "pruned", "pending", "final score", "95 % CI", "sd",
               "training time (s)", "Welch p vs best", ""]
     rows = []
     for _, row in sweep.summary.iterrows():
         rows.append([
-            str(row["value"]), str(row["complete"]), str(row["failed"]), str(row["pending"]),
+            str(row["value"]), str(row["complete"]), str(row["failed"]), str(row["pruned"]),
+            str(row["pending"]),
             number(row["final_mean"]), _interval(row["final_low"], row["final_high"]),
             number(row["final_sd"], 3),
             _with_interval(row["time_mean"], row["time_low"], row["time_high"]),
@@ -89,8 +91,8 @@ def verdict(sweep: Sweep) -> str:
 
 
 def failed_items(sweep: Sweep) -> list[str]:
-    """One line per failed run: value, seed, trial and reason."""
-    failed = sweep.trials[sweep.trials["outcome"].isin(["failed", "pruned"])]
+    """One line per failed or pruned run: value, seed, trial and reason."""
+    failed = sweep.trials[sweep.trials["outcome"].isin([Outcome.FAILED, Outcome.PRUNED])]
     prefix = f"{sweep.name} = " if sweep.parameter else ""
     return [f"{prefix}{r['value']}, seed {r['seed']} (trial {r['number']}): "
             f"{r['failure'] or r['outcome']}" for _, r in failed.iterrows()]
@@ -99,7 +101,7 @@ def failed_items(sweep: Sweep) -> list[str]:
 def _tables(sweep: Sweep, folder: Path) -> list[Path]:
     summary = sweep.summary.copy()
     summary.insert(0, "parameter", sweep.parameter or "-")
-    trials = sweep.trials.drop(columns=["trial_id", "vi"]).rename(columns={"value": sweep.name})
+    trials = sweep.trials.drop(columns=["vi"]).rename(columns={"value": sweep.name})
     curves = sweep.curves.assign(value=[sweep.labels[int(v)] for v in sweep.curves["vi"]])
     curves = curves[["value", "seed", "number", "step", "mean_reward", "wall_time", "episodes"]]
     curves = curves.rename(columns={"value": sweep.name, "number": "trial"})
@@ -158,7 +160,8 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
     section: list[Block] = [Heading(f"{sweep.data.name}", 2), Text(describe_sweep(sweep)),
                             Text(verdict(sweep)), summary_table(sweep)]
     if failed:
-        section += [Text(f"Failed runs ({len(failed)}), not in the figures:"), Items(failed)]
+        section += [Text(f"Failed or pruned runs ({len(failed)}), not in the figures:"),
+                    Items(failed)]
     if sweep.data.replaced:
         section.append(Text(f"{sweep.data.replaced} interrupted attempt(s) were run again; "
                             "only the later attempts count."))

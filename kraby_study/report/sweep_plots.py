@@ -2,7 +2,7 @@
 wall-clock time, training time and final score against the value.
 
 Lines are means over the complete seeds of a value; bands and error bars are the 95 %
-Student-t intervals of those means (see :mod:`kraby_study.report.stats`).
+Student-t intervals of those means (see :mod:`kraby_study.stats`).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from kraby_study.report.style import (
     new_figure,
     save,
 )
-from kraby_study.report.sweep import Sweep, legend_label
+from kraby_study.report.sweep_tables import Sweep, legend_label
 
 LATE_FRACTION = 0.25
 """The zoomed panel shows the last quarter of training."""

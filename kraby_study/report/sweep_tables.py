@@ -6,23 +6,19 @@ come are counted as pending, and nothing is dropped without a trace.
 
 from __future__ import annotations
 
-import json
-import re
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pandas as pd
-from optuna.trial import FrozenTrial, TrialState
 
-from kraby_study.ledger import value_label, was_interrupted
-from kraby_study.report.source import StudyData
-from kraby_study.report.stats import compare_to_best, describe, t_interval
+from kraby_study.records import Outcome, outcome, param_name, swept_value, value_key, value_label
+from kraby_study.report.load import StudyData
 from kraby_study.report.style import is_numeric, value_colours
+from kraby_study.stats import compare_to_best, describe, t_interval
 
-KEY_PATTERN = re.compile(r"^v(\d+)-s\d+$")
 SINGLE_LABEL = "all seeds"
-TRIAL_COLUMNS = ["number", "trial_id", "key", "seed", "vi", "value", "outcome", "final_score",
+TRIAL_COLUMNS = ["number", "key", "seed", "vi", "value", "outcome", "final_score",
                  "wall_time", "env_steps", "failure", "model_path"]
 
 
@@ -56,13 +52,13 @@ class Sweep:
 
     @property
     def counts(self) -> dict[str, int]:
-        """Runs complete, failed and pending (planned runs without a trial are pending)."""
-        outcome = self.trials["outcome"]
-        complete = int((outcome == "complete").sum())
-        failed = int((outcome == "failed").sum()) + int((outcome == "pruned").sum())
+        """Runs complete, failed, pruned and pending (planned runs without a trial are
+        pending)."""
+        outcomes = self.trials["outcome"]
+        counts = {o.value: int((outcomes == o).sum())
+                  for o in (Outcome.COMPLETE, Outcome.FAILED, Outcome.PRUNED)}
         planned = max(self.data.planned or 0, len(self.trials))
-        return {"planned": planned, "complete": complete, "failed": failed,
-                "pending": planned - complete - failed}
+        return {"planned": planned, **counts, "pending": planned - sum(counts.values())}
 
     @property
     def finished(self) -> bool:
@@ -73,10 +69,7 @@ class Sweep:
         """'10/10 complete', or e.g. '7/10 complete, 1 failed, 2 pending'."""
         c = self.counts
         parts = [f"{c['complete']}/{c['planned']} complete"]
-        if c["failed"]:
-            parts.append(f"{c['failed']} failed")
-        if c["pending"]:
-            parts.append(f"{c['pending']} pending")
+        parts += [f"{c[name]} {name}" for name in ("failed", "pruned", "pending") if c[name]]
         return ", ".join(parts)
 
     @property
@@ -86,43 +79,13 @@ class Sweep:
         return int(marked[0]) if len(marked) else None
 
 
-def _value_key(value: Any) -> tuple[str, Any]:
-    if isinstance(value, int | float) and not isinstance(value, bool):
-        return ("number", float(value))
-    return ("other", json.dumps(value, sort_keys=True, default=str))
-
-
-def trial_value(trial: FrozenTrial, name: str, planned: list[Any]) -> Any:
-    """A run's swept value: its parameter, its queued parameter, or its key's value index."""
-    if name in trial.params:
-        return trial.params[name]
-    fixed = trial.system_attrs.get("fixed_params") or {}
-    if name in fixed:
-        return fixed[name]
-    match = KEY_PATTERN.match(str(trial.user_attrs.get("key", "")))
-    if match and int(match.group(1)) < len(planned):
-        return planned[int(match.group(1))]
-    return None
-
-
-def outcome(trial: FrozenTrial) -> str:
-    """complete, failed, pruned, or pending (waiting, running, or given back unfinished)."""
-    if trial.state == TrialState.COMPLETE:
-        return "complete"
-    if trial.state == TrialState.PRUNED:
-        return "pruned"
-    if trial.state == TrialState.FAIL and not was_interrupted(trial):
-        return "failed"
-    return "pending"
-
-
 def ordered_values(planned: list[Any], found: list[Any]) -> list[Any]:
     """Planned values plus any other value found, sorted when all are numbers."""
     values = list(planned)
-    known = {_value_key(v) for v in values}
+    known = {value_key(v) for v in values}
     for value in found:
-        if value is not None and _value_key(value) not in known:
-            known.add(_value_key(value))
+        if value is not None and value_key(value) not in known:
+            known.add(value_key(value))
             values.append(value)
     if is_numeric(values):
         values.sort(key=float)
@@ -131,24 +94,24 @@ def ordered_values(planned: list[Any], found: list[Any]) -> list[Any]:
 
 def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.DataFrame:
     """One row per counted run; ``vi`` is the index of its value in ``values``."""
-    index = {_value_key(v): i for i, v in enumerate(values)}
+    index = {value_key(v): i for i, v in enumerate(values)}
     rows = []
     for trial in data.trials:
         attrs = trial.user_attrs
-        value = trial_value(trial, name, values) if name else None
-        vi = index.get(_value_key(value), -1) if name else 0
+        value = swept_value(trial, name, values) if name else None
+        vi = index.get(value_key(value), -1) if name else 0
         state = outcome(trial)
         rows.append({
-            "number": trial.number, "trial_id": trial._trial_id, "key": attrs.get("key"),
+            "number": trial.number, "key": attrs.get("key"),
             "seed": attrs.get("seed"), "vi": vi,
             "value": value_label(values[vi]) if vi >= 0 and name else
             (SINGLE_LABEL if not name else "?"),
-            "outcome": state,
+            "outcome": state.value,
             "final_score": float(trial.value) if state == "complete" and trial.value is not None
             else np.nan,
             "wall_time": attrs.get("wall_time", np.nan) if state != "pending" else np.nan,
             "env_steps": attrs.get("env_steps", np.nan) if state != "pending" else np.nan,
-            "failure": attrs.get("failure", "") if state in ("failed", "pruned") else "",
+            "failure": attrs.get("failure", "") if state == Outcome.FAILED else "",
             "model_path": attrs.get("model_path"),
         })
     frame = pd.DataFrame(rows, columns=TRIAL_COLUMNS)
@@ -190,7 +153,8 @@ def summarise(trials: pd.DataFrame, labels: list[str]) -> pd.DataFrame:
         rows.append({
             "value": label,
             "complete": int(count.get("complete", 0)),
-            "failed": int(count.get("failed", 0)) + int(count.get("pruned", 0)),
+            "failed": int(count.get("failed", 0)),
+            "pruned": int(count.get("pruned", 0)),
             "pending": int(count.get("pending", 0)),
             "final_mean": s["mean"] if s is not None else np.nan,
             "final_sd": s["sd"] if s is not None else np.nan,
@@ -211,9 +175,9 @@ def build_sweep(data: StudyData) -> Sweep:
     definition = data.definition
     if data.kind == "sweep":
         parameter = str(definition["parameter"])
-        name: str | None = parameter.split(".")[-1]
+        name: str | None = param_name(parameter)
         planned = list(definition.get("values", []))
-        found = [trial_value(t, name, planned) for t in data.trials]
+        found = [swept_value(t, name, planned) for t in data.trials]
         values = ordered_values(planned, found)
         labels = [value_label(v) for v in values]
     else:
@@ -222,8 +186,8 @@ def build_sweep(data: StudyData) -> Sweep:
     if (trials["vi"] < 0).any():  # a run whose value cannot be read: show it, do not drop it
         values, labels = values + ["?"], labels + ["?"]
         trials.loc[trials["vi"] < 0, "vi"] = len(values) - 1
-    complete = trials[trials["outcome"] == "complete"][["trial_id", "vi", "seed", "number"]]
-    curves = data.curves.merge(complete, on="trial_id", how="inner")
+    complete = trials[trials["outcome"] == Outcome.COMPLETE][["vi", "seed", "number"]]
+    curves = data.curves.merge(complete, on="number", how="inner")
     return Sweep(data=data, parameter=parameter, name=name or SINGLE_LABEL, values=values,
                  labels=labels, colours=value_colours(values), trials=trials, curves=curves,
                  bands=curve_bands(curves), summary=summarise(trials, labels))
@@ -233,6 +197,7 @@ def legend_label(sweep: Sweep, vi: int) -> str:
     """A value as the legends write it: its label and the seeds behind its mean."""
     row = sweep.summary.iloc[vi]
     text = f"{row['value']}  (n={row['complete']}"
-    if row["failed"]:
-        text += f", {row['failed']} failed"
+    for name in ("failed", "pruned"):
+        if row[name]:
+            text += f", {row[name]} {name}"
     return text + ")"

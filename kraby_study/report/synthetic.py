@@ -1,7 +1,7 @@
 """Synthetic stores shaped like real ones, for the report's tests, benchmark and previews.
 
-Trials are written through Optuna (``add_trial``) with the user attributes a real run leaves,
-and their curves in one bulk insert, so a store of hundreds of runs takes seconds to make.
+Trials are written through the store (finished trials added whole) with the attributes a real
+run leaves, and their curves in one bulk insert, so a store of hundreds of runs takes seconds.
 """
 
 from __future__ import annotations
@@ -16,7 +16,11 @@ import optuna
 from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
 from optuna.trial import TrialState, create_trial
 
-from kraby_study.store import DEFINITION, KIND, PLANNED, Store, curve_points
+from kraby_study.plan.sweep import fingerprint
+from kraby_study.records import Failure, Outcome, StudyAttrs, TrialAttrs, failure, sweep_key
+from kraby_study.run.result import CurvePoint
+from kraby_study.store.connection import Store
+from kraby_study.store.ledger import StudyLedger
 
 SETTINGS: dict[str, Any] = {
     "env": {"observation": "default", "delta": 0.5, "time_step": 0.05 / 12, "frameskip": 12,
@@ -27,6 +31,8 @@ SETTINGS: dict[str, Any] = {
             "activation": "tanh"},
 }
 
+DIVERGED = failure(Failure.DIVERGED, "the policy's parameters became NaN")
+
 
 @dataclass
 class Run:
@@ -35,7 +41,7 @@ class Run:
     Attributes:
         value: The swept value.
         seed: The run's seed.
-        status: complete, failed or pending (queued, not run yet).
+        outcome: complete, failed or pending (queued, not run yet).
         final_score: Final score of a complete run.
         wall_time: Training time (s).
         failure: Reason of a failed run.
@@ -45,7 +51,7 @@ class Run:
 
     value: Any
     seed: int
-    status: str = "complete"
+    outcome: Outcome = Outcome.COMPLETE
     final_score: float | None = None
     wall_time: float = 10.0
     failure: str | None = None
@@ -65,53 +71,54 @@ def learning_curve(final: float, steps: int, points: int, wall_time: float,
     return [(int(s), float(r), float(c)) for s, r, c in zip(grid, reward, clock, strict=True)]
 
 
+def define(store: Store, name: str, kind: str, definition: dict[str, Any],
+           planned: int) -> StudyLedger:
+    """A new study of the given kind and definition."""
+    attrs = StudyAttrs(kind=kind, definition=definition, fingerprint=fingerprint(definition),
+                       planned=planned)
+    return store.define(name, attrs, pruner=optuna.pruners.NopPruner())
+
+
 def add_sweep(store: Store, name: str, parameter: str, values: Sequence[Any],
-              runs: Sequence[Run], steps: int = 250_000, curve_every: int = 1000) -> optuna.Study:
+              runs: Sequence[Run], steps: int = 250_000, curve_every: int = 1000) -> StudyLedger:
     """A sweep study holding the given runs, with the attributes the runner stores."""
-    study = optuna.create_study(study_name=name, storage=store.storage, direction="maximize")
     definition = {"kind": "sweep", "parameter": parameter, "values": list(values),
                   "settings": SETTINGS, "steps": steps, "curve_every": curve_every}
-    study.set_user_attr(KIND, "sweep")
-    study.set_user_attr(DEFINITION, definition)
-    study.set_user_attr(PLANNED, len(runs))
+    ledger = define(store, name, "sweep", definition, len(runs))
     short = parameter.split(".")[-1]
     distribution = CategoricalDistribution(list(values))
     curves: dict[int, list[tuple[int, float, float]]] = {}
     for number, run in enumerate(runs):
-        key = f"v{list(values).index(run.value)}-s{run.seed}"
-        if run.status == "pending":
-            study.enqueue_trial({short: run.value}, user_attrs={"key": key, "seed": run.seed})
+        key = sweep_key(list(values).index(run.value), run.seed)
+        if run.outcome == Outcome.PENDING:
+            ledger.queue({short: run.value}, TrialAttrs(key=key, seed=run.seed))
             continue
         settings = {"env": dict(SETTINGS["env"]), "ppo": dict(SETTINGS["ppo"])}
         settings[parameter.split(".")[0]][short] = run.value
-        attrs: dict[str, Any] = {
-            "key": key, "seed": run.seed, "settings": settings, "steps": steps,
-            "model_path": run.model_path, "status": run.status, "env_steps": steps,
-            "wall_time": run.wall_time, "started": "2025-01-01T00:00:00+00:00",
-            "ended": "2025-01-01T00:10:00+00:00"}
-        if run.status == "complete":
-            attrs["final_score"] = run.final_score
+        attrs = TrialAttrs(
+            key=key, seed=run.seed, settings=settings, steps=steps, model_path=run.model_path,
+            env_steps=steps, wall_time=run.wall_time, started="2025-01-01T00:00:00+00:00",
+            ended="2025-01-01T00:10:00+00:00")
+        if run.outcome == Outcome.COMPLETE:
+            attrs.final_score = run.final_score
             state, value = TrialState.COMPLETE, run.final_score
         else:
-            attrs["failure"] = run.failure or "diverged: the policy's parameters became NaN"
+            attrs.failure = run.failure or DIVERGED
             state, value = TrialState.FAIL, None
-        study.add_trial(create_trial(state=state, value=value, params={short: run.value},
-                                     distributions={short: distribution}, user_attrs=attrs))
+        ledger.add_trials([create_trial(state=state, value=value, params={short: run.value},
+                                        distributions={short: distribution},
+                                        user_attrs=attrs.stored())])
         curves[number] = run.curve
-    write_curves(store, study, curves)
-    return study
+    write_curves(ledger, curves)
+    return ledger
 
 
-def write_curves(store: Store, study: optuna.Study,
-                 curves: dict[int, list[tuple[int, float, float]]]) -> None:
-    """Insert the curves of trials (by trial number) in one statement."""
-    ids = {t.number: t._trial_id for t in study.get_trials(deepcopy=False)}
-    rows = [{"study_id": study._study_id, "trial_id": ids[number], "step": step,
-             "mean_reward": reward, "wall_time": clock, "episodes": 32}
-            for number, points in curves.items() for step, reward, clock in points]
-    if rows:
-        with store.engine.begin() as connection:
-            connection.execute(curve_points.insert(), rows)
+def write_curves(ledger: StudyLedger, curves: dict[int, list[tuple[int, float, float]]]) -> None:
+    """Store the curves of trials (by trial number), (step, reward, seconds) points, in one
+    transaction."""
+    ledger.write_curves({number: [CurvePoint(step, reward, clock, 32)
+                                  for step, reward, clock in points]
+                         for number, points in curves.items()})
 
 
 def sweep_runs(values: Sequence[Any], seeds: int, points: int, steps: int,
@@ -127,18 +134,16 @@ def sweep_runs(values: Sequence[Any], seeds: int, points: int, steps: int,
             runs.append(Run(value=value, seed=seed, final_score=final, wall_time=wall,
                             curve=learning_curve(final, steps, points, wall, rng)))
     for run in runs[len(runs) - failed:]:
-        run.status, run.final_score = "failed", None
-        run.failure = "diverged: ValueError: invalid values (nan) in the policy's output"
+        run.outcome, run.final_score = Outcome.FAILED, None
+        run.failure = failure(Failure.DIVERGED,
+                              "ValueError: invalid values (nan) in the policy's output")
     return runs
 
 
 def add_search(store: Store, name: str, trials: int, rng: np.random.Generator,
-               steps: int = 250_000, checkpoints: int = 10, points: int = 250) -> optuna.Study:
+               steps: int = 250_000, checkpoints: int = 10, points: int = 250) -> StudyLedger:
     """A search study: TPE-free random parameters, intermediate values, pruned and failed trials."""
-    study = optuna.create_study(study_name=name, storage=store.storage, direction="maximize",
-                                pruner=optuna.pruners.NopPruner())
-    study.set_user_attr(KIND, "search")
-    study.set_user_attr(PLANNED, trials)
+    ledger = define(store, name, "search", {"kind": "search", "steps": steps}, trials)
     distributions = {
         "learning_rate": FloatDistribution(1e-4, 1.0, log=True),
         "gamma": FloatDistribution(0.2, 0.9999),
@@ -162,19 +167,19 @@ def add_search(store: Store, name: str, trials: int, rng: np.random.Generator,
                                                  if i * every < s <= (i + 1) * every]))
                  for i in range(checkpoints)}
         state, value = TrialState.COMPLETE, final
-        attrs: dict[str, Any] = {"status": "complete", "env_steps": steps, "wall_time": wall}
+        attrs = TrialAttrs(env_steps=steps, wall_time=wall)
         if number % 5 == 4:
             stop = every * int(rng.integers(2, checkpoints))
             marks = {s: v for s, v in marks.items() if s <= stop}
             curve = [p for p in curve if p[0] <= stop]
             state, value = TrialState.PRUNED, None
-            attrs.update(status="pruned", pruned_at=stop, env_steps=stop)
+            attrs.pruned_at, attrs.env_steps = stop, stop
         elif number % 23 == 22:
             state, value, marks, curve = TrialState.FAIL, None, {}, curve[:20]
-            attrs.update(status="failed", failure="diverged: the policy's parameters became NaN")
-        study.add_trial(create_trial(state=state, value=value, params=params,
-                                     distributions=distributions, user_attrs=attrs,
-                                     intermediate_values=marks))
+            attrs.failure = DIVERGED
+        ledger.add_trials([create_trial(state=state, value=value, params=params,
+                                        distributions=distributions, user_attrs=attrs.stored(),
+                                        intermediate_values=marks)])
         curves[number] = curve
-    write_curves(store, study, curves)
-    return study
+    write_curves(ledger, curves)
+    return ledger

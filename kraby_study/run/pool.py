@@ -1,7 +1,7 @@
 """Worker processes that run trials and send their results back to the parent.
 
 Workers never open the database: the parent is the single writer (SQLite allows one). Each worker
-is a fresh interpreter running :mod:`kraby_study.worker`, fed one spec at a time through its own
+is a fresh interpreter running :mod:`kraby_study.run.worker`, fed one spec at a time through its own
 pipe, so a worker that dies (killed, out of memory) is seen at once as the end of its pipe and
 only its own trial needs running again.
 """
@@ -15,14 +15,14 @@ from multiprocessing import Pipe
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from kraby_study.spec import TrialSpec
+from kraby_study.plan.spec import TrialSpec
 
 
 @dataclass
 class _Slot:
     process: subprocess.Popen[bytes]
     conn: Connection
-    trial_id: int | None = None
+    number: int | None = None
     spec: TrialSpec | None = None
 
 
@@ -31,7 +31,7 @@ class Event:
     """Something a worker said or did: progress, checkpoint, result or died."""
 
     kind: str
-    trial_id: int
+    number: int
     payload: Any = None
     slot: _Slot | None = None
 
@@ -39,19 +39,19 @@ class Event:
 class WorkerPool:
     """Up to ``size`` worker processes, started when there is work for them.
 
-    Each worker steps its trials' legs in ``physics_processes`` processes.
+    Each worker steps its trials' legs in ``shards`` processes.
     """
 
-    def __init__(self, size: int, physics_processes: int = 1) -> None:
+    def __init__(self, size: int, shards: int = 1) -> None:
         self.size = size
-        self.physics_processes = physics_processes
+        self.shards = shards
         self._slots: list[_Slot] = []
 
     def _start(self) -> _Slot:
         ours, theirs = Pipe()
         process = subprocess.Popen(
-            [sys.executable, "-m", "kraby_study.worker", str(theirs.fileno()),
-             str(self.physics_processes)],
+            [sys.executable, "-m", "kraby_study.run.worker", str(theirs.fileno()),
+             str(self.shards)],
             pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL)
         theirs.close()
         slot = _Slot(process, ours)
@@ -60,18 +60,18 @@ class WorkerPool:
 
     def idle(self) -> int:
         """How many more trials the pool can take now."""
-        busy = sum(1 for s in self._slots if s.trial_id is not None)
+        busy = sum(1 for s in self._slots if s.number is not None)
         return self.size - busy
 
-    def submit(self, trial_id: int, spec: TrialSpec) -> None:
+    def submit(self, number: int, spec: TrialSpec) -> None:
         """Give a trial to an idle worker, starting one if needed."""
-        slot = next((s for s in self._slots if s.trial_id is None), None) or self._start()
-        slot.trial_id, slot.spec = trial_id, spec
-        slot.conn.send((trial_id, spec))
+        slot = next((s for s in self._slots if s.number is None), None) or self._start()
+        slot.number, slot.spec = number, spec
+        slot.conn.send((number, spec))
 
     def running(self) -> dict[int, TrialSpec]:
         """The trials being run, by trial id."""
-        return {s.trial_id: s.spec for s in self._slots if s.trial_id is not None and s.spec}
+        return {s.number: s.spec for s in self._slots if s.number is not None and s.spec}
 
     def events(self, timeout: float) -> list[Event]:
         """What the workers said or did within ``timeout`` seconds."""
@@ -85,8 +85,8 @@ class WorkerPool:
                 self._slots.remove(slot)
                 slot.conn.close()
                 code = _exit_code(slot.process)
-                if slot.trial_id is not None:
-                    out.append(Event("died", slot.trial_id, (slot.spec, code)))
+                if slot.number is not None:
+                    out.append(Event("died", slot.number, (slot.spec, code)))
         return out
 
     @staticmethod
@@ -94,14 +94,14 @@ class WorkerPool:
         """Adds what the worker said to ``out``; False when its pipe has ended."""
         try:
             while slot.conn.poll():
-                kind, trial_id, *rest = slot.conn.recv()
+                kind, number, *rest = slot.conn.recv()
                 if kind == "result":
-                    slot.trial_id, slot.spec = None, None
-                    out.append(Event(kind, trial_id, rest[0], slot))
+                    slot.number, slot.spec = None, None
+                    out.append(Event(kind, number, rest[0], slot))
                 elif kind == "checkpoint":
-                    out.append(Event(kind, trial_id, (rest[0], rest[1]), slot))
+                    out.append(Event(kind, number, (rest[0], rest[1]), slot))
                 else:
-                    out.append(Event(kind, trial_id, rest[0], slot))
+                    out.append(Event(kind, number, rest[0], slot))
         except (EOFError, OSError):
             return False
         return True

@@ -11,41 +11,38 @@ from __future__ import annotations
 import signal
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol, TextIO
 
-from sqlalchemy import exc as sa_exc
-
-from kraby_study.config import cores
-from kraby_study.messages import first_line
-from kraby_study.progress import Progress
-from kraby_study.spec import TrialSpec
-from kraby_study.trial import TrialResult
-from kraby_study.workers import WorkerPool
+from kraby_study.config.validate import cores
+from kraby_study.errors import DatabaseLost, first_line
+from kraby_study.plan.spec import TrialSpec
+from kraby_study.records import Failure, Outcome, failure
+from kraby_study.run.pool import Event, WorkerPool
+from kraby_study.run.progress import Progress
+from kraby_study.run.result import TrialResult
+from kraby_study.store.connection import LOST_DATABASE
 
 MAX_WORKER_DEATHS = 3
 """A trial whose worker dies this many times is recorded as failed instead of run again."""
 
 
 class TrialSource(Protocol):
-    """Where trials come from and where their results go."""
+    """Where trials come from and where their results go; trials are named by number."""
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
         """Claim the next trial to run, or None when there is nothing left to start."""
 
-    def label(self, spec: TrialSpec) -> str:
-        """How the progress display names a trial."""
-
-    def checkpoint(self, trial_id: int, step: int, value: float) -> bool:
+    def checkpoint(self, number: int, step: int, value: float) -> bool:
         """Record an intermediate value; False prunes the trial."""
 
-    def record(self, trial_id: int, spec: TrialSpec, result: TrialResult) -> str:
-        """Store a finished trial; returns a short outcome for the progress display."""
+    def record(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
+        """Store a finished trial."""
 
-    def interrupted(self, trial_id: int, spec: TrialSpec, reason: str) -> None:
-        """Give back a trial that will not finish in this command."""
+    def requeue(self, number: int, spec: TrialSpec, reason: str) -> None:
+        """Give back a trial that will not finish in this command, to run again."""
 
-    def heartbeat(self, trial_ids: list[int]) -> None:
+    def heartbeat(self, numbers: list[int]) -> None:
         """Tell the store these trials are alive."""
 
     def running_elsewhere(self) -> bool:
@@ -61,9 +58,14 @@ class RunSummary:
     pruned: int = 0
     interrupted: bool = False
 
-
-class DatabaseLost(RuntimeError):
-    """The database stayed out of reach longer than the command was told to wait."""
+    def count(self, outcome: Outcome) -> None:
+        """Count one trial that ended."""
+        if outcome == Outcome.COMPLETE:
+            self.complete += 1
+        elif outcome == Outcome.PRUNED:
+            self.pruned += 1
+        else:
+            self.failed += 1
 
 
 class Retrying:
@@ -76,7 +78,7 @@ class Retrying:
 
     def __getattr__(self, name: str) -> Any:
         attr = getattr(self._source, name)
-        if not callable(attr) or name == "label":
+        if not callable(attr):
             return attr
 
         def call(*args: Any) -> Any:
@@ -85,7 +87,7 @@ class Retrying:
             while True:
                 try:
                     return attr(*args)
-                except (sa_exc.OperationalError, sa_exc.InterfaceError) as err:
+                except LOST_DATABASE as err:
                     if time.monotonic() >= deadline:
                         raise DatabaseLost(f"lost the database for {self._patience:.0f} s, "
                                            f"giving up: {first_line(err)}") from None
@@ -129,23 +131,82 @@ class _CtrlC:
             signal.signal(signal.SIGINT, self._previous)
 
 
+@dataclass
+class _Run:
+    """The state of one command's scheduling loop: one handler per worker event."""
+
+    source: TrialSource
+    pool: WorkerPool
+    progress: Progress
+    summary: RunSummary = field(default_factory=RunSummary)
+    deaths: dict[int, int] = field(default_factory=dict)
+
+    def submit(self, number: int, spec: TrialSpec) -> None:
+        self.pool.submit(number, spec)
+        self.progress.start(spec.label, spec.steps * spec.seeds)
+
+    def claim(self) -> bool:
+        """Fill the idle workers; False when the source had nothing left to hand out."""
+        while self.pool.idle() > 0:
+            claimed = self.source.next_trial()
+            if claimed is None:
+                return False
+            self.submit(*claimed)
+        return True
+
+    def on_progress(self, event: Event, spec: TrialSpec) -> None:
+        self.progress.step(spec.label, int(event.payload))
+
+    def on_checkpoint(self, event: Event, spec: TrialSpec) -> None:
+        step, value = event.payload
+        self.pool.reply(event, self.source.checkpoint(event.number, step, value))
+
+    def on_result(self, event: Event, spec: TrialSpec) -> None:
+        self.finish(event.number, spec, event.payload)
+
+    def on_died(self, event: Event, spec: TrialSpec) -> None:
+        _, code = event.payload
+        self.deaths[event.number] = self.deaths.get(event.number, 0) + 1
+        if self.deaths[event.number] >= MAX_WORKER_DEATHS:
+            reason = f"its worker died {MAX_WORKER_DEATHS} times (last exit code {code})"
+            self.finish(event.number, spec, TrialResult(outcome=Outcome.FAILED,
+                                                        failure=failure(Failure.ERROR, reason)))
+        else:
+            # Same trial, new worker: the trial stays claimed, so nothing is lost.
+            self.progress.interrupt(spec.label, f"worker exit code {code}, rerun")
+            self.submit(event.number, spec)
+
+    def finish(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
+        self.source.record(number, spec, result)
+        self.summary.count(result.outcome)
+        self.progress.finish(spec.label, result)
+
+    def stop(self) -> None:
+        """Ctrl-C: stop the workers and give their trials back to run next time."""
+        self.summary.interrupted = True
+        running = self.pool.running()
+        self.pool.close(terminate=True)
+        for number, spec in running.items():
+            self.source.requeue(number, spec, failure(Failure.INTERRUPTED, "stopped by the user"))
+            self.progress.interrupt(spec.label, "queued for the next run")
+
+
 def run_trials(source: TrialSource, workers: int, progress: Progress,
                heartbeat_seconds: float = 5.0, poll_seconds: float = 2.0,
-               physics_processes: int | None = None) -> RunSummary:
+               shards: int | None = None) -> RunSummary:
     """Run every trial the source hands out on ``workers`` processes.
 
-    Each trial steps its legs in ``physics_processes`` processes; None gives it the cores the
-    workers leave idle, so a lone trial uses the whole machine.
+    Each trial steps its legs in ``shards`` processes; None gives it the cores the workers
+    leave idle, so a lone trial uses the whole machine.
 
     When nothing is left to claim but other commands still run trials of the study (several
     machines on PostgreSQL), it keeps polling: a trial whose owner died comes back to the queue
     once its heartbeat is stale, and this command runs it.
     """
-    summary = RunSummary()
-    if physics_processes is None:
-        physics_processes = max(1, cores() // workers)
-    pool = WorkerPool(workers, physics_processes)
-    deaths: dict[int, int] = {}
+    pool = WorkerPool(workers, shards if shards is not None else max(1, cores() // workers))
+    run = _Run(source, pool, progress)
+    handlers = {"progress": run.on_progress, "checkpoint": run.on_checkpoint,
+                "result": run.on_result, "died": run.on_died}
     last_beat = 0.0
     next_claim = 0.0
     ctrl_c = _CtrlC()
@@ -153,14 +214,8 @@ def run_trials(source: TrialSource, workers: int, progress: Progress,
         ctrl_c.install()
         while True:
             ctrl_c.check()
-            while pool.idle() > 0 and time.monotonic() >= next_claim:
-                claimed = source.next_trial()
-                if claimed is None:
-                    next_claim = time.monotonic() + poll_seconds
-                    break
-                trial_id, spec = claimed
-                pool.submit(trial_id, spec)
-                progress.start(source.label(spec), spec.steps * spec.repeats)
+            if time.monotonic() >= next_claim and not run.claim():
+                next_claim = time.monotonic() + poll_seconds
             running = pool.running()
             if not running:
                 if not source.running_elsewhere():
@@ -172,52 +227,13 @@ def run_trials(source: TrialSource, workers: int, progress: Progress,
                 source.heartbeat(list(running))
                 last_beat = time.monotonic()
             for event in pool.events(timeout=0.5):
-                spec = running.get(event.trial_id)
-                if spec is None:
-                    continue
-                if event.kind == "progress":
-                    progress.step(source.label(spec), int(event.payload))
-                elif event.kind == "checkpoint":
-                    step, value = event.payload
-                    pool.reply(event, source.checkpoint(event.trial_id, step, value))
-                elif event.kind == "result":
-                    result: TrialResult = event.payload
-                    outcome = source.record(event.trial_id, spec, result)
-                    _count(summary, result.status)
-                    progress.finish(source.label(spec), outcome)
-                elif event.kind == "died":
-                    _, code = event.payload
-                    deaths[event.trial_id] = deaths.get(event.trial_id, 0) + 1
-                    label = source.label(spec)
-                    if deaths[event.trial_id] >= MAX_WORKER_DEATHS:
-                        result = TrialResult(key=spec.key, status="failed",
-                                             failure=f"error: its worker died {MAX_WORKER_DEATHS} "
-                                             f"times (last exit code {code})")
-                        progress.finish(label, source.record(event.trial_id, spec, result))
-                        _count(summary, "failed")
-                    else:
-                        # Same trial, new worker: the trial stays claimed, so nothing is lost.
-                        progress.finish(label, f"interrupted (worker exit code {code}), rerun")
-                        pool.submit(event.trial_id, spec)
-                        progress.start(label, spec.steps * spec.repeats)
+                spec = running.get(event.number)
+                if spec is not None:
+                    handlers[event.kind](event, spec)
     except KeyboardInterrupt:
-        summary.interrupted = True
-        running = pool.running()
-        pool.close(terminate=True)
-        for trial_id, spec in running.items():
-            source.interrupted(trial_id, spec, "interrupted: stopped by the user")
-            progress.finish(source.label(spec), "interrupted, queued for the next run")
+        run.stop()
     finally:
         ctrl_c.restore()
         pool.close()
         progress.close()
-    return summary
-
-
-def _count(summary: RunSummary, status: str) -> None:
-    if status == "complete":
-        summary.complete += 1
-    elif status == "pruned":
-        summary.pruned += 1
-    else:
-        summary.failed += 1
+    return run.summary

@@ -1,270 +1,122 @@
-"""Optuna searches: the declared space, the sampler and pruner, and the search's trial source."""
+"""Run an Optuna search: ask the sampler for trials until the study holds its total, prune."""
 
 from __future__ import annotations
 
-import json
 from typing import Any, TextIO
 
-import optuna
 from omegaconf import DictConfig
-from optuna.trial import FrozenTrial
+from optuna.trial import TrialState
 
-from kraby_study.config import ConfigError, rollout_size, to_container, validate_env, validate_ppo
-from kraby_study.ledger import superseded
-from kraby_study.plan import fingerprint, model_path, resolved_settings, with_value
-from kraby_study.progress import Progress
-from kraby_study.runner import Retrying, RunSummary, run_trials
-from kraby_study.source import StudySource, rerun_orphans
-from kraby_study.spec import TrialSpec
-from kraby_study.store import PLANNED, Store
+from kraby_study.errors import ConfigError
+from kraby_study.plan.space import (
+    apply_params,
+    checkpoint_every,
+    distributions,
+    make_pruner,
+    make_sampler,
+    search_definition,
+)
+from kraby_study.plan.spec import TrialSpec
+from kraby_study.plan.sweep import fingerprint, model_path, resolved_settings
+from kraby_study.records import (
+    Failure,
+    StudyAttrs,
+    TrialAttrs,
+    failure,
+    search_key,
+    value_label,
+)
+from kraby_study.run.progress import Progress
+from kraby_study.run.runner import Retrying, RunSummary, run_trials
+from kraby_study.run.source import StudySource, requeue_orphans
+from kraby_study.store.connection import Store
+from kraby_study.store.ledger import StudyLedger
 
-SAMPLERS = ("tpe", "random")
-PRUNERS = ("median", "hyperband", "none")
-OBJECTIVES = ("final_reward", "evaluation")
-NMINIBATCHES = "ppo.nminibatches"
-
-
-def _fail(message: str) -> None:
-    raise ConfigError(message)
-
-
-def validate_search(cfg: DictConfig) -> None:
-    """Refuse a search that cannot run: bad flags, a malformed space, a batch that cannot fit."""
-    search = cfg.search
-    if search.sampler not in SAMPLERS:
-        _fail(f"unknown sampler {search.sampler!r}: choose {' or '.join(SAMPLERS)}")
-    if search.pruner not in PRUNERS:
-        _fail(f"unknown pruner {search.pruner!r}: choose {', '.join(PRUNERS)}")
-    if search.objective not in OBJECTIVES:
-        _fail(f"search.objective must be {' or '.join(OBJECTIVES)}, got {search.objective!r}")
-    for name in ("trials", "checkpoints", "eval_episodes"):
-        if int(search[name]) < 1:
-            _fail(f"search.{name} must be at least 1, got {search[name]}")
-    for name in ("startup_trials", "pruner_startup_trials"):
-        if int(search[name]) < 0:
-            _fail(f"search.{name} must be >= 0, got {search[name]}")
-    if not 0 <= float(search.warmup) < 1:
-        _fail(f"search.warmup must be in [0, 1) (a fraction of the first seed), "
-              f"got {search.warmup}")
-    if not search.params:
-        _fail("search.params is empty: the space needs at least one parameter")
-    paths = [str(p.path) for p in search.params.values()]
-    if NMINIBATCHES in paths and "ppo.batch_size" in paths:
-        _fail("search both ppo.nminibatches and ppo.batch_size: choose one")
-    for name, param in search.params.items():
-        _validate_param(cfg, str(name), param)
-    _validate_batches(cfg)
+SHORT_NAMES = {"learning_rate": "lr", "nminibatches": "nmb", "n_steps": "n_steps",
+               "n_epochs": "epochs", "gae_lambda": "lambda", "clip_range": "clip",
+               "ent_coef": "ent", "observation": "obs"}
+"""Shorter parameter names for progress lines (others are written as they are)."""
 
 
-def _validate_param(cfg: DictConfig, name: str, param: DictConfig) -> None:
-    where = f"search.params.{name}"
-    if param.type in ("float", "int"):
-        if param.low is None or param.high is None:
-            _fail(f"{where}: a {param.type} range needs low and high")
-        if param.low > param.high:
-            _fail(f"{where}: low {param.low} is above high {param.high}")
-        if param.log and param.low <= 0:
-            _fail(f"{where}: a log range must start above 0, got low {param.low}")
-        if param.type == "int" and (param.low != int(param.low) or param.high != int(param.high)):
-            _fail(f"{where}: an int range needs whole-number bounds")
-        samples = [param.low, param.high]
-    elif param.type == "categorical":
-        if not param.choices:
-            _fail(f"{where}: a categorical parameter needs choices")
-        choices = list(to_container(param.choices))
-        if len({json.dumps(c) for c in choices}) != len(choices):
-            _fail(f"{where}: a choice is listed twice")
-        samples = choices
-    else:
-        _fail(f"{where}.type must be float, int or categorical, got {param.type!r}")
-    if param.path == NMINIBATCHES:
-        if any(not float(s).is_integer() or s < 1 for s in samples):
-            _fail(f"{where}: nminibatches must be whole numbers >= 1")
-        return
-    for sample in samples:
-        value = int(sample) if param.type == "int" else sample
-        try:
-            with_value(cfg, str(param.path), value)
-        except ConfigError as err:
-            _fail(f"{where}: {err}")
+def short_label(params: dict[str, Any], key: str) -> str:
+    """A search trial as progress lines name it: its sampled values in short, then its key."""
+    values = " ".join(f"{SHORT_NAMES.get(name, name)}={value_label(_rounded(value))}"
+                      for name, value in params.items())
+    return f"{values} ({key})"
 
 
-def _choices(cfg: DictConfig, path: str, default: Any) -> list[Any]:
-    for param in cfg.search.params.values():
-        if param.path == path:
-            if param.type == "categorical":
-                return list(to_container(param.choices))
-            return list(range(int(param.low), int(param.high) + 1))
-    return [default]
-
-
-def _validate_batches(cfg: DictConfig) -> None:
-    """Every sampled n_steps x n_envs rollout must split into the sampled minibatch counts."""
-    counts = _choices(cfg, NMINIBATCHES, None)
-    if counts == [None]:
-        return
-    for n_steps in _choices(cfg, "ppo.n_steps", cfg.ppo.n_steps):
-        for n_envs in _choices(cfg, "ppo.n_envs", cfg.ppo.n_envs):
-            rollout = int(n_steps) * int(n_envs)
-            for count in counts:
-                if rollout % int(count) or rollout // int(count) < 2:
-                    _fail(f"search.params: nminibatches {count} does not split the rollout "
-                          f"{n_steps} x {n_envs} = {rollout} into batches of at least 2")
-
-
-def sample(trial: optuna.Trial, cfg: DictConfig) -> dict[str, Any]:
-    """Ask the sampler for one value per parameter of the space."""
-    params: dict[str, Any] = {}
-    for name, p in cfg.search.params.items():
-        if p.type == "float":
-            params[name] = trial.suggest_float(name, float(p.low), float(p.high), log=p.log)
-        elif p.type == "int":
-            params[name] = trial.suggest_int(name, int(p.low), int(p.high), log=p.log)
-        else:
-            params[name] = trial.suggest_categorical(name, list(to_container(p.choices)))
-    return params
-
-
-def apply_params(cfg: DictConfig, params: dict[str, Any]) -> DictConfig:
-    """The config of one trial: the sampled values set, the batch size made explicit."""
-    trial_cfg = cfg
-    minibatches = None
-    for name, value in params.items():
-        path = str(cfg.search.params[name].path)
-        if path == NMINIBATCHES:
-            minibatches = int(value)
-        else:
-            trial_cfg = with_value(trial_cfg, path, value)
-    if minibatches is not None:
-        trial_cfg = with_value(trial_cfg, "ppo.batch_size", rollout_size(trial_cfg.ppo)
-                               // minibatches)
-    validate_env(trial_cfg.env)
-    validate_ppo(trial_cfg.ppo)
-    return trial_cfg
-
-
-def make_sampler(cfg: DictConfig) -> optuna.samplers.BaseSampler:
-    """The seeded sampler of a search."""
-    seed = int(cfg.search.seed)
-    if cfg.search.sampler == "random":
-        return optuna.samplers.RandomSampler(seed=seed)
-    return optuna.samplers.TPESampler(seed=seed, n_startup_trials=int(cfg.search.startup_trials),
-                                      constant_liar=True)
-
-
-def checkpoint_every(cfg: DictConfig) -> int:
-    """Env steps between two intermediate values (the same for every trial)."""
-    return max(1, int(cfg.budget.steps) // int(cfg.search.checkpoints))
-
-
-def warmup_steps(cfg: DictConfig) -> int:
-    """Env steps before the first checkpoint at which a pruner may stop a trial."""
-    return max(checkpoint_every(cfg), int(float(cfg.search.warmup) * int(cfg.budget.steps)))
-
-
-def make_pruner(cfg: DictConfig) -> optuna.pruners.BasePruner:
-    """The pruner of a search; its steps are env steps."""
-    warmup = warmup_steps(cfg)
-    if cfg.search.pruner == "median":
-        return optuna.pruners.MedianPruner(n_startup_trials=int(cfg.search.pruner_startup_trials),
-                                           n_warmup_steps=warmup)
-    if cfg.search.pruner == "hyperband":
-        total = int(cfg.budget.steps) * int(cfg.budget.seeds)
-        return optuna.pruners.HyperbandPruner(min_resource=warmup, max_resource=total)
-    return optuna.pruners.NopPruner()
-
-
-def search_definition(cfg: DictConfig) -> dict[str, Any]:
-    """What must not change under a search's name (the trial total may)."""
-    search = to_container(cfg.search)
-    search.pop("trials")
-    search.pop("name")
-    settings = resolved_settings(cfg)
-    return {"kind": "search", "search": search, "settings": settings,
-            "steps": int(cfg.budget.steps), "seeds": int(cfg.budget.seeds),
-            "curve_every": int(cfg.budget.curve_every), "seed": int(cfg.seed)}
+def _rounded(value: Any) -> Any:
+    return float(f"{value:.3g}") if isinstance(value, float) else value
 
 
 class SearchSource(StudySource):
     """Asks the sampler for trials until the study holds its total; prunes at checkpoints."""
 
-    def __init__(self, store: Store, study: optuna.Study, cfg: DictConfig) -> None:
-        super().__init__(store, study)
+    def __init__(self, ledger: StudyLedger, cfg: DictConfig) -> None:
+        super().__init__(ledger)
         self.cfg = cfg
         self.total = int(cfg.search.trials)
-
-    def _counted(self) -> int:
-        return len(self.counted(self.study.get_trials(deepcopy=False)))
+        self.space = distributions(cfg)
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
+        """Ask for the next trial (a queued retry first), or None when the total is reached."""
         while True:
-            with self.store.plan_lock(self.study):
-                waiting = self.study.get_trials(deepcopy=False,
-                                                states=(optuna.trial.TrialState.WAITING,))
-                if not waiting and self._counted() >= self.total:
+            with self.ledger.plan_lock():
+                waiting = self.ledger.trials(TrialState.WAITING)
+                if not waiting and len(self.counted()) >= self.total:
                     return None
-                trial = self.study.ask()
-            params = sample(trial, self.cfg)
+                trial = self.ledger.ask(self.space)
+            number = trial.number
+            params = {name: trial.params[name] for name in self.space}
             try:
                 trial_cfg = apply_params(self.cfg, params)
             except ConfigError as err:
-                self.store.set_attrs(trial._trial_id, {"failure": f"error: {err}"})
-                self.study.tell(trial, state=optuna.trial.TrialState.FAIL)
+                self.ledger.refuse(number, failure(Failure.ERROR, str(err)))
                 continue
-            spec = self._spec(trial, trial_cfg, params)
-            self.store.heartbeat(trial._trial_id)
-            self.store.set_attrs(trial._trial_id, {
-                "key": spec.key, "seed": spec.seed, "settings": spec.settings,
-                "steps": spec.steps, "model_path": spec.model_path})
-            return trial._trial_id, spec
+            # A retry keeps the key of the trial it replaces; a new trial is named by its number.
+            key = str(trial.user_attrs.get("key", search_key(number)))
+            spec = self._spec(key, trial_cfg, params)
+            self.ledger.set_attrs(number, TrialAttrs(
+                key=spec.key, seed=spec.seed, settings=spec.settings, steps=spec.steps,
+                model_path=spec.model_path))
+            return number, spec
 
-    def _spec(self, trial: optuna.Trial, trial_cfg: DictConfig,
-              params: dict[str, Any]) -> TrialSpec:
+    def _spec(self, key: str, trial_cfg: DictConfig, params: dict[str, Any]) -> TrialSpec:
         cfg = self.cfg
-        key = str(trial.user_attrs.get("key", f"t{trial.number}"))
         return TrialSpec(
-            study=self.study.study_name, key=key, seed=int(cfg.seed),
+            study=self.ledger.name, key=key, seed=int(cfg.seed),
             steps=int(cfg.budget.steps), curve_every=int(cfg.budget.curve_every),
-            settings=resolved_settings(trial_cfg), params=params,
-            model_path=model_path(cfg, self.study.study_name, key),
-            checkpoint_every=checkpoint_every(cfg), repeats=int(cfg.budget.seeds),
-            objective=str(cfg.search.objective), eval_episodes=int(cfg.search.eval_episodes))
+            settings=resolved_settings(trial_cfg),
+            model_path=model_path(cfg, self.ledger.name, key),
+            checkpoint_every=checkpoint_every(cfg), seeds=int(cfg.budget.seeds),
+            objective=str(cfg.search.objective), eval_episodes=int(cfg.search.eval_episodes),
+            label=short_label(params, key))
 
-    def label(self, spec: TrialSpec) -> str:
-        return f"trial {spec.key}"
-
-    def checkpoint(self, trial_id: int, step: int, value: float) -> bool:
-        trial = optuna.Trial(self.study, trial_id)
-        trial.report(value, step)
-        return not trial.should_prune()
-
-    def counted(self, trials: list[FrozenTrial]) -> list[FrozenTrial]:
-        replaced = superseded(trials)
-        return [t for t in trials if t.number not in replaced]
+    def checkpoint(self, number: int, step: int, value: float) -> bool:
+        """Report an intermediate value to the pruner; False stops the trial."""
+        return self.ledger.checkpoint(number, step, value)
 
 
 def run_search(store: Store, cfg: DictConfig, workers: int, stream: TextIO,
-               live: bool | None = None) -> tuple[RunSummary, optuna.Study]:
+               live: bool | None = None) -> tuple[RunSummary, StudyLedger]:
     """Run a search until its study holds ``search.trials`` trials."""
     definition = search_definition(cfg)
-    study = store.open_study(str(cfg.search.name), "search", definition,
-                             fingerprint(definition), sampler=make_sampler(cfg),
-                             pruner=make_pruner(cfg))
-    study.set_user_attr("sampler", str(cfg.search.sampler))
-    study.set_user_attr("sampler_seed", int(cfg.search.seed))
-    study.set_user_attr(PLANNED, int(cfg.search.trials))
-    rerun_orphans(store, study, stream)
-    source = SearchSource(store, study, cfg)
-    done = source._counted() - len(study.get_trials(
-        deepcopy=False, states=(optuna.trial.TrialState.WAITING,
-                                optuna.trial.TrialState.RUNNING)))
+    ledger = store.define(str(cfg.search.name),
+                          StudyAttrs(kind="search", definition=definition,
+                                     fingerprint=fingerprint(definition)),
+                          sampler=make_sampler(cfg), pruner=make_pruner(cfg))
+    ledger.update(StudyAttrs(sampler=str(cfg.search.sampler), sampler_seed=int(cfg.search.seed),
+                             planned=int(cfg.search.trials)))
+    requeue_orphans(ledger, stream)
+    source = SearchSource(ledger, cfg)
+    counted = source.counted()
+    done = sum(1 for t in counted if t.state not in (TrialState.WAITING, TrialState.RUNNING))
     left = max(0, source.total - done)
     slots = max(1, min(workers, left))
-    print(f"search {study.study_name}: {source.total} trials, {done} done, {left} to run on "
+    print(f"search {ledger.name}: {source.total} trials, {done} done, {left} to run on "
           f"{slots} worker(s); {cfg.budget.seeds} seed(s) x {cfg.budget.steps:,} steps each, "
           f"{cfg.search.sampler} sampler, {cfg.search.pruner} pruner", file=stream, flush=True)
-    progress = Progress(study.study_name, source.total, done, stream, live)
-    summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream),  # type: ignore[arg-type]
-                         slots, progress, heartbeat_seconds=float(cfg.heartbeat_interval),
-                         physics_processes=cfg.physics_processes)
-    return summary, study
+    progress = Progress(ledger.name, source.total, done, stream, live)
+    summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream), slots, progress,
+                         heartbeat_seconds=float(cfg.heartbeat_interval), shards=cfg.shards)
+    return summary, ledger

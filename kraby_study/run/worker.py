@@ -1,9 +1,9 @@
 """One worker process: runs the trials its pool sends and reports back.
 
-Started by :class:`kraby_study.workers.WorkerPool` as ``python -m kraby_study.worker FD
-PHYSICS`` with one end of a pipe as FD. It imports only what a trial needs (torch,
+Started by :class:`kraby_study.run.pool.WorkerPool` as ``python -m kraby_study.run.worker FD
+SHARDS`` with one end of a pipe as FD. It imports only what a trial needs (torch,
 stable-baselines3, the environments), never the command line, the configuration tree or the
-database, and trains with one torch thread. PHYSICS is the number of processes each trial's
+database, and trains with one torch thread. SHARDS is the number of processes each trial's
 legs are stepped in (see :mod:`kraby_envs.sharded`); it changes speed, not results.
 """
 
@@ -15,12 +15,14 @@ import traceback
 from multiprocessing.connection import Connection
 
 
-def serve(conn: Connection, physics_processes: int) -> None:
+def serve(conn: Connection, shards: int) -> None:
     """Runs trials until the pool sends None or goes away."""
     import torch
 
     torch.set_num_threads(1)
-    from kraby_study.trial import TrialResult, run_trial
+    from kraby_study.records import Failure, Outcome, failure
+    from kraby_study.run.result import TrialResult
+    from kraby_study.run.trial import run_trial
 
     while True:
         try:
@@ -29,23 +31,23 @@ def serve(conn: Connection, physics_processes: int) -> None:
             return
         if message is None:
             return
-        trial_id, spec = message
+        number, spec = message
 
-        def progress(step: int, trial_id: int = trial_id) -> None:
-            conn.send(("progress", trial_id, step))
+        def progress(step: int, number: int = number) -> None:
+            conn.send(("progress", number, step))
 
-        def checkpoint(step: int, value: float, trial_id: int = trial_id) -> bool:
-            conn.send(("checkpoint", trial_id, step, value))
+        def checkpoint(step: int, value: float, number: int = number) -> bool:
+            conn.send(("checkpoint", number, step, value))
             return bool(conn.recv())
 
         try:
             result = run_trial(spec, checkpoint if spec.checkpoint_every else None, progress,
-                               physics_processes=physics_processes)
+                               shards=shards)
         except Exception as err:  # a bug or a bad environment must not kill the study
             last = traceback.format_exception_only(type(err), err)[-1].strip()
-            result = TrialResult(key=spec.key, status="failed", failure=f"error: {last}")
+            result = TrialResult(outcome=Outcome.FAILED, failure=failure(Failure.ERROR, last))
         try:
-            conn.send(("result", trial_id, result))
+            conn.send(("result", number, result))
         except OSError:
             return
 

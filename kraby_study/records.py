@@ -1,0 +1,351 @@
+"""What a stored trial is: one record schema for the runner, ``list``, ``best`` and the report.
+
+Every study (a sweep, a search, a single training run) is an Optuna study. kraby-study adds:
+
+- on the study, the attributes of :class:`StudyAttrs` (what kind of study, how it was defined);
+- on each trial, the attributes of :class:`TrialAttrs` (its key, seed, settings and result);
+- beside Optuna's tables, the learning curve of each trial (see :mod:`kraby_study.store`).
+
+A planned run may take several attempts (a worker died, a command was stopped): the attempt
+that counts is the latest one with the run's key (:func:`counted`). A trial's :class:`Outcome`
+reads its Optuna state and failure reason; an interrupted attempt is not a result.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import re
+from collections.abc import Hashable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any, TypeVar
+
+from optuna.trial import FrozenTrial, TrialState
+
+
+class Outcome(StrEnum):
+    """How a trial stands, in the words every command and the report use."""
+
+    COMPLETE = "complete"
+    """Trained to its budget; its value is its score."""
+    FAILED = "failed"
+    """Ended without a score: it diverged (NaN) or raised an error. A result, not a crash."""
+    PRUNED = "pruned"
+    """Stopped early by a search's pruner."""
+    PENDING = "pending"
+    """Not a result yet: waiting, running, or given back unfinished (interrupted)."""
+
+
+class Failure(StrEnum):
+    """The kind of a failure, the first word of a trial's ``failure`` attribute."""
+
+    DIVERGED = "diverged"
+    """The loss or the policy's parameters became NaN or infinite."""
+    ERROR = "error"
+    """Training raised an error, or gave no finite score."""
+    INTERRUPTED = "interrupted"
+    """Its command or worker stopped: the run is queued again, this attempt is no result."""
+
+
+def failure(kind: Failure, detail: str) -> str:
+    """A failure reason as stored: ``<kind>: <detail>``, on one line."""
+    text = " ".join(str(detail).split())
+    return f"{kind.value}: {text}"
+
+
+def failure_kind(reason: str | None) -> Failure | None:
+    """The kind of a stored failure reason (None when it names none)."""
+    head = str(reason or "").split(":", 1)[0].strip()
+    try:
+        return Failure(head)
+    except ValueError:
+        return None
+
+
+@dataclass
+class TrialAttrs:
+    """The user attributes kraby-study stores on a trial (every field optional on read)."""
+
+    key: str | None = None
+    """Identity of the planned run within its study, stable across attempts (see the key
+    functions below): ``v<value index>-s<seed>`` in sweeps, ``s<seed>`` for ``train``,
+    ``t<trial number>`` in searches."""
+    seed: int | None = None
+    """Seed of the run's first training run (a search trial trains seed, seed + 1, ...)."""
+    settings: dict[str, Any] | None = None
+    """The resolved ``env`` and ``ppo`` settings it trained with (batch size explicit)."""
+    steps: int | None = None
+    """Env steps of each training run (the budget)."""
+    model_path: str | None = None
+    """Where its final model (SB3 zip) is saved, if models are kept."""
+    env_steps: int | None = None
+    """Env steps it actually trained, over all its seeds (fewer when pruned or failed)."""
+    wall_time: float | None = None
+    """Seconds it took, from the first env step to the end of the last seed."""
+    started: str | None = None
+    """When it started (UTC, ISO 8601)."""
+    ended: str | None = None
+    """When it ended (UTC, ISO 8601)."""
+    final_score: float | None = None
+    """Its score: the mean episode reward over the last 10 % of training, or the evaluation
+    objective's value in a search that asks for it; the trial's Optuna value too."""
+    train_reward: float | None = None
+    """Mean episode reward over the last 10 % of training (the final score unless the
+    objective is an evaluation)."""
+    failure: str | None = None
+    """Why it failed or was given back: ``<Failure kind>: <detail>``."""
+    pruned_at: int | None = None
+    """Env steps at which the pruner stopped it."""
+    retry_of: int | None = None
+    """Number of the interrupted trial this attempt replaces."""
+
+    def stored(self) -> dict[str, Any]:
+        """The attributes to store: every field that is set."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+
+    @classmethod
+    def of(cls, trial: FrozenTrial) -> TrialAttrs:
+        """The attributes of a stored trial (unknown attributes ignored)."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in trial.user_attrs.items() if k in names})
+
+
+@dataclass
+class StudyAttrs:
+    """The user attributes kraby-study stores on a study."""
+
+    kind: str | None = None
+    """sweep, train or search; None for a study kraby-study did not make."""
+    definition: dict[str, Any] = field(default_factory=dict)
+    """What must not change under the study's name: parameter and values or search space,
+    fixed settings, budget."""
+    fingerprint: str | None = None
+    """Hash of the definition; a command with another definition under this name is refused."""
+    planned: int | None = None
+    """Runs planned (sweeps) or the trial total (searches)."""
+    sampler: str | None = field(default=None, metadata={"stored": "sampler"})
+    """A search's sampler (tpe or random)."""
+    sampler_seed: int | None = field(default=None, metadata={"stored": "sampler_seed"})
+    """A search's sampler seed."""
+
+    @staticmethod
+    def stored_names() -> dict[str, str]:
+        """Field name -> stored name: ``kraby_<field>``, but for the sampler's, which
+        optuna-dashboard users read as they are."""
+        return {f.name: f.metadata.get("stored", f"kraby_{f.name}")
+                for f in dataclasses.fields(StudyAttrs)}
+
+    def stored(self) -> dict[str, Any]:
+        """The attributes to store, under their stored names: every field that is set."""
+        names = self.stored_names()
+        return {names[k]: v for k, v in dataclasses.asdict(self).items()
+                if v is not None and v != {}}
+
+    @classmethod
+    def of(cls, user_attrs: Mapping[str, Any]) -> StudyAttrs:
+        """The attributes of a stored study (unknown attributes ignored)."""
+        return cls(**{name: user_attrs[stored] for name, stored in cls.stored_names().items()
+                      if stored in user_attrs})
+
+
+# Keys -------------------------------------------------------------------------------------------
+
+SWEEP_KEY = re.compile(r"^v(\d+)-s(\d+)$")
+
+
+def sweep_key(value_index: int, seed: int) -> str:
+    """The key of a sweep's run: its value's index in the study file and its seed."""
+    return f"v{value_index}-s{seed}"
+
+
+def parse_sweep_key(key: str | None) -> tuple[int, int] | None:
+    """(value index, seed) of a sweep key, or None for another key."""
+    match = SWEEP_KEY.match(str(key or ""))
+    return (int(match.group(1)), int(match.group(2))) if match else None
+
+
+def train_key(seed: int) -> str:
+    """The key of a ``train`` run: its seed."""
+    return f"s{seed}"
+
+
+def search_key(number: int) -> str:
+    """The key of a search trial: the number of its first attempt."""
+    return f"t{number}"
+
+
+# Outcomes and which trials count -----------------------------------------------------------------
+
+
+def outcome(trial: FrozenTrial) -> Outcome:
+    """A trial's outcome; a failed attempt that was given back unfinished is pending."""
+    if trial.state == TrialState.COMPLETE:
+        return Outcome.COMPLETE
+    if trial.state == TrialState.PRUNED:
+        return Outcome.PRUNED
+    if trial.state == TrialState.FAIL:
+        reason = trial.user_attrs.get("failure")
+        # A failed trial with no reason was given back by Optuna's heartbeat (a lost owner).
+        if reason is None or failure_kind(reason) == Failure.INTERRUPTED:
+            return Outcome.PENDING
+        return Outcome.FAILED
+    return Outcome.PENDING
+
+
+def is_interrupted(trial: FrozenTrial) -> bool:
+    """A trial given back unfinished: its run is queued again, it is no result."""
+    return trial.state == TrialState.FAIL and outcome(trial) == Outcome.PENDING
+
+
+def counted(trials: Iterable[FrozenTrial]) -> list[FrozenTrial]:
+    """The trials that make a study's result, in trial-number order.
+
+    One attempt counts per planned run: the latest trial with its key. A trial without a key
+    (a foreign Optuna study, a search trial refused before it had one) counts unless a later
+    attempt names it in ``retry_of``.
+    """
+    ordered = sorted(trials, key=lambda t: t.number)
+    replaced = {int(t.user_attrs["retry_of"]) for t in ordered if "retry_of" in t.user_attrs}
+    latest: dict[str, int] = {}
+    for trial in ordered:
+        key = trial.user_attrs.get("key")
+        if key is not None:
+            latest[str(key)] = trial.number
+    keep = set(latest.values())
+
+    def counts(trial: FrozenTrial) -> bool:
+        if trial.user_attrs.get("key") is not None:
+            return trial.number in keep
+        return trial.number not in replaced
+
+    return [t for t in ordered if counts(t)]
+
+
+def latest_by_key(trials: Iterable[FrozenTrial]) -> dict[str, FrozenTrial]:
+    """The counted trial of each key."""
+    return {str(t.user_attrs["key"]): t for t in counted(trials)
+            if t.user_attrs.get("key") is not None}
+
+
+@dataclass(frozen=True)
+class Tally:
+    """How many counted trials stand at each outcome."""
+
+    complete: int = 0
+    failed: int = 0
+    pruned: int = 0
+    pending: int = 0
+
+    @property
+    def ended(self) -> int:
+        """Trials that are results: complete, failed or pruned."""
+        return self.complete + self.failed + self.pruned
+
+
+def tally(trials: Iterable[FrozenTrial]) -> Tally:
+    """Outcome counts of the given (counted) trials."""
+    counts = {o: 0 for o in Outcome}
+    for trial in trials:
+        counts[outcome(trial)] += 1
+    return Tally(complete=counts[Outcome.COMPLETE], failed=counts[Outcome.FAILED],
+                 pruned=counts[Outcome.PRUNED], pending=counts[Outcome.PENDING])
+
+
+# Values and the best one --------------------------------------------------------------------------
+
+
+def value_key(value: Any) -> Hashable:
+    """The equality rule for swept values: numbers by value (1 == 1.0), also inside lists and
+    dicts ([64, 64] == [64.0, 64.0]); the rest by JSON."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return ("number", float(value))
+    return ("other", json.dumps(_numbers_as_floats(value), sort_keys=True, default=str))
+
+
+def _numbers_as_floats(value: Any) -> Any:
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(value, list | tuple):
+        return [_numbers_as_floats(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _numbers_as_floats(v) for k, v in value.items()}
+    return value
+
+
+def value_label(value: Any) -> str:
+    """How a swept value is written in tables, legends and messages."""
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def param_name(parameter: str) -> str:
+    """The Optuna parameter name of a swept setting: its last part (ppo.gamma -> gamma)."""
+    return parameter.split(".")[-1]
+
+
+K = TypeVar("K", bound=Hashable)
+
+
+def best_group(scores: Mapping[K, Sequence[float]]) -> K | None:
+    """The group with the highest mean score (the first such in order); None if none has one."""
+    best: K | None = None
+    best_mean = -math.inf
+    for group, values in scores.items():
+        if len(values) and (mean := math.fsum(values) / len(values)) > best_mean:
+            best, best_mean = group, mean
+    return best
+
+
+def swept_value(trial: FrozenTrial, name: str, planned: Sequence[Any]) -> Any:
+    """A sweep trial's value: its parameter, its queued parameter, or its key's value index."""
+    if name in trial.params:
+        return trial.params[name]
+    fixed = trial.system_attrs.get("fixed_params") or {}
+    if name in fixed:
+        return fixed[name]
+    parsed = parse_sweep_key(trial.user_attrs.get("key"))
+    if parsed is not None and parsed[0] < len(planned):
+        return planned[parsed[0]]
+    return None
+
+
+@dataclass(frozen=True)
+class BestValue:
+    """The winner of a sweep: the value with the highest mean score over its complete seeds."""
+
+    value: Any
+    mean: float
+    trials: list[FrozenTrial]
+    """Its complete counted trials."""
+
+
+def best_value(trials: Iterable[FrozenTrial], name: str,
+               planned: Sequence[Any] = ()) -> BestValue | None:
+    """The best value of a sweep's counted trials; None when no trial is complete."""
+    groups: dict[Hashable, list[FrozenTrial]] = {}
+    values: dict[Hashable, Any] = {}
+    for trial in trials:
+        if outcome(trial) != Outcome.COMPLETE or trial.value is None:
+            continue
+        value = swept_value(trial, name, planned)
+        groups.setdefault(value_key(value), []).append(trial)
+        values.setdefault(value_key(value), value)
+    scores = {k: [float(t.value) for t in group] for k, group in groups.items()}  # type: ignore[arg-type]
+    best = best_group(scores)
+    if best is None:
+        return None
+    return BestValue(value=values[best], mean=math.fsum(scores[best]) / len(scores[best]),
+                     trials=groups[best])
+
+
+def best_trial(trials: Iterable[FrozenTrial], maximize: bool = True) -> FrozenTrial | None:
+    """The complete trial with the best value (a search's best); None when none is complete.
+
+    kraby-study maximises; ``maximize=False`` serves foreign studies that minimise.
+    """
+    done = [t for t in trials if outcome(t) == Outcome.COMPLETE and t.value is not None]
+    pick = max if maximize else min
+    return pick(done, key=lambda t: float(t.value), default=None)  # type: ignore[arg-type]
