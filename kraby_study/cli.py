@@ -42,6 +42,7 @@ class Flag:
     key: str
     """The setting it sets, e.g. storage (search.trials for --trials)."""
     help: str
+    metavar: str | None = None
     kind: Callable[[str], Any] = str
     choices: tuple[str, ...] | None = None
 
@@ -64,26 +65,28 @@ def _whole(text: str) -> int:
 
 
 STORAGE = Flag("--storage", "storage", "database URL, as storage=URL (default "
-               "sqlite:///studies/kraby.db)")
+               "sqlite:///studies/kraby.db)", "URL")
 WORKERS = Flag("--workers", "workers", "trials at once, each in its own worker process, as "
-               "workers=N (default: one per core)", _positive_int)
-STUDY_NAME = Flag("--study-name", "study", "the stored study, as study=NAME (default: the "
-                  "search's name, ppo_search)")
+               "workers=N (default: one per core)", "N", _positive_int)
+BEST_OF = Flag("--study-name", "study", "the stored study, as study=NAME (default: the "
+               "search's name, ppo_search)", "NAME")
+REPORTED = Flag("--study-name", "study", "report this stored study only, as study=NAME "
+                "(default: every study)", "NAME")
 SEARCH_FLAGS = [
     Flag("--trials", "search.trials", "total trials of the study, as search.trials=N: "
          "rerunning tops it up to this number, so --trials 50 twice gives 50, not 100 "
-         "(default 50)", _positive_int),
+         "(default 50)", "N", _positive_int),
     WORKERS, STORAGE,
     Flag("--study-name", "search.name", "name of the search in the store, as search.name=NAME "
-         "(default ppo_search)"),
+         "(default ppo_search)", "NAME"),
     Flag("--sampler", "search.sampler", "default tpe (seeded), as search.sampler=...",
          choices=("tpe", "random")),
     Flag("--pruner", "search.pruner", "stops bad trials at env-step checkpoints, as "
          "search.pruner=... (default median)", choices=("median", "hyperband", "none")),
     Flag("--seed", "search.seed", "sampler seed, stored with the study, as search.seed=S "
-         "(default 0)", _whole),
+         "(default 0)", "S", _whole),
 ]
-OUT = Flag("--out", "out", "report folder, as out=DIR (default reports)")
+OUT = Flag("--out", "out", "report folder, as out=DIR (default reports)", "DIR")
 
 
 def flag_overrides(args: argparse.Namespace, flags: Sequence[Flag]) -> list[str]:
@@ -214,7 +217,7 @@ def cmd_best(args: argparse.Namespace) -> int:
     from kraby_study.config.compose import USER_CONF_DIR
     from kraby_study.store.connection import opened
 
-    chosen, overrides = stored_study(flag_overrides(args, [STORAGE, STUDY_NAME]))
+    chosen, overrides = stored_study(flag_overrides(args, [STORAGE, BEST_OF]))
     cfg = compose_config(overrides)
     name = chosen or str(cfg.search.name)
     config_name = args.name or f"best_{name}"
@@ -234,7 +237,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     """Redraw the figures and tables of the stored studies."""
     from kraby_study.report import run_report
 
-    chosen, overrides = stored_study(flag_overrides(args, [STORAGE, STUDY_NAME, OUT]))
+    chosen, overrides = stored_study(flag_overrides(args, [STORAGE, REPORTED, OUT]))
     cfg = compose_config(overrides)
     return run_report(cfg.storage, cfg.out, study=chosen, fmt=args.format, stream=sys.stdout,
                       policy=not args.no_policy)
@@ -260,13 +263,14 @@ def build_parser() -> argparse.ArgumentParser:
         ("train", cmd_train, "one training run (ppo=tuned by default), model saved"),
         ("list", cmd_list, "the studies in the store with their progress"),
         ("optuna", cmd_optuna, "an Optuna search (TPE, pruning) over conf/search/ppo.yaml"),
-        ("best", cmd_best, "print a study's best settings and write them as conf/ppo/NAME.yaml"),
-        ("report", cmd_report, "redraw every figure and table of the stored studies into out= "
-         "(default reports/): study=NAME for one"),
+        ("best", cmd_best, "print a study's best settings and write them as "
+         "./conf/ppo/NAME.yaml"),
+        ("report", cmd_report, "redraw every figure and table of the stored studies into "
+         "--out (default reports/); --study-name NAME for one"),
     ]
     flags: dict[str, list[Flag]] = {
         "run": [STORAGE, WORKERS], "train": [STORAGE], "list": [STORAGE],
-        "optuna": SEARCH_FLAGS, "best": [STORAGE, STUDY_NAME], "report": [STORAGE, STUDY_NAME, OUT],
+        "optuna": SEARCH_FLAGS, "best": [STORAGE, BEST_OF], "report": [STORAGE, REPORTED, OUT],
     }
     parsers = {}
     for name, func, text in commands:
@@ -274,7 +278,8 @@ def build_parser() -> argparse.ArgumentParser:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
         command.add_argument("overrides", nargs="*", metavar="KEY=VALUE", help=OVERRIDES_HELP)
         for flag in flags[name]:
-            command.add_argument(flag.name, type=flag.kind, choices=flag.choices, help=flag.help)
+            command.add_argument(flag.name, type=flag.kind, choices=flag.choices,
+                                 metavar=flag.metavar, help=flag.help)
         command.set_defaults(func=func)
         parsers[name] = command
     parsers["optuna"].epilog = (

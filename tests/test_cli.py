@@ -78,6 +78,11 @@ def test_best_writes_the_working_folder_and_its_file_is_the_one_loaded(
     assert compose_config(["ppo=tuned"]).ppo.n_epochs == 2  # TINY's, not the packaged 30
 
 
+def test_the_old_name_of_a_renamed_setting_still_works_on_the_command_line() -> None:
+    assert compose_config(["physics_processes=3"]).shards == 3
+    assert compose_config(["shards=2"]).shards == 2
+
+
 def _one_line_error(capsys: pytest.CaptureFixture[str], *args: str) -> str:
     assert run_cli(*args) == 2
     err = capsys.readouterr().err

@@ -77,8 +77,22 @@ class UserConfFirst(SearchPathPlugin):
             search_path.prepend(provider="kraby-user", path=f"file://{user_dir}")
 
 
+RENAMED = {"physics_processes": "shards"}
+"""Old setting names still accepted on the command line (see the README's changelog)."""
+
+
+def renamed(overrides: Sequence[str]) -> list[str]:
+    """The overrides with old setting names replaced by their new ones."""
+    out = []
+    for override in overrides:
+        key, sep, value = override.partition("=")
+        out.append(f"{RENAMED.get(key, key)}{sep}{value}" if sep else override)
+    return out
+
+
 def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
     """Compose conf/config.yaml with overrides; raise ConfigError with a one-line message."""
+    overrides = renamed(overrides)
     register_schema()
     Plugins.instance().register(UserConfFirst)
     GlobalHydra.instance().clear()

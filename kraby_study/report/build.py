@@ -155,7 +155,8 @@ def check_folder(out: Path) -> None:
         with tempfile.TemporaryFile(dir=existing):
             pass
     except OSError as err:
-        raise ConfigError(f"cannot write the report folder {out}: {first_line(err)}") from None
+        reason = err.strerror or first_line(err)
+        raise ConfigError(f"cannot write the report folder {out}: {reason}") from None
 
 
 def write_report(url: str, out: Path | str, study: str | None = None, fmt: str = "png",
