@@ -94,7 +94,9 @@ class StudyLedger:
         query, sorted by trial and step; empty for a plain Optuna store."""
         from kraby_study.store.connection import curve_points
 
-        ids = {t._trial_id: t.number for t in self._study.get_trials(deepcopy=False)}
+        if numbers is None or any(n not in self._ids for n in numbers):
+            self.trials()  # the ids of every trial, in one query
+        ids = {trial_id: number for number, trial_id in self._ids.items()}
         query = (sa.select(curve_points.c.trial_id, curve_points.c.step,
                            curve_points.c.mean_reward, curve_points.c.wall_time,
                            curve_points.c.episodes)
