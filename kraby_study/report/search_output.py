@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from kraby_study.records import Outcome
 from kraby_study.report import search_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
@@ -53,7 +54,7 @@ def top_table(search: Search) -> Table:
 
 def failed_items(search: Search) -> list[str]:
     """One line per failed trial: number, parameters, reason."""
-    failed = search.trials[search.trials["outcome"] == "failed"]
+    failed = search.trials[search.trials["outcome"] == Outcome.FAILED]
     items = []
     for _, row in failed.iterrows():
         params = ", ".join(f"{p}={format_param(row[p], search.distributions.get(p))}"

@@ -17,6 +17,7 @@ from matplotlib.colors import Normalize
 from matplotlib.lines import Line2D
 from optuna.distributions import BaseDistribution, CategoricalDistribution
 
+from kraby_study.records import Outcome
 from kraby_study.report.search_tables import Search, is_log, numeric_array
 from kraby_study.report.style import (
     BEST_COLOUR,
@@ -49,7 +50,7 @@ def history(search: Search, path: Path) -> Path:
     """Objective of every complete trial by trial number, and the best value so far."""
     fig, (ax,) = new_figure(SINGLE)
     frame = search.trials
-    done = frame[frame["outcome"] == "complete"]
+    done = frame[frame["outcome"] == Outcome.COMPLETE]
     ax.scatter(done["number"], done["value"], s=18, color="#3b6ea8", alpha=0.75, linewidths=0,
                label=f"complete trial ({len(done)})", zorder=3)
     if len(done):
@@ -57,7 +58,8 @@ def history(search: Search, path: Path) -> Path:
         running = (ordered["value"].cummax() if search.maximize else ordered["value"].cummin())
         ax.step(ordered["number"], running, where="post", color=BEST_COLOUR, label="best so far",
                 zorder=4)
-    for state, colour, marker in (("pruned", PRUNED_COLOUR, "|"), ("failed", FAILED_COLOUR, "x")):
+    for state, colour, marker in ((Outcome.PRUNED, PRUNED_COLOUR, "|"),
+                                  (Outcome.FAILED, FAILED_COLOUR, "x")):
         rows = frame[frame["outcome"] == state]
         if len(rows):
             ax.scatter(rows["number"], np.full(len(rows), 0.015),
@@ -97,7 +99,7 @@ def _positions(values: np.ndarray | list[object],
 
 def slices(search: Search, path: Path) -> Path:
     """Objective against each parameter, coloured by trial number."""
-    done = search.trials[search.trials["outcome"] == "complete"]
+    done = search.trials[search.trials["outcome"] == Outcome.COMPLETE]
     count = len(search.params)
     ncols = min(3, count)
     nrows = math.ceil(count / ncols)
@@ -133,7 +135,7 @@ def intermediate(search: Search, path: Path) -> Path:
     """Reported values against steps; pruned trials end where they were stopped."""
     fig, (ax,) = new_figure(SINGLE)
     best = search.best
-    groups: dict[str, list[np.ndarray]] = {"complete": [], "pruned": []}
+    groups: dict[str, list[np.ndarray]] = {Outcome.COMPLETE: [], Outcome.PRUNED: []}
     ends = []
     states = dict(zip(search.trials["number"], search.trials["outcome"], strict=True))
     for trial in search.data.trials:
@@ -143,11 +145,11 @@ def intermediate(search: Search, path: Path) -> Path:
         steps = sorted(trial.intermediate_values)
         line = np.array([[s, trial.intermediate_values[s]] for s in steps], dtype=float)
         groups[state].append(line)
-        if state == "pruned":
+        if state == Outcome.PRUNED:
             ends.append(line[-1])
-    ax.add_collection(LineCollection(groups["complete"], colors="#3b6ea8", alpha=0.35,
+    ax.add_collection(LineCollection(groups[Outcome.COMPLETE], colors="#3b6ea8", alpha=0.35,
                                      linewidths=1.0))
-    ax.add_collection(LineCollection(groups["pruned"], colors=PRUNED_COLOUR, alpha=0.6,
+    ax.add_collection(LineCollection(groups[Outcome.PRUNED], colors=PRUNED_COLOUR, alpha=0.6,
                                      linewidths=1.0))
     if ends:
         end = np.array(ends)
@@ -193,7 +195,7 @@ def _normalised(search: Search, name: str, values: list[object]) -> tuple[np.nda
 
 def parallel(search: Search, path: Path) -> Path:
     """Each complete trial as a line across the parameter axes and the objective."""
-    done = search.trials[search.trials["outcome"] == "complete"].sort_values(
+    done = search.trials[search.trials["outcome"] == Outcome.COMPLETE].sort_values(
         "value", ascending=search.maximize)
     names = [*search.params, "objective"]
     fig, (ax,) = new_figure((min(12.0, max(WIDE[0] * 0.8, 1.1 * len(names) + 1.5)), WIDE[1]))

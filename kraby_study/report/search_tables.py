@@ -66,7 +66,7 @@ class Search:
         """Trials complete, pruned, failed and pending (planned trials not started are pending)."""
         outcomes = self.trials["outcome"].value_counts()
         counts = {name: int(outcomes.get(name, 0))
-                  for name in ("complete", "pruned", "failed", "pending")}
+                  for name in (Outcome.COMPLETE, Outcome.PRUNED, Outcome.FAILED, Outcome.PENDING)}
         planned = max(self.data.planned or 0, len(self.trials))
         counts["pending"] += planned - len(self.trials)
         counts["planned"] = planned
@@ -133,12 +133,13 @@ def trial_rows(trials: list[FrozenTrial], params: list[str]) -> pd.DataFrame:
             steps = max(trial.intermediate_values)
         rows.append({
             "number": trial.number, "outcome": state.value,
-            "value": float(trial.value) if state == "complete" and trial.value is not None
+            "value": float(trial.value) if state == Outcome.COMPLETE and trial.value is not None
             else math.nan,
             "env_steps": steps, "wall_time": attrs.get("wall_time", _duration(trial)),
             "pruned_at": attrs.get("pruned_at", max(trial.intermediate_values)
-                                   if state == "pruned" and trial.intermediate_values else None),
-            "failure": attrs.get("failure", "") if state in ("failed",) else "",
+                                   if state == Outcome.PRUNED and trial.intermediate_values
+                                   else None),
+            "failure": attrs.get("failure", "") if state == Outcome.FAILED else "",
             **{name: trial.params.get(name) for name in params},
         })
     frame = pd.DataFrame(rows, columns=["number", "outcome", "value", "env_steps", "wall_time",
@@ -166,7 +167,7 @@ def build_search(data: StudyData) -> Search:
 
 def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:
     """The best complete trials, best first, with a rank column."""
-    done = search.trials[search.trials["outcome"] == "complete"]
+    done = search.trials[search.trials["outcome"] == Outcome.COMPLETE]
     done = done.sort_values("value", ascending=not search.maximize, kind="stable").head(count)
     return done.drop(columns=["outcome", "pruned_at", "failure"]).assign(
         rank=range(1, len(done) + 1))[["rank", "number", "value", *search.params, "env_steps",

@@ -146,7 +146,7 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
     if len(sweep.values) > 1:
         figures.append(("training_time", sweep_plots.training_time))
     images: list[Block] = []
-    if (sweep.trials["outcome"] == "complete").any():
+    if (sweep.trials["outcome"] == Outcome.COMPLETE).any():
         with styled():
             for stem, draw in figures:
                 path = draw(sweep, folder / f"{stem}.{fmt}")
@@ -186,7 +186,8 @@ def policy_candidates(sweep: Sweep) -> list[tuple[str, dict[str, Any], str]]:
     best = sweep.best
     if best is None:
         return []
-    done = sweep.trials[(sweep.trials["outcome"] == "complete") & (sweep.trials["vi"] == best)]
+    rows = sweep.trials
+    done = rows[(rows["outcome"] == Outcome.COMPLETE) & (rows["vi"] == best)]
     done = done.sort_values("final_score", ascending=False)
     trials = {t.number: t for t in sweep.data.trials}
     out = []

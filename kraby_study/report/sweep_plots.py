@@ -16,6 +16,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from kraby_study.records import Outcome
 from kraby_study.report.style import (
     BEST_COLOUR,
     FAILED_COLOUR,
@@ -128,7 +129,7 @@ def _value_axis(ax: Axes, sweep: Sweep) -> None:
 
 def _seeds_and_means(ax: Axes, sweep: Sweep, column: str, mean: str, low: str,
                      high: str) -> None:
-    done = sweep.trials[sweep.trials["outcome"] == "complete"]
+    done = sweep.trials[sweep.trials["outcome"] == Outcome.COMPLETE]
     rng = np.random.default_rng(0)  # fixed jitter: a rerun draws the same figure
     for vi, group in done.groupby("vi", sort=True):
         jitter = rng.uniform(-0.12, 0.12, len(group))

@@ -69,7 +69,8 @@ class Sweep:
         """'10/10 complete', or e.g. '7/10 complete, 1 failed, 2 pending'."""
         c = self.counts
         parts = [f"{c['complete']}/{c['planned']} complete"]
-        parts += [f"{c[name]} {name}" for name in ("failed", "pruned", "pending") if c[name]]
+        parts += [f"{c[name]} {name}" for name in (Outcome.FAILED, Outcome.PRUNED, Outcome.PENDING)
+                  if c[name]]
         return ", ".join(parts)
 
     @property
@@ -107,10 +108,10 @@ def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.Data
             "value": value_label(values[vi]) if vi >= 0 and name else
             (SINGLE_LABEL if not name else "?"),
             "outcome": state.value,
-            "final_score": float(trial.value) if state == "complete" and trial.value is not None
-            else np.nan,
-            "wall_time": attrs.get("wall_time", np.nan) if state != "pending" else np.nan,
-            "env_steps": attrs.get("env_steps", np.nan) if state != "pending" else np.nan,
+            "final_score": float(trial.value)
+            if state == Outcome.COMPLETE and trial.value is not None else np.nan,
+            "wall_time": attrs.get("wall_time", np.nan) if state != Outcome.PENDING else np.nan,
+            "env_steps": attrs.get("env_steps", np.nan) if state != Outcome.PENDING else np.nan,
             "failure": attrs.get("failure", "") if state == Outcome.FAILED else "",
             "model_path": attrs.get("model_path"),
         })
@@ -136,7 +137,7 @@ def summarise(trials: pd.DataFrame, labels: list[str]) -> pd.DataFrame:
     Welch p-value against the best value, and a mark: ``best``, ``tie`` (not significantly
     different from the best) or empty.
     """
-    done = trials[trials["outcome"] == "complete"]
+    done = trials[trials["outcome"] == Outcome.COMPLETE]
     score = describe(done, "vi", "final_score")
     time = describe(done, "vi", "wall_time")
     counts = pd.crosstab(trials["vi"], trials["outcome"])
@@ -152,10 +153,10 @@ def summarise(trials: pd.DataFrame, labels: list[str]) -> pd.DataFrame:
         steps = done.loc[done["vi"] == vi, "env_steps"]
         rows.append({
             "value": label,
-            "complete": int(count.get("complete", 0)),
-            "failed": int(count.get("failed", 0)),
-            "pruned": int(count.get("pruned", 0)),
-            "pending": int(count.get("pending", 0)),
+            "complete": int(count.get(Outcome.COMPLETE, 0)),
+            "failed": int(count.get(Outcome.FAILED, 0)),
+            "pruned": int(count.get(Outcome.PRUNED, 0)),
+            "pending": int(count.get(Outcome.PENDING, 0)),
             "final_mean": s["mean"] if s is not None else np.nan,
             "final_sd": s["sd"] if s is not None else np.nan,
             "final_low": s["low"] if s is not None else np.nan,
@@ -197,7 +198,7 @@ def legend_label(sweep: Sweep, vi: int) -> str:
     """A value as the legends write it: its label and the seeds behind its mean."""
     row = sweep.summary.iloc[vi]
     text = f"{row['value']}  (n={row['complete']}"
-    for name in ("failed", "pruned"):
+    for name in (Outcome.FAILED, Outcome.PRUNED):
         if row[name]:
             text += f", {row[name]} {name}"
     return text + ")"
