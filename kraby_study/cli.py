@@ -64,6 +64,22 @@ def _whole(text: str) -> int:
         raise argparse.ArgumentTypeError(f"invalid whole number: {text!r}") from None
 
 
+def _baseline(text: str) -> str:
+    """``ppo=NAME`` -> NAME (a baseline is a ppo config)."""
+    group, sep, name = text.partition("=")
+    if group != "ppo" or not sep or not name.replace("_", "").replace("-", "").isalnum():
+        raise argparse.ArgumentTypeError(f"expected ppo=NAME (a config in conf/ppo/), got "
+                                         f"{text!r}")
+    return name
+
+
+def _at_least_two(text: str) -> int:
+    value = _positive_int(text)
+    if value < 2:
+        raise argparse.ArgumentTypeError(f"must be at least 2, got {value}")
+    return value
+
+
 STORAGE = Flag("--storage", "storage", "database URL, as storage=URL (default "
                "sqlite:///studies/kraby.db)", "URL")
 WORKERS = Flag("--workers", "workers", "trials at once, each in its own worker process, as "
@@ -87,11 +103,22 @@ SEARCH_FLAGS = [
          "(default 0)", "S", _whole),
 ]
 OUT = Flag("--out", "out", "report folder, as out=DIR (default reports)", "DIR")
+CONFIRM_FLAGS = [
+    Flag("--study-name", "confirm.study", "the search or sweep whose top configurations are "
+         "retrained, as confirm.study=NAME (default: none, baselines only)", "NAME"),
+    Flag("--top", "confirm.top", "configurations retrained: the search's best complete trials "
+         "or the sweep's best values, as confirm.top=K (default 5)", "K", _positive_int),
+    Flag("--seeds", "confirm.seeds", "fresh seeds per configuration, none used by the study, as "
+         "confirm.seeds=N (default 10)", "N", _at_least_two),
+    STORAGE, WORKERS,
+]
 
 
 def flag_overrides(args: argparse.Namespace, flags: Sequence[Flag]) -> list[str]:
     """The flags given, as key=value overrides, placed before the user's own overrides."""
     out = []
+    if getattr(args, "baseline", None):
+        out.append(f"confirm.baselines=[{','.join(args.baseline)}]")
     for flag in flags:
         value = getattr(args, flag.name.lstrip("-").replace("-", "_"), None)
         if value is not None:
@@ -196,17 +223,58 @@ def cmd_list(args: argparse.Namespace) -> int:
 def cmd_optuna(args: argparse.Namespace) -> int:
     """An Optuna search over conf/search/<space>.yaml, into the same store."""
     from kraby_study.plan.space import validate_search
+    from kraby_study.plan.sweep import resolved_settings
     from kraby_study.run.search_source import run_search
     from kraby_study.summary import study_progress
 
-    cfg = compose_config(with_default(flag_overrides(args, SEARCH_FLAGS), "budget", "quick"))
+    overrides = with_default(flag_overrides(args, SEARCH_FLAGS), "budget", "quick")
+    cfg = compose_config(overrides)
     validate_search(cfg)
+    kept = [o for o in overrides if not o.startswith("ppo=")]
+    starts = [(f"ppo={name}", resolved_settings(compose_config([*kept, f"ppo={name}"])))
+              for name in cfg.search.enqueue]
     with open_writer(cfg) as store:
-        summary, ledger = run_search(store, cfg, worker_count(cfg), sys.stdout)
+        summary, ledger = run_search(store, cfg, worker_count(cfg), sys.stdout, starts=starts)
         state = study_progress(ledger)
     print(f"search {state.name}: {state.complete} complete, {state.pruned} pruned, "
           f"{state.failed} failed of {state.total}; best {state.best}")
     return 130 if summary.interrupted else 0
+
+
+def cmd_confirm(args: argparse.Namespace) -> int:
+    """Retrain a study's top configurations (and baselines) on fresh seeds."""
+    from kraby_study.best import confirm_source
+    from kraby_study.plan.confirm import confirm_plan
+    from kraby_study.run.sweep_source import run_plan
+    from kraby_study.store.connection import opened
+
+    overrides = flag_overrides(args, CONFIRM_FLAGS)
+    cfg = compose_config(with_default(overrides, "budget", "quick"))
+    baselines = [baseline_arm(name, overrides) for name in cfg.confirm.baselines]
+    source = None
+    if cfg.confirm.study is not None:
+        with opened(cfg.storage, create=False, writer=False) as store:
+            source = confirm_source(store.load(str(cfg.confirm.study)), int(cfg.confirm.top))
+    plan = confirm_plan(cfg, source, baselines)
+    with open_writer(cfg) as store:
+        summary, counts = run_plan(store, plan, worker_count(cfg), sys.stdout,
+                                   **run_options(cfg))
+    total = len(plan.specs)
+    print(f"confirm {plan.name}: {counts.complete}/{total} complete, {counts.failed} failed"
+          + (f", {total - counts.ended} left (rerun the same command to continue)"
+             if counts.ended < total else "")
+          + f"; report it with `kraby-study report --study-name {plan.name}`")
+    return 130 if summary.interrupted else 0
+
+
+def baseline_arm(name: str, overrides: Sequence[str]):  # noqa: ANN201 - a plan.confirm.Arm
+    """A ppo config file as a confirm arm: the command's settings with ``ppo=NAME``."""
+    from kraby_study.plan.confirm import Arm
+    from kraby_study.plan.sweep import resolved_settings
+
+    kept = [o for o in overrides if not o.startswith(("ppo=", "confirm."))]
+    settings = resolved_settings(compose_config([*kept, f"ppo={name}"]))
+    return Arm(label=f"ppo={name}", settings=settings, origin=f"the config ppo={name}")
 
 
 def cmd_best(args: argparse.Namespace) -> int:
@@ -240,7 +308,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     chosen, overrides = stored_study(flag_overrides(args, [STORAGE, REPORTED, OUT]))
     cfg = compose_config(overrides)
     return run_report(cfg.storage, cfg.out, study=chosen, fmt=args.format, stream=sys.stdout,
-                      policy=not args.no_policy)
+                      policy=not args.no_policy, options=cfg.report)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -263,6 +331,8 @@ def build_parser() -> argparse.ArgumentParser:
         ("train", cmd_train, "one training run (ppo=tuned by default), model saved"),
         ("list", cmd_list, "the studies in the store with their progress"),
         ("optuna", cmd_optuna, "an Optuna search (TPE, pruning) over conf/search/ppo.yaml"),
+        ("confirm", cmd_confirm, "retrain a search's top configurations (or a sweep's top "
+         "values, or baselines) on fresh seeds, into study NAME-confirm"),
         ("best", cmd_best, "print a study's best settings and write them as "
          "./conf/ppo/NAME.yaml"),
         ("report", cmd_report, "redraw every figure and table of the stored studies into "
@@ -270,7 +340,8 @@ def build_parser() -> argparse.ArgumentParser:
     ]
     flags: dict[str, list[Flag]] = {
         "run": [STORAGE, WORKERS], "train": [STORAGE], "list": [STORAGE],
-        "optuna": SEARCH_FLAGS, "best": [STORAGE, BEST_OF], "report": [STORAGE, REPORTED, OUT],
+        "optuna": SEARCH_FLAGS, "confirm": CONFIRM_FLAGS, "best": [STORAGE, BEST_OF],
+        "report": [STORAGE, REPORTED, OUT],
     }
     parsers = {}
     for name, func, text in commands:
@@ -288,6 +359,15 @@ def build_parser() -> argparse.ArgumentParser:
         "search.checkpoints equal env-step intervals of the first seed, then the mean score "
         "after each further seed; it stops no trial in the first search.warmup (half) of the "
         "first seed.\n\n" + EPILOG)
+    parsers["confirm"].add_argument(
+        "--baseline", action="append", type=_baseline, metavar="ppo=NAME",
+        help="add a ppo config's settings as one more configuration (repeatable), e.g. "
+        "--baseline ppo=tuned; with no --study-name, only these are retrained")
+    parsers["confirm"].epilog = (
+        "each configuration trains --seeds runs at the study's budget (steps and curve bins; "
+        "budget=quick for baselines alone), with seeds no trial of the study used. The study "
+        "NAME-confirm is resumable like run; report it, then `kraby-study best --study-name "
+        "NAME-confirm` writes the confirmed winner's settings.\n\n" + EPILOG)
     parsers["best"].add_argument("--name", help="config name to write in ./conf/ppo/ (default "
                                  "best_<study>)")
     report = parsers["report"]

@@ -172,7 +172,7 @@ def test_summary_numbers_equal_a_hand_computation(sweep_report: ReportIndex) -> 
     assert low["p_vs_best"] == pytest.approx(p, rel=1e-4)
     assert (high["mark"], low["mark"]) == ("best", "tie")  # p = 0.28: not told apart
     text = (out / "ent_coef" / "summary.md").read_text()
-    assert "Best: ent_coef = 0.1, mean final score 5" in text
+    assert "ent_coef: 0.1 best final score (mean 5" in text
     assert "Welch's t-test" in text and "95 % Student-t" in text
 
 

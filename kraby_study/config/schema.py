@@ -141,6 +141,34 @@ class SearchConfig:
     """Fixed targets of the evaluation objective."""
     params: dict[str, ParamSpace] = field(default_factory=dict)
     """The space: Optuna parameter name -> range."""
+    enqueue: list[str] = field(default_factory=lambda: ["tuned", "start"])
+    """ppo config names whose settings are evaluated first, as far as the space holds them, so
+    a search never ends below the settings it was given."""
+
+
+@dataclass
+class ReportConfig:
+    """How ``report`` computes its statistics (see docs/statistics.md)."""
+
+    bootstrap: int = 2000
+    """Bootstrap resamples of the IQM and probability-of-improvement intervals (fixed seed)."""
+    threshold: float | None = None
+    """Reward a learning curve must reach for steps/seconds to threshold; null: 90 % of the way
+    from the untrained policy's first-bin reward to the best value's final score."""
+
+
+@dataclass
+class ConfirmConfig:
+    """What ``confirm`` retrains on fresh seeds (see the command's --help)."""
+
+    study: str | None = None
+    """The search or sweep whose top configurations are retrained; null: baselines only."""
+    top: int = 5
+    """Configurations retrained: the search's best complete trials, or the sweep's best values."""
+    seeds: int = 10
+    """Fresh seeds per configuration, none used by the study's trials."""
+    baselines: list[str] = field(default_factory=list)
+    """ppo config names added as arms, e.g. [tuned]."""
 
 
 @dataclass
@@ -152,6 +180,8 @@ class KrabyConfig:
     budget: BudgetConfig = field(default_factory=BudgetConfig)
     study: StudyConfig | None = None
     search: SearchConfig = field(default_factory=SearchConfig)
+    report: ReportConfig = field(default_factory=ReportConfig)
+    confirm: ConfirmConfig = field(default_factory=ConfirmConfig)
     storage: str = "sqlite:///studies/kraby.db"
     """Database URL: a SQLite file (created on demand) or postgresql+psycopg://user@host/db."""
     workers: int | None = None

@@ -111,6 +111,13 @@ def validate(cfg: DictConfig) -> None:
         if cfg[name] is not None:
             _require(int(cfg[name]) >= 1, f"{name} must be at least 1, got {cfg[name]}")
     _require(int(cfg.seed) >= 0, f"seed must be >= 0, got {cfg.seed}")
+    _require(int(cfg.report.bootstrap) >= 100,
+             f"report.bootstrap must be at least 100 resamples, got {cfg.report.bootstrap}")
+    _require(int(cfg.confirm.top) >= 1, f"confirm.top must be at least 1, got {cfg.confirm.top}")
+    _require(int(cfg.confirm.seeds) >= 2,
+             f"confirm.seeds must be at least 2 (an interval needs two), got {cfg.confirm.seeds}")
+    if cfg.report.threshold is not None:
+        _finite("report.threshold", float(cfg.report.threshold))
 
 
 def cores() -> int:

@@ -186,3 +186,37 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
     return {"kind": "search", "search": search, "settings": settings,
             "steps": int(cfg.budget.steps), "seeds": int(cfg.budget.seeds),
             "curve_every": int(cfg.budget.curve_every), "seed": int(cfg.seed)}
+
+
+def fitted_params(cfg: DictConfig, settings: dict[str, Any]) -> dict[str, Any]:
+    """The space's parameters that resolved settings take, as far as the space holds them.
+
+    A parameter whose value lies outside its range or choices is left out (the sampler draws
+    it); ``nminibatches`` is read as the rollout over the batch size.
+    """
+    params: dict[str, Any] = {}
+    space = distributions(cfg)
+    for name, p in cfg.search.params.items():
+        root, leaf = str(p.path).split(".", 1)
+        if str(p.path) == NMINIBATCHES:
+            ppo = settings["ppo"]
+            rollout = int(ppo["n_steps"]) * int(ppo["n_envs"])
+            if rollout % int(ppo["batch_size"]):
+                continue
+            value: Any = rollout // int(ppo["batch_size"])
+        elif leaf in settings.get(root, {}):
+            value = settings[root][leaf]
+        else:
+            continue
+        distribution = space[str(name)]
+        if isinstance(distribution, CategoricalDistribution):
+            match = [c for c in distribution.choices if value_key(c) == value_key(value)]
+            if match:
+                params[str(name)] = match[0]
+        elif isinstance(value, int | float) and not isinstance(value, bool) and (
+                distribution.low <= value <= distribution.high):
+            if isinstance(distribution, IntDistribution) and float(value) != int(value):
+                continue
+            params[str(name)] = int(value) if isinstance(distribution, IntDistribution) else (
+                float(value))
+    return params

@@ -26,8 +26,8 @@ from kraby_study.report.document import (
 from kraby_study.report.load import StudyData, check_format, load_study, select_studies
 from kraby_study.report.results import ReportIndex, StudyReport
 from kraby_study.report.search_tables import build_search
-from kraby_study.report.sweep_tables import build_sweep
-from kraby_study.stats import INTERVAL_NAME, TEST_NAME
+from kraby_study.report.sweep_tables import build_sweep, option
+from kraby_study.stats import BOOTSTRAP_REPETITIONS, HOLM_NAME, INTERVAL_NAME
 from kraby_study.store.connection import opened_for_reading, shown_url, sqlite_path
 
 TITLE = "kraby-study report"
@@ -88,12 +88,16 @@ def add_policy(report: StudyReport, candidates: Candidates, url: str, rel: str) 
     report.notes.append(f"saved model not found ({candidates[0][0]}): no policy animation")
 
 
+SWEEP_LIKE = ("sweep", "train", "confirm")
+"""Kinds reported as sweeps: values (or one value) with several seeds each."""
+
+
 def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
-                 policy: bool) -> StudyReport:
-    """The files and index section of one study."""
+                 policy: bool, options: Any = None) -> StudyReport:
+    """The files and index section of one study; ``options`` as in :func:`write_report`."""
     candidates: Candidates
-    if data.kind in ("sweep", "train"):
-        sweep = build_sweep(data)
+    if data.kind in SWEEP_LIKE:
+        sweep = build_sweep(data, options)
         report = sweep_output.write_sweep(sweep, folder, rel, fmt)
         candidates = sweep_output.policy_candidates(sweep)
     elif data.ledger.objectives > 1:
@@ -122,7 +126,8 @@ def _overview(reports: list[StudyReport]) -> Table:
     return Table(["study", "kind", "status", "folder"], rows)
 
 
-def index_blocks(url: str, reports: list[StudyReport]) -> list[Block]:
+def index_blocks(url: str, reports: list[StudyReport],
+                 bootstrap: int = BOOTSTRAP_REPETITIONS) -> list[Block]:
     """The index page: what the numbers mean, an overview, then every study's section."""
     blocks: list[Block] = [
         Heading(TITLE, 1),
@@ -130,11 +135,13 @@ def index_blocks(url: str, reports: list[StudyReport]) -> list[Block]:
              " reported."),
         Text("Final score: mean episode reward over the last 10 % of a run's training "
              "(reward = minus the squared tip-target distance in m^2, summed over the episode). "
-             f"Intervals and bands: {INTERVAL_NAME}. Values marked '\u2248 best': {TEST_NAME} "
-             "(no correction for multiple comparisons). Figures use complete runs only; failed "
-             "runs are listed."),
-        _overview(reports),
+             f"Intervals and bands: {INTERVAL_NAME}, unless named otherwise. Values marked "
+             f"'\u2248 best': {HOLM_NAME} (p >= 0.05 after the correction). Figures use "
+             "complete runs only; failed runs are listed."),
     ]
+    if any(report.kind in SWEEP_LIKE for report in reports):
+        blocks.append(Text("Sweep tables. " + sweep_output.metric_notes(bootstrap)))
+    blocks.append(_overview(reports))
     for report in reports:
         blocks += report.blocks
     return blocks
@@ -160,7 +167,7 @@ def check_folder(out: Path) -> None:
 
 
 def write_report(url: str, out: Path | str, study: str | None = None, fmt: str = "png",
-                 policy: bool = True) -> ReportIndex:
+                 policy: bool = True, options: Any = None) -> ReportIndex:
     """Report every study of a store (or one) into ``out``.
 
     Args:
@@ -169,6 +176,9 @@ def write_report(url: str, out: Path | str, study: str | None = None, fmt: str =
         study: Report only this study.
         fmt: Figure format, png or svg (animations are GIFs either way).
         policy: Animate the best saved policy of each study (needs PyBullet and SB3).
+        options: The report's statistics options (``bootstrap``: resamples of the bootstrap
+            intervals; ``threshold``: the reward for steps/seconds to threshold, None for the
+            default); None for the defaults.
 
     Returns:
         What was written.
@@ -192,8 +202,9 @@ def write_report(url: str, out: Path | str, study: str | None = None, fmt: str =
     reports = []
     for data in studies:
         rel = folder_name(data.name, taken)
-        reports.append(report_study(data, out / rel, rel, fmt, url, policy))
-    blocks = index_blocks(url, reports)
+        reports.append(report_study(data, out / rel, rel, fmt, url, policy, options))
+    blocks = index_blocks(url, reports, int(option(options, "bootstrap",
+                                                   BOOTSTRAP_REPETITIONS)))
     markdown, html = out / "index.md", out / "index.html"
     markdown.write_text(to_markdown(blocks), encoding="utf-8")
     html.write_text(to_html(blocks, TITLE), encoding="utf-8")
@@ -202,14 +213,14 @@ def write_report(url: str, out: Path | str, study: str | None = None, fmt: str =
 
 
 def run_report(url: str, out: Path | str, study: str | None = None, fmt: str = "png",
-               stream: TextIO | None = None, policy: bool = True) -> int:
+               stream: TextIO | None = None, policy: bool = True, options: Any = None) -> int:
     """``kraby-study report``: write the report and say where it is; returns the exit code.
 
     Raises:
         ConfigError: As :func:`write_report`.
         StoreError: As :func:`write_report`.
     """
-    index = write_report(url, out, study=study, fmt=fmt, policy=policy)
+    index = write_report(url, out, study=study, fmt=fmt, policy=policy, options=options)
     if stream is not None:
         for report in index.studies:
             line = f"{report.name} ({report.kind}): {report.status}"

@@ -17,7 +17,7 @@ from kraby_study.records import counted
 from kraby_study.store.connection import Store
 from kraby_study.store.ledger import StudyLedger
 
-KINDS = ("sweep", "train", "search")
+KINDS = ("sweep", "train", "search", "confirm")
 
 
 @dataclass
@@ -26,9 +26,11 @@ class StudyData:
 
     Attributes:
         name: The study's name in the store.
-        kind: ``sweep``, ``train``, ``search`` or ``optuna`` (a study kraby-study did not make).
+        kind: ``sweep``, ``train``, ``search``, ``confirm`` (fresh seeds of chosen
+            configurations) or ``optuna`` (a study kraby-study did not make).
         ledger: The stored study.
-        definition: The stored definition (sweeps and single runs), else empty.
+        definition: The stored definition (sweeps, confirm studies and single runs), else
+            empty.
         trials: The trials that count (:func:`kraby_study.records.counted`), in number order.
         curves: Learning-curve points of the counted trials, columns ``number, step,
             mean_reward, wall_time, episodes``.
@@ -66,7 +68,7 @@ def load_study(store: Store, name: str) -> StudyData:
     ledger = store.load(name)
     attrs = ledger.attrs
     kind = attrs.kind if attrs.kind in KINDS else "optuna"
-    if kind == "sweep" and "parameter" not in attrs.definition:
+    if kind in ("sweep", "confirm") and "parameter" not in attrs.definition:
         kind = "optuna"
     every = ledger.trials()
     trials = counted(every)

@@ -14,7 +14,7 @@ class StudyReport:
 
     Attributes:
         name: The study's name in the store.
-        kind: sweep, train, search or optuna.
+        kind: sweep, train, search, confirm or optuna.
         folder: Where its files are (``out/<study>``).
         status: Where the study stands, e.g. ``7/10 complete, 1 failed, 2 pending``.
         finished: False while runs are still to come.

@@ -1,4 +1,8 @@
-"""A sweep's files (figures, CSV and Markdown tables) and its section of the index."""
+"""A sweep's files (figures, CSV and Markdown tables) and its section of the index.
+
+Confirm studies are written the same way, with a table of their configurations and a sentence
+on whether the source study's winner is the confirmed winner.
+"""
 
 from __future__ import annotations
 
@@ -14,8 +18,16 @@ from kraby_study.report.document import Block, Heading, Image, Items, Links, Tab
 from kraby_study.report.document import to_markdown as blocks_to_markdown
 from kraby_study.report.results import StudyReport
 from kraby_study.report.style import number, styled
-from kraby_study.report.sweep_tables import Sweep
-from kraby_study.stats import ALPHA, INTERVAL_NAME, TEST_NAME
+from kraby_study.report.sweep_tables import Sweep, arms_frame
+from kraby_study.stats import (
+    ALPHA,
+    AUC_NAME,
+    HOLM_NAME,
+    INTERVAL_NAME,
+    TEST_NAME,
+    iqm_interval_name,
+    p_improvement_name,
+)
 
 MARK_TEXT = {"best": "best", "tie": "\u2248 best", "": ""}
 CAPTIONS = {
@@ -23,10 +35,25 @@ CAPTIONS = {
                        "95 % t-interval; (b) zooms on the last quarter of training.",
     "final_score": "Final score (mean episode reward over the last 10 % of training) of every "
                    "seed; mean and 95 % t-interval beside them. Shaded: the best mean, and the "
-                   "values a Welch's t-test cannot tell from it (p >= 0.05).",
+                   "values not significantly worse than it (Welch's t-test, Holm-corrected over "
+                   "the study's comparisons, p >= 0.05).",
     "wallclock": "Mean episode reward against wall-clock time since the start of training.",
     "training_time": "Training time of every run, with mean and 95 % t-interval.",
+    "sample_efficiency": "Sample efficiency (AUC: the mean of a seed's binned mean episode "
+                         "rewards over the whole run, the normalised area under its learning "
+                         "curve) of every seed; mean and 95 % t-interval beside them.",
+    "time_to_threshold": "Environment steps (a) and seconds (b) until a seed's learning curve "
+                         "first reached the threshold, for every seed that reached it; beside "
+                         "them the mean over those seeds with its 95 % t-interval. k/N: seeds "
+                         "that reached it of the value's complete seeds; 'none reached' marks "
+                         "values where none did.",
+    "improvement": "Probability of improvement P(best > value) of the best value over each "
+                   "other value: the share of pairs of seeds (one of each) where the best "
+                   "value's final score is higher, ties counted half, with its 95 % "
+                   "percentile-bootstrap interval. Dashed: 0.5, neither better.",
 }
+NEW_FIGURES = ("sample_efficiency", "time_to_threshold", "improvement")
+"""Figures that compare values, drawn when a study has more than one."""
 
 
 def _p_text(p: float, mark: str) -> str:
@@ -50,10 +77,24 @@ def _with_interval(mean: float, low: float, high: float) -> str:
     return text
 
 
+def _bootstrap_interval(low: float, high: float) -> str:
+    return _interval(low, high, 3)
+
+
+def _reached(row: pd.Series) -> str:
+    return f"{row['reached']}/{row['complete']}" if row["complete"] else "-"
+
+
+def _steps(value: float) -> str:
+    return f"{value:,.0f}" if np.isfinite(value) else "-"
+
+
 def summary_table(sweep: Sweep) -> Table:
     """The summary as a table of formatted cells, best and tied rows marked."""
     header = [sweep.name, "complete", "failed", "pruned", "pending", "final score", "95 % CI", "sd",
-              "training time (s)", "Welch p vs best", ""]
+              "IQM [95 % bootstrap CI]", "final IQR", "AUC [95 % CI]", "env steps to threshold",
+              "seconds to threshold", "reached", "training time (s)", "Welch p vs best",
+              "Holm p", "P(best > value) [95 % bootstrap CI]", ""]
     rows = []
     for _, row in sweep.summary.iterrows():
         rows.append([
@@ -61,33 +102,169 @@ def summary_table(sweep: Sweep) -> Table:
             str(row["pending"]),
             number(row["final_mean"]), _interval(row["final_low"], row["final_high"]),
             number(row["final_sd"], 3),
+            _with_interval(row["iqm"], row["iqm_low"], row["iqm_high"]),
+            number(row["final_iqr"], 3),
+            _with_interval(row["auc_mean"], row["auc_low"], row["auc_high"]),
+            _steps(row["steps_to_threshold"]), number(row["seconds_to_threshold"], 3),
+            _reached(row),
             _with_interval(row["time_mean"], row["time_low"], row["time_high"]),
-            _p_text(row["p_vs_best"], row["mark"]), MARK_TEXT[row["mark"]]])
+            _p_text(row["p_vs_best"], row["mark"]), _p_text(row["p_holm"], row["mark"]),
+            "-" if row["mark"] == "best" else
+            _with_interval(row["p_improvement"], row["p_improvement_low"],
+                           row["p_improvement_high"]),
+            MARK_TEXT[row["mark"]]])
     return Table(header, rows, marks=list(sweep.summary["mark"]))
 
 
-def verdict(sweep: Sweep) -> str:
-    """One sentence: which value wins, and which ones it cannot be told from."""
+def threshold_text(sweep: Sweep) -> str:
+    """The threshold used for steps and seconds to threshold, and where it comes from."""
+    if not np.isfinite(sweep.threshold):
+        return "Threshold: none (no complete run with a learning curve), so no time to threshold."
+    text = f"Threshold for steps and seconds to threshold: mean episode reward >= " \
+           f"{number(sweep.threshold)}"
+    if not sweep.threshold_default:
+        return text + ", set by the report's option report.threshold."
     best = sweep.best
-    if best is None:
-        return "No run is complete yet, so no value can be compared."
-    row = sweep.summary.iloc[best]
-    if not sweep.parameter:
-        return (f"Final score {number(row['final_mean'])} (95 % CI "
-                f"{_interval(row['final_low'], row['final_high'])}, n={row['complete']}).")
-    text = (f"Best: {sweep.name} = {row['value']}, mean final score {number(row['final_mean'])} "
-            f"(95 % CI {_interval(row['final_low'], row['final_high'])}, n={row['complete']}).")
-    ties = sweep.summary.loc[sweep.summary["mark"] == "tie", "value"].tolist()
-    untested = sweep.summary.loc[(sweep.summary["mark"] == "") & sweep.summary["p_vs_best"].isna()
-                                 & (sweep.summary["complete"] > 0), "value"].tolist()
-    if ties:
-        text += (f" Not significantly different from it (Welch's t-test, p >= {ALPHA}): "
-                 f"{', '.join(ties)}.")
-    elif len(sweep.values) > 1:
-        text += f" Every other value tested is significantly worse (Welch's t-test, p < {ALPHA})."
-    if untested:
-        text += f" Too few seeds to test: {', '.join(untested)}."
+    final = sweep.summary.iloc[best]["final_mean"] if best is not None else np.nan
+    count = int(sweep.seeds["first_reward"].notna().sum())
+    return (text + f", the default: 90 % of the way from the untrained policy's reward "
+            f"({number(sweep.untrained)}, the mean first-bin reward of all {count} complete "
+            f"seeds) to the best value's mean final score ({number(final)}).")
+
+
+def metric_notes(bootstrap: int) -> str:
+    """What every interval and test of a sweep's summary is, each named once, for bootstraps
+    of ``bootstrap`` resamples."""
+    return (f"Final score, training time and AUC intervals: {INTERVAL_NAME}. IQM: "
+            f"{iqm_interval_name(bootstrap)}. {AUC_NAME[0].upper()}{AUC_NAME[1:]}. Steps and "
+            "seconds to threshold: mean over the seeds that reached it; reached: those seeds "
+            "of the complete seeds. Final IQR: interquartile range of the complete seeds' final "
+            "scores "
+            f"(needs 2 seeds). Welch p vs best: {TEST_NAME}, uncorrected. Holm p and the "
+            f"'\u2248 best' marks: {HOLM_NAME}. P(best > value): "
+            f"{p_improvement_name(bootstrap)}.")
+
+
+def _label(sweep: Sweep, vi: int) -> str:
+    return str(sweep.labels[vi])
+
+
+def _final_text(row: pd.Series) -> str:
+    text = f"mean {number(row['final_mean'])}"
+    if np.isfinite(row["final_low"]):
+        text += f", 95 % CI {_interval(row['final_low'], row['final_high'])}"
+    text += f", n={row['complete']}; IQM {number(row['iqm'])}"
+    if np.isfinite(row["iqm_low"]):
+        text += f", 95 % bootstrap CI {_interval(row['iqm_low'], row['iqm_high'])}"
     return text
+
+
+def _auc_text(row: pd.Series) -> str:
+    text = f"AUC {number(row['auc_mean'])}"
+    if np.isfinite(row["auc_low"]):
+        text += f", 95 % CI {_interval(row['auc_low'], row['auc_high'])}"
+    return text + f", n={int(row['complete'])}"
+
+
+def _reach_text(row: pd.Series) -> str:
+    return (f"{number(row['seconds_to_threshold'], 3)} s, "
+            f"{_steps(row['steps_to_threshold'])} env steps, mean over the "
+            f"{row['reached']}/{row['complete']} seeds that reached it")
+
+
+def verdict(sweep: Sweep) -> str:
+    """The study's verdict (:attr:`Sweep.verdict`, from :func:`kraby_study.stats.verdict`) in
+    words: the best value and its ties, the most sample-efficient, the fastest to the threshold
+    and the most repeatable, each with its n and interval."""
+    result = sweep.verdict
+    summary = sweep.summary
+    if result.best is None:
+        return "No run is complete yet, so no value can be compared."
+    best = summary.iloc[result.best]
+    if not sweep.parameter:
+        text = f"Final score: {_final_text(best)}; {_auc_text(best)}"
+        if best["reached"]:
+            return text + f"; threshold reached in {_reach_text(best)}."
+        return text + "; no seed reached the threshold."
+    parts = []
+    first = f"{_label(sweep, result.best)} best final score ({_final_text(best)}"
+    if result.tied:
+        first += (f"; tied: {', '.join(_label(sweep, vi) for vi in result.tied)}, "
+                  f"Holm-corrected Welch p >= {ALPHA}")
+    elif len(sweep.values) > 1 and summary["p_holm"].notna().any():
+        noun = "configuration" if sweep.kind == "confirm" else "value"
+        first += f"; every other {noun} tested is worse, Holm-corrected Welch p < {ALPHA}"
+    parts.append(first + ")")
+    if result.most_sample_efficient is not None:
+        row = summary.iloc[result.most_sample_efficient]
+        parts.append(f"{_label(sweep, result.most_sample_efficient)} most sample-efficient "
+                     f"({_auc_text(row)})")
+    if result.fastest is not None:
+        row = summary.iloc[result.fastest]
+        parts.append(f"{_label(sweep, result.fastest)} fastest to threshold ({_reach_text(row)})")
+    elif np.isfinite(sweep.threshold):
+        parts.append(f"no value reached the threshold {number(sweep.threshold)}")
+    if result.most_repeatable is not None:
+        row = summary.iloc[result.most_repeatable]
+        parts.append(f"{_label(sweep, result.most_repeatable)} most repeatable (final IQR "
+                     f"{number(row['final_iqr'], 3)}, n={row['complete']})")
+    prefix = "Confirmed verdict" if sweep.kind == "confirm" else sweep.name
+    text = f"{prefix}: " + "; ".join(parts) + "."
+    untested = summary.loc[(summary["mark"] == "") & summary["p_holm"].isna()
+                           & (summary["complete"] > 0), "value"].tolist()
+    if untested:
+        text += f" Too few seeds to test: {', '.join(map(str, untested))}."
+    return text
+
+
+def arms_table(sweep: Sweep) -> Table:
+    """A confirm study's configurations: origin, the source's score, the confirmed score."""
+    arms = arms_frame(sweep)
+    rows = [[str(r["label"]), str(r["origin"]), number(r["source_score"]),
+             number(r["mean"]), _interval(r["low"], r["high"]), number(r["iqm"]),
+             _bootstrap_interval(r["iqm_low"], r["iqm_high"]), str(r["n"])]
+            for _, r in arms.iterrows()]
+    return Table(["configuration", "origin", "source's score", "confirmed mean final score",
+                  "95 % CI", "confirmed IQM", "95 % bootstrap CI", "n"], rows,
+                 marks=list(arms["mark"]))
+
+
+def winner_text(sweep: Sweep) -> str | None:
+    """Whether the source study's winner is the confirmed winner; None without a source
+    winner."""
+    definition = sweep.data.definition
+    winner = definition.get("source_winner")
+    if winner is None:
+        return None
+    winner = str(winner)
+    source = definition.get("source")
+    owner = f"{source}'s" if source else "The source's"
+    best = sweep.verdict.best
+    if best is None:
+        return f"{owner} winner {winner} cannot be checked yet: no confirmed run is complete."
+    row = sweep.summary.iloc[best]
+    label = _label(sweep, best)
+    fresh = f"the best mean final score on {row['complete']} fresh seeds"
+    if winner == label:
+        return f"{owner} winner {winner} is the confirmed winner: it has {fresh}."
+    text = f"{owner} winner {winner} is not the confirmed winner: {label} has {fresh}."
+    if winner not in sweep.labels:
+        return text + f" {winner} was not retrained here."
+    mark = sweep.summary.iloc[sweep.labels.index(winner)]["mark"]
+    if mark == "tie":
+        text += (f" The two cannot be told apart (Holm-corrected Welch p >= {ALPHA}), so {winner} "
+                 "may still be as good.")
+    return text
+
+
+def confirm_blocks(sweep: Sweep) -> tuple[list[Block], list[Block]]:
+    """A confirm study's blocks: its configuration table (before the verdict) and the sentence
+    on the source's winner (after it); empty for other kinds."""
+    if sweep.kind != "confirm":
+        return [], []
+    winner = winner_text(sweep)
+    return ([Text("Configurations retrained on fresh seeds:"), arms_table(sweep)],
+            [Text(winner)] if winner else [])
 
 
 def failed_items(sweep: Sweep) -> list[str]:
@@ -119,6 +296,11 @@ def describe_sweep(sweep: Sweep) -> str:
     seeds = int(sweep.trials["seed"].nunique()) if len(sweep.trials) else 0
     steps = definition.get("steps")
     budget = f", {steps:,} environment steps per run" if isinstance(steps, int) else ""
+    if sweep.kind == "confirm":
+        source = definition.get("source")
+        origin = f" from {source}" if source else ""
+        return (f"Confirmation of {len(sweep.values)} configurations{origin} on {seeds} fresh "
+                f"seeds each{budget}. Status: {sweep.status()}.")
     if not sweep.parameter:
         return f"Single training run, {seeds} seed(s){budget}. Status: {sweep.status()}."
     return (f"Sweep of {sweep.parameter} over {len(sweep.values)} values, {seeds} seeds each"
@@ -145,31 +327,39 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
                                       ("wallclock", sweep_plots.wallclock)]
     if len(sweep.values) > 1:
         figures.append(("training_time", sweep_plots.training_time))
+        figures += [(stem, getattr(sweep_plots, stem)) for stem in NEW_FIGURES]
     images: list[Block] = []
     if (sweep.trials["outcome"] == Outcome.COMPLETE).any():
         with styled():
             for stem, draw in figures:
                 path = draw(sweep, folder / f"{stem}.{fmt}")
                 report.files.append(path)
-                images.append(Image(f"{rel}/{path.name}", stem.replace("_", " "),
-                                    CAPTIONS[stem]))
+                caption = CAPTIONS[stem]
+                if stem == "time_to_threshold":
+                    caption += f" {threshold_text(sweep)}"
+                elif stem == "improvement":
+                    caption += f" {sweep.bootstrap:,} resamples, fixed seed."
+                images.append(Image(f"{rel}/{path.name}", stem.replace("_", " "), caption))
     else:
         report.notes.append("no complete run yet: no figures")
     tables = _tables(sweep, folder)
     failed = failed_items(sweep)
-    section: list[Block] = [Heading(f"{sweep.data.name}", 2), Text(describe_sweep(sweep)),
-                            Text(verdict(sweep)), summary_table(sweep)]
+    arms, winner = confirm_blocks(sweep)
+    said = Text(verdict(sweep))
+    details: list[Block] = [summary_table(sweep), Text(threshold_text(sweep))]
     if failed:
-        section += [Text(f"Failed or pruned runs ({len(failed)}), not in the figures:"),
+        details += [Text(f"Failed or pruned runs ({len(failed)}), not in the figures:"),
                     Items(failed)]
     if sweep.data.replaced:
-        section.append(Text(f"{sweep.data.replaced} interrupted attempt(s) were run again; "
+        details.append(Text(f"{sweep.data.replaced} interrupted attempt(s) were run again; "
                             "only the later attempts count."))
+    described = Text(describe_sweep(sweep))
+    section: list[Block] = [Heading(f"{sweep.data.name}", 2), described, *arms, said, *winner,
+                            *details]
     summary_md = folder / "summary.md"
     summary_md.write_text(blocks_to_markdown(
-        [Heading(f"{sweep.data.name}: summary", 1), *section[1:],
-         Text(f"Interval: {INTERVAL_NAME}. Ties: {TEST_NAME}, no correction for multiple "
-              "comparisons.")]), encoding="utf-8")
+        [Heading(f"{sweep.data.name}: summary", 1), said, *winner, described, *arms, *details,
+         Text(metric_notes(sweep.bootstrap))]), encoding="utf-8")
     report.files += tables + [summary_md]
     report.blocks = section + images
     report.blocks.append(Links("Tables", [(p.name, f"{rel}/{p.name}") for p in

@@ -1,8 +1,10 @@
 """The figures of a sweep: learning curves (with a zoomed late panel), reward against
-wall-clock time, training time and final score against the value.
+wall-clock time, training time, final score, sample efficiency and time to threshold against the
+value, and the best value's probability of improvement over each other value.
 
 Lines are means over the complete seeds of a value; bands and error bars are the 95 %
-Student-t intervals of those means (see :mod:`kraby_study.stats`).
+Student-t intervals of those means, except the probability of improvement's, which are
+percentile-bootstrap intervals (see :mod:`kraby_study.stats`).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from kraby_study.report.style import (
     save,
 )
 from kraby_study.report.sweep_tables import Sweep, legend_label
+from kraby_study.stats import mean_interval
 
 LATE_FRACTION = 0.25
 """The zoomed panel shows the last quarter of training."""
@@ -119,7 +122,8 @@ def _value_axis(ax: Axes, sweep: Sweep) -> None:
     positions = np.arange(len(sweep.values))
     ax.set_xticks(positions, sweep.labels)
     ax.set_xlim(-0.6, len(sweep.values) - 0.4)
-    if max((len(label) for label in sweep.labels), default=0) * len(sweep.labels) > 80:
+    # Long labels (a confirm study's configurations) would overlap, in half-width panels too.
+    if max((len(label) for label in sweep.labels), default=0) * len(sweep.labels) > 40:
         ax.tick_params(axis="x", labelrotation=25)
         for label in ax.get_xticklabels():
             label.set_horizontalalignment("right")
@@ -127,24 +131,35 @@ def _value_axis(ax: Axes, sweep: Sweep) -> None:
     ax.grid(axis="x", visible=False)
 
 
-def _seeds_and_means(ax: Axes, sweep: Sweep, column: str, mean: str, low: str,
-                     high: str) -> None:
-    done = sweep.trials[sweep.trials["outcome"] == Outcome.COMPLETE]
+def _seed_points(ax: Axes, sweep: Sweep, points: pd.DataFrame, column: str) -> None:
     rng = np.random.default_rng(0)  # fixed jitter: a rerun draws the same figure
-    for vi, group in done.groupby("vi", sort=True):
-        jitter = rng.uniform(-0.12, 0.12, len(group))
-        ax.scatter(int(vi) - 0.1 + jitter, group[column], s=16, color=sweep.colours[int(vi)],
+    for vi, group in points.groupby("vi", sort=True):
+        values = group[column].dropna()
+        jitter = rng.uniform(-0.12, 0.12, len(values))
+        ax.scatter(int(vi) - 0.1 + jitter, values, s=16, color=sweep.colours[int(vi)],
                    alpha=0.55, linewidths=0, zorder=2)
-    summary = sweep.summary
-    for vi, row in summary.iterrows():
-        if not np.isfinite(row[mean]):
-            continue
-        err = None
-        if np.isfinite(row[low]):
-            err = [[row[mean] - row[low]], [row[high] - row[mean]]]
-        ax.errorbar(int(vi) + 0.18, row[mean], yerr=err, fmt="o", color=sweep.colours[int(vi)],
-                    markeredgecolor="black", markeredgewidth=0.6, markersize=7, capsize=4,
-                    elinewidth=1.6, zorder=3)
+
+
+def _mean_mark(ax: Axes, sweep: Sweep, vi: int, mean: float, low: float, high: float) -> None:
+    if not np.isfinite(mean):
+        return
+    err = None
+    if np.isfinite(low) and np.isfinite(high):
+        err = [[mean - low], [high - mean]]
+    ax.errorbar(vi + 0.18, mean, yerr=err, fmt="o", color=sweep.colours[vi],
+                markeredgecolor="black", markeredgewidth=0.6, markersize=7, capsize=4,
+                elinewidth=1.6, zorder=3)
+
+
+def _seeds_and_means(ax: Axes, sweep: Sweep, column: str, mean: str, low: str,
+                     high: str, points: pd.DataFrame | None = None) -> None:
+    """Every complete seed's ``column`` (from ``points``, by default the complete runs) as a
+    point, and the summary's mean with its interval beside them."""
+    if points is None:
+        points = sweep.trials[sweep.trials["outcome"] == Outcome.COMPLETE]
+    _seed_points(ax, sweep, points, column)
+    for vi, row in sweep.summary.iterrows():
+        _mean_mark(ax, sweep, int(vi), row[mean], row[low], row[high])
 
 
 def _failed_marks(ax: Axes, sweep: Sweep) -> bool:
@@ -195,10 +210,116 @@ def final_score(sweep: Sweep, path: Path) -> Path:
         extra.append(Patch(color=BEST_COLOUR, alpha=0.3, label="best mean"))
     if (marks == "tie").any():
         extra.append(Patch(color=BEST_COLOUR, alpha=0.1,
-                           label="not sig. different from best (Welch's t-test, p >= 0.05)"))
+                           label="not sig. worse than best (Welch's t-test,\n"
+                                 "Holm-corrected p >= 0.05)"))
     if _failed_marks(ax, sweep):
         ax.margins(y=0.12)
     fig.legend(handles=_legend_entries(extra), loc="outside lower center",
                ncols=2 if several else 1, frameon=False)
     fig.suptitle(_title(sweep, "final score"))
+    return save(fig, path)
+
+
+def sample_efficiency(sweep: Sweep, path: Path) -> Path:
+    """AUC (mean reward over the whole learning curve) of each seed against the value."""
+    several = len(sweep.values) > 1
+    fig, (ax,) = new_figure(SINGLE if several else (SINGLE[0] * 0.6, SINGLE[1]))
+    _seeds_and_means(ax, sweep, "auc", "auc_mean", "auc_low", "auc_high", points=sweep.seeds)
+    _value_axis(ax, sweep)
+    ax.set_ylabel("AUC: mean episode reward\nover the whole learning curve")
+    if _failed_marks(ax, sweep):
+        ax.margins(y=0.12)
+    fig.legend(handles=_legend_entries([]), loc="outside lower center",
+               ncols=2 if several else 1, frameon=False)
+    fig.suptitle(_title(sweep, "sample efficiency (area under the learning curve)"))
+    return save(fig, path)
+
+
+def _threshold_text(sweep: Sweep) -> str:
+    if not np.isfinite(sweep.threshold):
+        return "no threshold (no learning curve)"
+    how = "default" if sweep.threshold_default else "set by report.threshold"
+    return f"threshold: mean episode reward >= {sweep.threshold:.4g} ({how})"
+
+
+def time_to_threshold(sweep: Sweep, path: Path) -> Path:
+    """Env steps (a) and seconds (b) until each seed's curve first reached the threshold:
+    every seed that reached it, the mean over those seeds with its t-interval, and how many of
+    the complete seeds reached it; values where none did are marked."""
+    fig, axes = new_figure(WIDE, ncols=2)
+    seeds = sweep.seeds
+    panels = [("steps_to_threshold", "environment steps to threshold", "(a) env steps"),
+              ("seconds_to_threshold", "seconds to threshold (wall clock)", "(b) seconds")]
+    none_reached = False
+    for ax, (column, label, title) in zip(axes, panels, strict=True):
+        reached = seeds[seeds[column].notna()]
+        _seed_points(ax, sweep, reached, column)
+        for vi, row in sweep.summary.iterrows():
+            values = reached.loc[reached["vi"] == vi, column].to_numpy()
+            mean, low, high = mean_interval(values)
+            _mean_mark(ax, sweep, int(vi), mean, low, high)
+            if row["complete"] == 0:
+                continue
+            colour = FAILED_COLOUR if row["reached"] == 0 else "black"
+            ax.annotate(f"{row['reached']}/{row['complete']}", (int(vi), 1.0),
+                        xycoords=("data", "axes fraction"), ha="center", va="top", fontsize=9,
+                        color=colour)
+            if row["reached"] == 0:
+                none_reached = True
+                ax.annotate("none\nreached", (int(vi), 0.04), xycoords=("data", "axes fraction"),
+                            ha="center", va="bottom", fontsize=9, color=FAILED_COLOUR)
+        _value_axis(ax, sweep)
+        ax.set_ylabel(label)
+        ax.set_title(title, loc="left")
+        ax.autoscale_view()
+        top = ax.get_ylim()[1]
+        ax.set_ylim(0, top * 1.15 if top > 0 else 1.0)  # room for the k/N labels on top
+        if column == "steps_to_threshold":
+            ax.yaxis.set_major_formatter(STEPS_FORMATTER)
+    extra: list[Line2D | Patch] = [Line2D([], [], linestyle="", label="k/N: seeds that reached "
+                                          "the threshold / complete seeds")]
+    if none_reached:
+        extra.append(Line2D([], [], linestyle="", label="none reached: no seed of the value "
+                            "reached the threshold"))
+    handles = _legend_entries(extra)
+    handles[0].set_label("one seed that reached the threshold")
+    handles[1].set_label("mean over those seeds, 95 % t-interval")
+    fig.legend(handles=handles, loc="outside lower center", ncols=2, frameon=False)
+    fig.suptitle(_title(sweep, f"time to threshold, {_threshold_text(sweep)}"))
+    return save(fig, path)
+
+
+def improvement(sweep: Sweep, path: Path) -> Path:
+    """Probability of improvement of the best value over each other value, with its bootstrap
+    interval, against the value; a line at 0.5 (no improvement either way)."""
+    fig, (ax,) = new_figure(SINGLE)
+    best = sweep.best
+    ax.axhline(0.5, color=MUTED, linestyle="--", linewidth=1.2, zorder=1)
+    for vi, row in sweep.summary.iterrows():
+        vi = int(vi)
+        if vi == best:
+            ax.annotate("best", (vi, 0.5), ha="center", va="center", fontsize=10,
+                        color=BEST_COLOUR, fontweight="bold")
+            continue
+        p = row["p_improvement"]
+        if not np.isfinite(p):
+            ax.annotate("n/a", (vi, 0.5), ha="center", va="center", fontsize=9, color=MUTED)
+            continue
+        err = None
+        if np.isfinite(row["p_improvement_low"]) and np.isfinite(row["p_improvement_high"]):
+            err = [[p - row["p_improvement_low"]], [row["p_improvement_high"] - p]]
+        ax.errorbar(vi, p, yerr=err, fmt="o", color=sweep.colours[vi], markeredgecolor="black",
+                    markeredgewidth=0.6, markersize=7, capsize=4, elinewidth=1.6, zorder=3)
+    _value_axis(ax, sweep)
+    ax.set_ylim(-0.03, 1.03)
+    best_label = sweep.labels[best] if best is not None else "?"
+    ax.set_ylabel("P(best > value)")
+    handles: list[Line2D | Patch] = [
+        Line2D([], [], marker="o", linestyle="-", color=MUTED, markeredgecolor="black",
+               markersize=7, label=f"P(best > value) over pairs of seeds, 95 % bootstrap "
+               f"interval ({sweep.bootstrap:,} resamples)"),
+        Line2D([], [], color=MUTED, linestyle="--", label="0.5: neither better"),
+    ]
+    fig.legend(handles=handles, loc="outside lower center", ncols=1, frameon=False)
+    fig.suptitle(_title(sweep, f"P(best > value), best = {best_label}"))
     return save(fig, path)

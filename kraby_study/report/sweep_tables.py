@@ -1,12 +1,15 @@
-"""A sweep (or a single-run study) as tables: one row per run, per value, per curve point.
+"""A sweep (or a single-run or confirm study) as tables: one row per run, per value, per seed's
+metrics, per curve point, and the study's verdict.
 
-Figures draw from the complete runs only; failed runs are counted and listed, runs still to
-come are counted as pending, and nothing is dropped without a trace.
+Figures and metrics draw from the complete runs only; failed runs are counted and listed, runs
+still to come are counted as pending, and nothing is dropped without a trace. A confirm study
+is a sweep whose values are the labels of the configurations it retrains (in the order given).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -15,11 +18,33 @@ import pandas as pd
 from kraby_study.records import Outcome, outcome, param_name, swept_value, value_key, value_label
 from kraby_study.report.load import StudyData
 from kraby_study.report.style import is_numeric, value_colours
-from kraby_study.stats import compare_to_best, describe, t_interval
+from kraby_study.stats import (
+    ALPHA,
+    BOOTSTRAP_REPETITIONS,
+    Verdict,
+    auc,
+    compare_to_best,
+    default_threshold,
+    describe,
+    first_reach,
+    holm,
+    iqm,
+    iqm_interval,
+    iqr,
+    mean_interval,
+    p_improvement,
+    p_improvement_interval,
+    t_interval,
+    verdict,
+)
 
 SINGLE_LABEL = "all seeds"
 TRIAL_COLUMNS = ["number", "key", "seed", "vi", "value", "outcome", "final_score",
                  "wall_time", "env_steps", "failure", "model_path"]
+SEED_COLUMNS = ["vi", "seed", "number", "final_score", "first_reward", "auc",
+                "steps_to_threshold", "seconds_to_threshold"]
+SWEEP_KINDS = ("sweep", "confirm")
+"""Kinds whose definition names a swept parameter and its values."""
 
 
 @dataclass
@@ -36,7 +61,16 @@ class Sweep:
         trials: One row per counted run (columns ``TRIAL_COLUMNS``); ``vi`` indexes values.
         curves: Curve points of the complete runs, with their ``vi`` and ``seed``.
         bands: Per value and step: n, mean, sd, low, high of the reward; mean wall time.
-        summary: One row per value (see :func:`summarise`).
+        summary: One row per value (see :func:`summarise` and :func:`add_curve_metrics`).
+        seeds: One row per complete run (columns ``SEED_COLUMNS``): its final score, its
+            first curve point's reward, its AUC and when it first reached the threshold.
+        threshold: The reward a curve must reach (NaN when there is no curve to set it).
+        threshold_default: True when the threshold is the default (see
+            :func:`study_threshold`), False when the report's options set it.
+        untrained: The untrained policy's reward: the mean first-bin reward of every complete
+            seed of the study (NaN without curves).
+        bootstrap: Resamples of the bootstrap intervals.
+        verdict: The study's verdict (:func:`kraby_study.stats.verdict`).
     """
 
     data: StudyData
@@ -49,6 +83,17 @@ class Sweep:
     curves: pd.DataFrame
     bands: pd.DataFrame
     summary: pd.DataFrame
+    seeds: pd.DataFrame = field(default_factory=lambda: pd.DataFrame(columns=SEED_COLUMNS))
+    threshold: float = math.nan
+    threshold_default: bool = True
+    untrained: float = math.nan
+    bootstrap: int = BOOTSTRAP_REPETITIONS
+    verdict: Verdict = field(default_factory=lambda: Verdict(None, [], None, None, None))
+
+    @property
+    def kind(self) -> str:
+        """The study's kind: sweep, confirm or train."""
+        return self.data.kind
 
     @property
     def counts(self) -> dict[str, int]:
@@ -80,15 +125,15 @@ class Sweep:
         return int(marked[0]) if len(marked) else None
 
 
-def ordered_values(planned: list[Any], found: list[Any]) -> list[Any]:
-    """Planned values plus any other value found, sorted when all are numbers."""
+def ordered_values(planned: list[Any], found: list[Any], sort: bool = True) -> list[Any]:
+    """Planned values plus any other value found, sorted when all are numbers (and ``sort``)."""
     values = list(planned)
     known = {value_key(v) for v in values}
     for value in found:
         if value is not None and value_key(value) not in known:
             known.add(value_key(value))
             values.append(value)
-    if is_numeric(values):
+    if sort and is_numeric(values):
         values.sort(key=float)
     return values
 
@@ -132,25 +177,44 @@ def curve_bands(curves: pd.DataFrame) -> pd.DataFrame:
     return grouped.reset_index()
 
 
-def summarise(trials: pd.DataFrame, labels: list[str]) -> pd.DataFrame:
-    """One row per value: run counts, final score and training time (mean, sd, interval), the
-    Welch p-value against the best value, and a mark: ``best``, ``tie`` (not significantly
-    different from the best) or empty.
+def _finals(done: pd.DataFrame) -> dict[int, list[float]]:
+    return {int(vi): group["final_score"].tolist() for vi, group in done.groupby("vi")}
+
+
+def summarise(trials: pd.DataFrame, labels: list[str],
+              bootstrap: int = BOOTSTRAP_REPETITIONS) -> pd.DataFrame:
+    """One row per value: run counts; the complete seeds' final score (mean, sd, t-interval;
+    IQM with its bootstrap interval; IQR) and training time; the Welch p-value against the best
+    value, raw (``p_vs_best``) and Holm-corrected over the study's comparisons (``p_holm``); the
+    probability that the best value beats this one, with its bootstrap interval; and a mark:
+    ``best``, ``tie`` (Holm-corrected p >= 0.05: not significantly worse than the best) or
+    empty. The curve metrics are added by :func:`add_curve_metrics`.
     """
     done = trials[trials["outcome"] == Outcome.COMPLETE]
     score = describe(done, "vi", "final_score")
     time = describe(done, "vi", "wall_time")
     counts = pd.crosstab(trials["vi"], trials["outcome"])
-    scores = {int(vi): group["final_score"].tolist() for vi, group in done.groupby("vi")}
+    scores = _finals(done)
     best, pvalues = compare_to_best(scores)
+    raw = [pvalues.get(vi, np.nan) for vi in range(len(labels))]
+    adjusted = holm(raw)
     rows = []
     for vi, label in enumerate(labels):
         count = counts.loc[vi] if vi in counts.index else pd.Series(dtype=int)
-        p = pvalues.get(vi, np.nan)
-        mark = "best" if vi == best else ("tie" if np.isfinite(p) and p >= 0.05 else "")
+        finals = scores.get(vi, [])
+        p_holm = adjusted[vi]
+        mark = "best" if vi == best else ("tie" if np.isfinite(p_holm) and p_holm >= ALPHA
+                                          else "")
         s = score.loc[vi] if vi in score.index else None
         t = time.loc[vi] if vi in time.index else None
         steps = done.loc[done["vi"] == vi, "env_steps"]
+        iqm_low, iqm_high = iqm_interval(finals, repetitions=bootstrap)
+        if best is None or vi == best or not finals:
+            improvement, improvement_low, improvement_high = np.nan, np.nan, np.nan
+        else:
+            improvement = p_improvement(scores[best], finals)
+            improvement_low, improvement_high = p_improvement_interval(
+                scores[best], finals, repetitions=bootstrap)
         rows.append({
             "value": label,
             "complete": int(count.get(Outcome.COMPLETE, 0)),
@@ -161,25 +225,162 @@ def summarise(trials: pd.DataFrame, labels: list[str]) -> pd.DataFrame:
             "final_sd": s["sd"] if s is not None else np.nan,
             "final_low": s["low"] if s is not None else np.nan,
             "final_high": s["high"] if s is not None else np.nan,
+            "iqm": iqm(finals),
+            "iqm_low": iqm_low,
+            "iqm_high": iqm_high,
+            # A spread needs two seeds: one seed's IQR of 0 would read as perfectly repeatable.
+            "final_iqr": iqr(finals) if len(finals) >= 2 else np.nan,
             "time_mean": t["mean"] if t is not None else np.nan,
             "time_low": t["low"] if t is not None else np.nan,
             "time_high": t["high"] if t is not None else np.nan,
             "env_steps": float(steps.mean()) if len(steps) else np.nan,
-            "p_vs_best": p,
+            "p_vs_best": raw[vi],
+            "p_holm": p_holm,
+            "p_improvement": improvement,
+            "p_improvement_low": improvement_low,
+            "p_improvement_high": improvement_high,
             "mark": mark,
         })
     return pd.DataFrame(rows)
 
 
-def build_sweep(data: StudyData) -> Sweep:
-    """The tables of a sweep study, or of a single-run study (one value, several seeds)."""
+def first_points(curves: pd.DataFrame) -> pd.DataFrame:
+    """The curve points of each trial in step order (a stable sort, so equal steps keep their
+    stored order)."""
+    return curves.sort_values(["number", "step"], kind="stable")
+
+
+def study_threshold(curves: pd.DataFrame, summary: pd.DataFrame,
+                    threshold: float | None) -> tuple[float, bool, float]:
+    """The reward a learning curve must reach.
+
+    Args:
+        curves: Curve points of the complete runs.
+        summary: The summary (for the best value's mean final score).
+        threshold: The report's threshold, or None for the default.
+
+    Returns:
+        (threshold, whether it is the default, the untrained reward). The default is
+        :func:`kraby_study.stats.default_threshold` of the untrained reward (the mean over every
+        complete seed of its first curve point's reward) and the best value's mean final score;
+        NaN when either is missing.
+    """
+    ordered = first_points(curves)
+    first = ordered.drop_duplicates("number")["mean_reward"].to_numpy(dtype=float)
+    untrained = float(np.mean(first)) if len(first) else math.nan
+    if threshold is not None:
+        return float(threshold), False, untrained
+    best = summary.index[summary["mark"] == "best"]
+    best_final = float(summary.loc[best[0], "final_mean"]) if len(best) else math.nan
+    if not (np.isfinite(untrained) and np.isfinite(best_final)):
+        return math.nan, True, untrained
+    return float(default_threshold(untrained, best_final)), True, untrained
+
+
+def seed_metrics(trials: pd.DataFrame, curves: pd.DataFrame, threshold: float) -> pd.DataFrame:
+    """One row per complete run: its final score, its curve's first reward, its AUC
+    (:func:`kraby_study.stats.auc` of the curve in step order) and the env steps and seconds at
+    which the curve first reached ``threshold`` (NaN if never, or without a curve)."""
+    done = trials[trials["outcome"] == Outcome.COMPLETE]
+    per_trial: dict[int, tuple[float, float, float, float]] = {}
+    for number, group in first_points(curves).groupby("number", sort=False):
+        rewards = group["mean_reward"].to_numpy(dtype=float)
+        steps, seconds = first_reach(group["step"].to_numpy(dtype=float), rewards,
+                                     group["wall_time"].to_numpy(dtype=float), threshold)
+        per_trial[int(number)] = (float(rewards[0]), auc(rewards), steps, seconds)
+    missing = (math.nan,) * 4
+    rows = []
+    for row in done.itertuples(index=False):
+        metrics = per_trial.get(int(row.number), missing)
+        rows.append((int(row.vi), row.seed, int(row.number), float(row.final_score), *metrics))
+    frame = pd.DataFrame(rows, columns=SEED_COLUMNS)
+    for column in SEED_COLUMNS[3:]:
+        frame[column] = frame[column].astype(float)
+    return frame
+
+
+def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame) -> pd.DataFrame:
+    """The summary with the curve metrics of each value's complete seeds: AUC (mean and
+    t-interval over the seeds with a curve), env steps and seconds to the threshold (mean over
+    the seeds that reached it) and how many seeds reached it."""
+    columns: dict[str, list[float]] = {name: [] for name in (
+        "auc_mean", "auc_low", "auc_high", "steps_to_threshold", "seconds_to_threshold",
+        "reached")}
+    groups = dict(iter(seeds.groupby("vi", sort=True)))
+    for vi in summary.index:
+        group = groups.get(vi, seeds.iloc[:0])
+        aucs = group["auc"].dropna().to_numpy()
+        mean, low, high = mean_interval(aucs)
+        reached = group[group["steps_to_threshold"].notna()]
+        columns["auc_mean"].append(mean)
+        columns["auc_low"].append(low)
+        columns["auc_high"].append(high)
+        columns["steps_to_threshold"].append(
+            float(reached["steps_to_threshold"].mean()) if len(reached) else math.nan)
+        columns["seconds_to_threshold"].append(
+            float(reached["seconds_to_threshold"].mean()) if len(reached) else math.nan)
+        columns["reached"].append(len(reached))
+    out = summary.copy()
+    at = list(out.columns).index("final_iqr") + 1
+    for offset, (name, values) in enumerate(columns.items()):
+        out.insert(at + offset, name, values)
+    out["reached"] = out["reached"].astype(int)
+    return out
+
+
+def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame) -> Verdict:
+    """The verdict of :func:`kraby_study.stats.verdict` from the summary rows and the seeds'
+    final scores."""
+    final = {int(vi): group["final_score"].tolist() for vi, group in seeds.groupby("vi")}
+    return verdict(final, auc_means=summary["auc_mean"].to_dict(),
+                   seconds=summary["seconds_to_threshold"].to_dict(),
+                   iqrs=summary["final_iqr"].to_dict(), p_holm=summary["p_holm"].to_dict())
+
+
+def arms_frame(sweep: Sweep) -> pd.DataFrame:
+    """A confirm study's configurations: label, origin, the source's own score, and the
+    confirmed final score (mean, t-interval, IQM, bootstrap interval, n)."""
+    arms = {str(arm.get("label")): arm for arm in sweep.data.definition.get("arms") or []
+            if isinstance(arm, dict)}
+    rows = []
+    for vi, label in enumerate(sweep.labels):
+        arm = arms.get(label, {})
+        source = arm.get("source_score")
+        row = sweep.summary.iloc[vi]
+        rows.append({"label": label, "origin": str(arm.get("origin") or "-"),
+                     "source_score": float(source) if source is not None else math.nan,
+                     "mean": row["final_mean"], "low": row["final_low"],
+                     "high": row["final_high"], "iqm": row["iqm"], "iqm_low": row["iqm_low"],
+                     "iqm_high": row["iqm_high"], "n": int(row["complete"]),
+                     "mark": row["mark"]})
+    return pd.DataFrame(rows)
+
+
+def option(options: Any, name: str, default: Any) -> Any:
+    """A report option (an attribute of ``options``), or ``default`` when it or ``options`` is
+    None."""
+    value = getattr(options, name, None) if options is not None else None
+    return default if value is None else value
+
+
+def build_sweep(data: StudyData, options: Any = None) -> Sweep:
+    """The tables of a sweep or confirm study, or of a single-run study (one value, several
+    seeds).
+
+    Args:
+        data: The stored study.
+        options: The report's options (``bootstrap``: resamples, ``threshold``: reward to reach
+            or None for the default); None for the defaults.
+    """
+    bootstrap = int(option(options, "bootstrap", BOOTSTRAP_REPETITIONS))
+    chosen = option(options, "threshold", None)
     definition = data.definition
-    if data.kind == "sweep":
+    if data.kind in SWEEP_KINDS:
         parameter = str(definition["parameter"])
         name: str | None = param_name(parameter)
         planned = list(definition.get("values", []))
         found = [swept_value(t, name, planned) for t in data.trials]
-        values = ordered_values(planned, found)
+        values = ordered_values(planned, found, sort=data.kind != "confirm")
         labels = [value_label(v) for v in values]
     else:
         parameter, name, values, labels = "", None, [SINGLE_LABEL], [SINGLE_LABEL]
@@ -189,9 +390,16 @@ def build_sweep(data: StudyData) -> Sweep:
         trials.loc[trials["vi"] < 0, "vi"] = len(values) - 1
     complete = trials[trials["outcome"] == Outcome.COMPLETE][["vi", "seed", "number"]]
     curves = data.curves.merge(complete, on="number", how="inner")
+    summary = summarise(trials, labels, bootstrap)
+    threshold, is_default, untrained = study_threshold(curves, summary, chosen)
+    seeds = seed_metrics(trials, curves, threshold)
+    summary = add_curve_metrics(summary, seeds)
+    colours = value_colours(labels if data.kind == "confirm" else values)
     return Sweep(data=data, parameter=parameter, name=name or SINGLE_LABEL, values=values,
-                 labels=labels, colours=value_colours(values), trials=trials, curves=curves,
-                 bands=curve_bands(curves), summary=summarise(trials, labels))
+                 labels=labels, colours=colours, trials=trials, curves=curves,
+                 bands=curve_bands(curves), summary=summary, seeds=seeds, threshold=threshold,
+                 threshold_default=is_default, untrained=untrained, bootstrap=bootstrap,
+                 verdict=study_verdict(summary, seeds))
 
 
 def legend_label(sweep: Sweep, vi: int) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, TextIO
 
 from omegaconf import DictConfig
@@ -12,6 +13,7 @@ from kraby_study.plan.space import (
     apply_params,
     checkpoint_every,
     distributions,
+    fitted_params,
     make_pruner,
     make_sampler,
     search_definition,
@@ -97,9 +99,27 @@ class SearchSource(StudySource):
         return self.ledger.checkpoint(number, step, value)
 
 
+def warm_start(ledger: StudyLedger, cfg: DictConfig,
+               starts: Sequence[tuple[str, dict[str, Any]]]) -> list[str]:
+    """Queue the known configurations (name, resolved settings) a new search evaluates first, as
+    far as its space holds them, at most its trial total; returns the names queued."""
+    queued: list[str] = []
+    with ledger.plan_lock():
+        if ledger.trials():
+            return queued  # not a new search: it was warm-started when it began
+        for name, settings in starts[:int(cfg.search.trials)]:
+            params = fitted_params(cfg, settings)
+            if params:
+                ledger.queue(params, TrialAttrs())
+                queued.append(name)
+    return queued
+
+
 def run_search(store: Store, cfg: DictConfig, workers: int, stream: TextIO,
-               live: bool | None = None) -> tuple[RunSummary, StudyLedger]:
-    """Run a search until its study holds ``search.trials`` trials."""
+               live: bool | None = None, starts: Sequence[tuple[str, dict[str, Any]]] = (),
+               ) -> tuple[RunSummary, StudyLedger]:
+    """Run a search until its study holds ``search.trials`` trials; a new search evaluates the
+    ``starts`` configurations (name, resolved settings) first."""
     definition = search_definition(cfg)
     ledger = store.define(str(cfg.search.name),
                           StudyAttrs(kind="search", definition=definition,
@@ -108,6 +128,9 @@ def run_search(store: Store, cfg: DictConfig, workers: int, stream: TextIO,
     ledger.update(StudyAttrs(sampler=str(cfg.search.sampler), sampler_seed=int(cfg.search.seed),
                              planned=int(cfg.search.trials)))
     requeue_orphans(ledger, stream)
+    queued = warm_start(ledger, cfg, starts)
+    if queued:
+        print(f"search {ledger.name}: evaluating {', '.join(queued)} first", file=stream)
     source = SearchSource(ledger, cfg)
     counted = source.counted()
     done = sum(1 for t in counted if t.state not in (TrialState.WAITING, TrialState.RUNNING))

@@ -25,8 +25,10 @@ from kraby_study.store.ledger import StudyLedger
 
 
 def swept_name(plan: StudyPlan) -> str | None:
-    """The Optuna parameter name of a sweep's value; None for a single training run."""
-    return param_name(plan.parameter) if plan.definition.get("kind") == "sweep" else None
+    """The Optuna parameter name of a sweep's value (a confirm study's configuration); None for
+    a single training run."""
+    swept = plan.definition.get("kind") in ("sweep", "confirm")
+    return param_name(plan.parameter) if swept else None
 
 
 class SweepSource(StudySource):

@@ -1,0 +1,103 @@
+"""A confirm study: configurations retrained on fresh seeds, one arm per configuration.
+
+A search's best trial is the best of many noisy draws, an optimistic estimate. ``confirm``
+retrains the top configurations of a search (or the top values of a sweep), and any baseline
+config, on seeds no trial of the source used, at the source's budget. Pure: the arms come in
+already read from the store.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from omegaconf import DictConfig
+
+from kraby_study.errors import ConfigError
+from kraby_study.plan.spec import TrialSpec
+from kraby_study.plan.sweep import StudyPlan, model_path
+from kraby_study.records import sweep_key
+
+PARAMETER = "config"
+"""The Optuna parameter of a confirm study's trials: the arm's label."""
+
+
+@dataclass(frozen=True)
+class Arm:
+    """One configuration a confirm study retrains."""
+
+    label: str
+    """Its name in tables and legends: ``t12`` (a search trial), ``gamma=0.8`` (a sweep's
+    value) or ``ppo=tuned`` (a baseline config)."""
+    settings: dict[str, Any]
+    """The resolved env and ppo settings it trains with, exactly as its source stored them."""
+    origin: str
+    """Where it comes from, in words."""
+    source_score: float | None = None
+    """Its score in the source study (a trial's value, or a value's mean final score)."""
+
+
+@dataclass(frozen=True)
+class Source:
+    """The study whose configurations are confirmed, as read from the store."""
+
+    name: str
+    arms: list[Arm]
+    """Its top configurations, best first."""
+    used_seeds: set[int]
+    """Every seed its trials trained."""
+    steps: int
+    curve_every: int
+    env_keys: list[str]
+    """Env settings it varied (written with the ppo settings by ``best``)."""
+
+
+def fresh_seeds(used: set[int], count: int, first: int = 0) -> list[int]:
+    """``count`` seeds from ``first`` on that are not in ``used``."""
+    seeds: list[int] = []
+    seed = first
+    while len(seeds) < count:
+        if seed not in used:
+            seeds.append(seed)
+        seed += 1
+    return seeds
+
+
+def confirm_name(source: str | None, baselines: list[str]) -> str:
+    """``NAME-confirm``, or ``confirm-<baselines>`` when only baselines are retrained."""
+    return f"{source}-confirm" if source else "confirm-" + "+".join(baselines)
+
+
+def confirm_plan(cfg: DictConfig, source: Source | None, baselines: list[Arm]) -> StudyPlan:
+    """One spec per (arm, fresh seed): the source's top arms first, then the baselines.
+
+    Raises:
+        ConfigError: Two arms share a label, or there is no arm at all.
+    """
+    arms = (source.arms if source else []) + baselines
+    labels = [arm.label for arm in arms]
+    if not arms:
+        raise ConfigError("confirm needs --study-name NAME or at least one --baseline ppo=NAME")
+    if len(set(labels)) != len(labels):
+        raise ConfigError(f"confirm: two configurations are named alike ({', '.join(labels)})")
+    seeds = fresh_seeds(source.used_seeds if source else set(), int(cfg.confirm.seeds),
+                        first=int(cfg.seed))
+    steps = source.steps if source else int(cfg.budget.steps)
+    curve_every = source.curve_every if source else int(cfg.budget.curve_every)
+    name = confirm_name(source.name if source else None, [a.label for a in baselines])
+    specs = [TrialSpec(study=name, key=sweep_key(index, seed), seed=seed, steps=steps,
+                       curve_every=curve_every, settings=arm.settings, value=arm.label,
+                       model_path=model_path(cfg, name, sweep_key(index, seed)),
+                       label=f"{arm.label} seed {seed}")
+             for index, arm in enumerate(arms) for seed in seeds]
+    definition = {
+        "kind": "confirm", "parameter": PARAMETER, "values": labels,
+        "source": source.name if source else None,
+        "source_winner": source.arms[0].label if source else None,
+        "arms": [{"label": a.label, "origin": a.origin, "source_score": a.source_score,
+                  "settings": a.settings} for a in arms],
+        "seeds": seeds, "steps": steps, "curve_every": curve_every,
+        "env_keys": source.env_keys if source else [],
+    }
+    return StudyPlan(name=name, parameter=PARAMETER, values=labels, specs=specs,
+                     definition=definition)

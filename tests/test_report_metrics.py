@@ -1,0 +1,305 @@
+"""The report's metrics per value, its verdict and its three comparison figures, checked
+against hand computations on a store of hand-made curves and scores."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+from conftest import sqlite_url
+from optuna.distributions import CategoricalDistribution
+from optuna.trial import TrialState, create_trial
+from scipy import stats
+
+from kraby_study.records import Outcome, StudyAttrs, TrialAttrs
+from kraby_study.report import ReportIndex, write_report
+from kraby_study.report.synthetic import Run, add_sweep, write_curves
+from kraby_study.stats import BOOTSTRAP_SEED
+from kraby_study.store.connection import Store
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+NEW_FIGURES = ["sample_efficiency", "time_to_threshold", "improvement"]
+BOOTSTRAP = 1000
+"""Resamples of the fixture's report: not the default, so the option must reach the tables."""
+STEPS = (100, 200, 300, 400)
+
+# learning_rate: final scores per value; 0.01 is the best (mean 5.5).
+FINALS = {0.001: [1.0, 2.0, 3.0, 10.0], 0.01: [4.0, 5.0, 6.0, 7.0], 0.1: [0.5],
+          0.3: [2.8, 3.0, 3.2]}
+WALL = {0.001: 4.0, 0.01: 12.0, 0.1: 4.0, 0.3: 8.0}
+"""Training time of every seed of a value; curve point i is at (i + 1) / 4 of it."""
+FAILED_CURVE = [(100, 50.0, 1.0), (200, 60.0, 2.0)]
+"""The failed run's curve: counted anywhere, it would move the untrained reward."""
+
+
+def _rewards(value: float, final: float) -> list[float]:
+    """Hand-made curves, every one starting at 0 (so the untrained reward is 0). 0.3 learns
+    early (twice its final score from the second point on), the others climb to their final
+    score."""
+    if value == 0.3:
+        return [0.0, 2 * final, 2 * final, final]
+    return [0.0, final / 2, final, final]
+
+
+def _curve(value: float, final: float) -> list[tuple[int, float, float]]:
+    wall = WALL[value]
+    return [(step, reward, wall * (i + 1) / 4)
+            for i, (step, reward) in enumerate(zip(STEPS, _rewards(value, final), strict=True))]
+
+
+def _add_confirm(store: Store) -> None:
+    """A confirm study as the confirm command stores it: labels as values (given in an order
+    that sorting would change), the search's winner t12 losing to t7 on fresh seeds."""
+    labels = ["tuned", "t7", "t12"]
+    finals = {"tuned": [-0.05, -0.06, -0.04], "t7": [-0.010, -0.012, -0.011],
+              "t12": [-0.03, -0.028, -0.032]}
+    arms = [{"label": "tuned", "source_score": None, "origin": "ppo config 'tuned'"},
+            {"label": "t7", "source_score": -0.0201, "origin": "trial 7 of search 'ppo_search'"},
+            {"label": "t12", "source_score": -0.0123,
+             "origin": "trial 12 of search 'ppo_search'"}]
+    definition = {"kind": "confirm", "parameter": "config", "values": labels,
+                  "source": "ppo_search", "source_winner": "t12", "arms": arms,
+                  "steps": 400, "curve_every": 100}
+    ledger = store.define("confirm_ppo_search", StudyAttrs(
+        kind="confirm", definition=definition, fingerprint="x", planned=9))
+    distribution = CategoricalDistribution(labels)
+    curves = {}
+    number = 0
+    for vi, label in enumerate(labels):
+        for seed, final in enumerate(finals[label]):
+            attrs = TrialAttrs(key=f"v{vi}-s{seed}", seed=100 + seed, final_score=final,
+                               wall_time=4.0, env_steps=400)
+            ledger.add_trials([create_trial(state=TrialState.COMPLETE, value=final,
+                                            params={"config": label},
+                                            distributions={"config": distribution},
+                                            user_attrs=attrs.stored())])
+            curves[number] = [(s, final * (1 + 4 / s), s / 100) for s in STEPS]
+            number += 1
+    write_curves(ledger, curves)
+
+
+@pytest.fixture(scope="module")
+def store_url(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """learning_rate: 4 values with hand-made curves, one failed run, one value with a single
+    complete seed; a sweep with no complete run; a confirm study."""
+    url = sqlite_url(tmp_path_factory.mktemp("metrics") / "k.db")
+    store = Store(url)
+    try:
+        runs = [Run(value=value, seed=seed, final_score=final, wall_time=WALL[value],
+                    curve=_curve(value, final))
+                for value, finals in FINALS.items() for seed, final in enumerate(finals)]
+        runs.append(Run(value=0.001, seed=4, outcome=Outcome.FAILED, wall_time=2.0,
+                        failure="diverged: ValueError: nan in the actions", curve=FAILED_CURVE))
+        add_sweep(store, "learning_rate", "ppo.learning_rate", list(FINALS), runs, steps=400,
+                  curve_every=100)
+        add_sweep(store, "waiting", "ppo.gamma", [0.9, 0.99],
+                  [Run(value=v, seed=0, outcome=Outcome.PENDING) for v in (0.9, 0.99)])
+        _add_confirm(store)
+    finally:
+        store.close()
+    return url
+
+
+@pytest.fixture(scope="module")
+def report(store_url: str, tmp_path_factory: pytest.TempPathFactory) -> ReportIndex:
+    options = SimpleNamespace(bootstrap=BOOTSTRAP, threshold=None)
+    return write_report(store_url, tmp_path_factory.mktemp("out"), policy=False, options=options)
+
+
+def _summary(out: Path, study: str = "learning_rate") -> pd.DataFrame:
+    return pd.read_csv(out / study / "summary.csv", keep_default_na=False,
+                       na_values=[""]).set_index("value")
+
+
+def _iqm_bootstrap(values: list[float], repetitions: int) -> tuple[float, float]:
+    """The percentile bootstrap of the interquartile mean, straight from SciPy."""
+    result = stats.bootstrap((np.asarray(values),),
+                             lambda x, axis: stats.trim_mean(x, 0.25, axis=axis),
+                             n_resamples=repetitions, vectorized=True, method="percentile",
+                             rng=np.random.default_rng(BOOTSTRAP_SEED))
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+
+
+def _improvement_bootstrap(x: list[float], y: list[float],
+                           repetitions: int) -> tuple[float, float]:
+    """The percentile bootstrap of P(X > Y) + 0.5 P(X = Y), each sample resampled apart."""
+    def statistic(a: np.ndarray, b: np.ndarray, axis: int) -> np.ndarray:
+        wins = (a[..., :, None] > b[..., None, :]) + 0.5 * (a[..., :, None] == b[..., None, :])
+        return wins.mean(axis=(-2, -1))
+
+    result = stats.bootstrap((np.asarray(x), np.asarray(y)), statistic, n_resamples=repetitions,
+                             vectorized=True, paired=False, method="percentile",
+                             rng=np.random.default_rng(BOOTSTRAP_SEED))
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+
+
+def _t_interval(values: list[float]) -> tuple[float, float, float]:
+    x = np.asarray(values)
+    half = stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / math.sqrt(len(x))
+    return float(x.mean()), float(x.mean() - half), float(x.mean() + half)
+
+
+def test_iqm_iqr_and_the_failed_run(report: ReportIndex) -> None:
+    summary = _summary(report.out)
+    low = summary.loc[0.001]
+    assert (low["complete"], low["failed"]) == (4, 1)
+    assert low["iqm"] == pytest.approx(2.5)  # middle half of 1, 2, 3, 10
+    assert (low["iqm_low"], low["iqm_high"]) == pytest.approx(
+        _iqm_bootstrap(FINALS[0.001], BOOTSTRAP), rel=1e-5)
+    assert low["iqm_low"] <= 2.5 <= low["iqm_high"]
+    assert low["final_iqr"] == pytest.approx(4.75 - 1.75)  # linear quartiles
+    best = summary.loc[0.01]
+    assert best["iqm"] == pytest.approx(5.5) and best["final_iqr"] == pytest.approx(1.5)
+    assert summary.loc[0.3, "final_iqr"] == pytest.approx(0.2)
+    # The failed run is listed, and nowhere in the metrics.
+    text = (report.out / "learning_rate" / "summary.md").read_text()
+    assert "learning_rate = 0.001, seed 4 (trial 12): diverged" in text
+
+
+def test_auc_is_the_mean_of_each_seed_curve(report: ReportIndex) -> None:
+    summary = _summary(report.out)
+    for value, finals in FINALS.items():
+        aucs = [float(np.mean(_rewards(value, f))) for f in finals]
+        row = summary.loc[value]
+        assert row["auc_mean"] == pytest.approx(np.mean(aucs), rel=1e-5)
+        if len(aucs) > 1:
+            _, low, high = _t_interval(aucs)
+            assert (row["auc_low"], row["auc_high"]) == pytest.approx((low, high), rel=1e-5)
+    assert summary.loc[0.3, "auc_mean"] == pytest.approx(1.25 * 3.0)
+
+
+def test_default_threshold_reached_and_never_reached(report: ReportIndex) -> None:
+    summary = _summary(report.out)
+    # Untrained: every complete seed's first point is 0 (the failed run's 50 does not count);
+    # 90 % of the way to the best mean final score 5.5.
+    threshold = 0.0 + 0.9 * 5.5
+    expected = {}
+    for value, finals in FINALS.items():
+        hits = []
+        for final in finals:
+            curve = _curve(value, final)
+            first = next(((s, t) for s, r, t in curve if r >= threshold), None)
+            if first:
+                hits.append(first)
+        expected[value] = hits
+    assert [len(expected[v]) for v in FINALS] == [1, 3, 0, 3]
+    for value, hits in expected.items():
+        row = summary.loc[value]
+        assert row["reached"] == len(hits)
+        if hits:
+            assert row["steps_to_threshold"] == pytest.approx(np.mean([s for s, _ in hits]))
+            assert row["seconds_to_threshold"] == pytest.approx(np.mean([t for _, t in hits]))
+        else:
+            assert math.isnan(row["steps_to_threshold"])
+            assert math.isnan(row["seconds_to_threshold"])
+    text = (report.out / "learning_rate" / "summary.md").read_text()
+    assert "mean episode reward >= 4.95, the default" in text
+    assert "| 0/1 |" in text and "| 3/4 |" in text
+
+
+def test_a_single_seed_has_no_intervals(report: ReportIndex) -> None:
+    row = _summary(report.out).loc[0.1]
+    assert row["complete"] == 1
+    assert row["iqm"] == pytest.approx(0.5) and row["auc_mean"] == pytest.approx(0.3125)
+    for column in ("iqm_low", "iqm_high", "auc_low", "auc_high", "final_iqr", "p_vs_best",
+                   "p_holm", "p_improvement_low", "p_improvement_high"):
+        assert math.isnan(row[column]), column
+    assert row["p_improvement"] == pytest.approx(1.0)  # every best seed beats 0.5
+    assert pd.isna(row["mark"])  # neither best nor tied: an empty cell
+
+
+def test_holm_ties_and_probability_of_improvement(report: ReportIndex) -> None:
+    summary = _summary(report.out)
+    best = FINALS[0.01]
+    raw = {v: stats.ttest_ind(best, FINALS[v], equal_var=False).pvalue for v in (0.001, 0.3)}
+    order = sorted(raw, key=raw.get)
+    holm = {order[0]: min(1.0, 2 * raw[order[0]])}
+    holm[order[1]] = max(holm[order[0]], min(1.0, raw[order[1]]))
+    for value in (0.001, 0.3):
+        assert summary.loc[value, "p_vs_best"] == pytest.approx(raw[value], rel=1e-4)
+        assert summary.loc[value, "p_holm"] == pytest.approx(holm[value], rel=1e-4)
+    # 0.3 differs from the best on the raw test, but not after Holm's correction: a tie.
+    assert summary.loc[0.3, "p_vs_best"] < 0.05 <= summary.loc[0.3, "p_holm"]
+    assert list(summary["mark"].fillna("")) == ["tie", "best", "", "tie"]
+    assert math.isnan(summary.loc[0.01, "p_holm"])
+    for value in (0.001, 0.3):
+        pairs = [(b > y) + 0.5 * (b == y) for b in best for y in FINALS[value]]
+        row = summary.loc[value]
+        assert row["p_improvement"] == pytest.approx(np.mean(pairs))
+        assert row["p_improvement_low"] <= row["p_improvement"] <= row["p_improvement_high"]
+        assert (row["p_improvement_low"], row["p_improvement_high"]) == pytest.approx(
+            _improvement_bootstrap(best, FINALS[value], BOOTSTRAP))
+    assert summary.loc[0.001, "p_improvement"] == pytest.approx(0.75)
+    assert summary.loc[0.3, "p_improvement"] == pytest.approx(1.0)
+    assert math.isnan(summary.loc[0.01, "p_improvement"])
+    text = (report.out / "learning_rate" / "summary.md").read_text()
+    assert "Holm-corrected" in text and "P(best > value)" in text
+    assert text.count("(1,000 resamples") == 2  # the IQM's and P(best > value)'s, as asked
+    assert "no correction for multiple comparisons" not in report.markdown.read_text()
+
+
+def test_verdict_sentence(report: ReportIndex) -> None:
+    expected = ("learning_rate: 0.01 best final score (mean 5.5, 95 % CI [",
+                "n=4; IQM 5.5, 95 % bootstrap CI [",
+                "tied: 0.001, 0.3, Holm-corrected Welch p >= 0.05)",
+                "; 0.3 most sample-efficient (AUC 3.75, 95 % CI [",
+                "; 0.001 fastest to threshold (2 s, 200 env steps, mean over the 1/4 seeds",
+                "; 0.3 most repeatable (final IQR 0.2, n=3).",
+                " Too few seeds to test: 0.1.")
+    summary_md = (report.out / "learning_rate" / "summary.md").read_text()
+    verdict = summary_md.split("\n\n")[1]  # the first paragraph under the title
+    index = report.markdown.read_text()
+    for part in expected:
+        assert part in verdict and part in index, part
+    waiting = (report.out / "waiting" / "summary.md").read_text()
+    assert "No run is complete yet" in waiting
+
+
+def test_three_figures_are_drawn_and_listed(report: ReportIndex) -> None:
+    index = report.markdown.read_text()
+    for stem in NEW_FIGURES:
+        png = report.out / "learning_rate" / f"{stem}.png"
+        assert png.read_bytes()[:8] == PNG_MAGIC and png.stat().st_size > 10_000
+        assert f"(learning_rate/{stem}.png)" in index
+    assert not list((report.out / "waiting").glob("*.png"))
+
+
+def test_confirm_study(report: ReportIndex) -> None:
+    summary = pd.read_csv(report.out / "confirm_ppo_search" / "summary.csv")
+    assert summary["value"].tolist() == ["tuned", "t7", "t12"]  # the order given, not sorted
+    assert summary["mark"].fillna("").tolist()[1] == "best"
+    winner = ("ppo_search's winner t12 is not the confirmed winner: t7 has the best mean final "
+              "score on 3 fresh seeds.")
+    text = (report.out / "confirm_ppo_search" / "summary.md").read_text()
+    index = report.markdown.read_text()
+    assert winner in text and winner in index
+    assert "Confirmed verdict: t7 best final score (mean -0.011" in text
+    mean, low, high = _t_interval([-0.010, -0.012, -0.011])
+    row = next(line for line in text.splitlines() if line.startswith("| t12 |"))
+    assert "trial 12 of search 'ppo_search'" in row and "-0.0123" in row
+    row = next(line for line in text.splitlines() if line.startswith("| t7 |"))
+    assert f"| -0.0201 | {mean:.4g} | [{low:.4g}, {high:.4g}] |" in row
+    assert row.endswith("| 3 |")
+    assert "| configuration | origin | source's score |" in index
+
+
+def test_threshold_option_changes_reach(store_url: str, report: ReportIndex,
+                                        tmp_path: Path) -> None:
+    options = SimpleNamespace(bootstrap=BOOTSTRAP, threshold=1.0)
+    index = write_report(store_url, tmp_path / "r", study="learning_rate", policy=False,
+                         options=options)
+    summary = _summary(index.out)
+    default = _summary(report.out)
+    # Reward >= 1: 0.01 at its second point (200) in every seed; 0.001 at 300 for the seed
+    # whose final score is 1, at 200 for the others; 0.1 (0, 0.25, 0.5, 0.5) never.
+    assert summary.loc[0.01, "reached"] == 4 and default.loc[0.01, "reached"] == 3
+    assert summary.loc[0.01, "steps_to_threshold"] == pytest.approx(200)
+    assert summary.loc[0.001, "reached"] == 4
+    assert summary.loc[0.001, "steps_to_threshold"] == pytest.approx((300 + 3 * 200) / 4)
+    assert summary.loc[0.1, "reached"] == 0
+    assert "mean episode reward >= 1, set by the report's option report.threshold" in (
+        index.out / "learning_rate" / "summary.md").read_text()

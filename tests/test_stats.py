@@ -1,0 +1,262 @@
+"""The statistics of a report, each against values worked out by hand on small samples."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from kraby_study.stats import (
+    ALPHA,
+    BOOTSTRAP_SEED,
+    HOLM_NAME,
+    IQM_INTERVAL_NAME,
+    Verdict,
+    auc,
+    compare_to_best,
+    default_threshold,
+    first_reach,
+    holm,
+    iqm,
+    iqm_interval,
+    iqm_interval_name,
+    iqr,
+    mean_interval,
+    p_improvement,
+    p_improvement_interval,
+    verdict,
+)
+
+NAN = math.nan
+SPREAD = [3.1, 0.4, 2.2, 5.9, 1.7, 4.4, 2.8, 3.6, 0.9, 5.1]
+"""Ten distinct values, enough for bootstrap intervals of some width."""
+
+
+def nan_pair(pair: tuple[float, float]) -> bool:
+    return math.isnan(pair[0]) and math.isnan(pair[1])
+
+
+# IQM and its interval -----------------------------------------------------------------------------
+
+
+def test_iqm_is_the_mean_of_the_middle_half() -> None:
+    # n = 8: cut 2 from each end, the middle four 3, 4, 5, 6 average 4.5; order does not matter.
+    assert iqm([1, 2, 3, 4, 5, 6, 7, 8]) == pytest.approx(4.5)
+    assert iqm([8, 1, 7, 2, 6, 3, 5, 4]) == pytest.approx(4.5)
+    # n = 5: cut floor(5 / 4) = 1 from each end: (2 + 3 + 4) / 3 = 3, the outlier 100 ignored.
+    assert iqm([1, 2, 3, 4, 100]) == pytest.approx(3.0)
+    # n = 3: nothing to cut, the plain mean.
+    assert iqm([1, 2, 6]) == pytest.approx(3.0)
+    assert math.isnan(iqm([]))
+
+
+def test_iqm_interval_on_a_hand_computed_bootstrap() -> None:
+    # Two seeds 0 and 1: a resample's IQM (the mean, n = 2) is 0 (p = 1/4), 0.5 (p = 1/2) or
+    # 1 (p = 1/4). The 2.5th and 97.5th percentiles are 0 and 1; the 30th and 70th are 0.5.
+    assert iqm_interval([0.0, 1.0]) == pytest.approx((0.0, 1.0))
+    assert iqm_interval([0.0, 1.0], level=0.4) == pytest.approx((0.5, 0.5))
+
+
+def test_iqm_interval_contains_the_estimate_and_is_reproducible() -> None:
+    low, high = iqm_interval(SPREAD)
+    assert min(SPREAD) <= low < iqm(SPREAD) < high <= max(SPREAD)
+    assert iqm_interval(SPREAD) == (low, high)
+    assert iqm_interval(SPREAD, seed=BOOTSTRAP_SEED) == (low, high)
+    assert iqm_interval(SPREAD, seed=BOOTSTRAP_SEED + 1) != (low, high)
+    narrow = iqm_interval(SPREAD, level=0.5)
+    assert low <= narrow[0] < narrow[1] <= high
+
+
+def test_iqm_interval_edge_cases_without_warnings() -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert nan_pair(iqm_interval([]))
+        assert nan_pair(iqm_interval([4.0]))
+        assert iqm_interval([2.5, 2.5, 2.5]) == (2.5, 2.5)
+
+
+def test_interval_names_follow_the_resamples() -> None:
+    assert IQM_INTERVAL_NAME == ("95 % percentile-bootstrap interval of the interquartile mean"
+                                 " over seeds (2,000 resamples, fixed seed)")
+    assert "(500 resamples" in iqm_interval_name(500)
+    assert HOLM_NAME == ("Welch's t-test against the best value, Holm-corrected over the study's"
+                         " comparisons, alpha = 0.05")
+
+
+# Sample efficiency and time to a threshold -----------------------------------------------------
+
+
+def test_auc_is_the_mean_of_the_curve() -> None:
+    # Five bins rising 2, 4, 6, 8, 10: area 30 bin-widths over 5 bins = 6.
+    assert auc([2.0, 4.0, 6.0, 8.0, 10.0]) == pytest.approx(6.0)
+    # Same final reward, reached sooner: more area.
+    assert auc([2.0, 10.0, 10.0, 10.0, 10.0]) == pytest.approx(8.4)
+    assert math.isnan(auc([]))
+
+
+def test_first_reach() -> None:
+    steps, times = [100, 200, 300, 400, 500], [1.5, 2.5, 3.5, 4.5, 5.5]
+    rewards = [0.0, 5.0, 9.0, 7.0, 12.0]
+    assert first_reach(steps, rewards, times, 9.0) == (300.0, 3.5)  # equal counts as reached
+    assert first_reach(steps, rewards, times, 8.0) == (300.0, 3.5)  # the first, not the last
+    assert first_reach(steps, rewards, times, -1.0) == (100.0, 1.5)
+    assert nan_pair(first_reach(steps, rewards, times, 12.5))
+    assert nan_pair(first_reach(steps, rewards, times, NAN))
+    assert nan_pair(first_reach([], [], [], 0.0))
+
+
+def test_default_threshold() -> None:
+    assert default_threshold(10.0, 110.0) == pytest.approx(100.0)
+    assert default_threshold(10.0, 110.0, fraction=0.5) == pytest.approx(60.0)
+    # Negative rewards: -200 + 0.9 * (-20 - -200) = -200 + 162 = -38.
+    assert default_threshold(-200.0, -20.0) == pytest.approx(-38.0)
+
+
+# Spread ------------------------------------------------------------------------------------------
+
+
+def test_iqr() -> None:
+    # Linear interpolation: [1..5] has Q1 = 2 and Q3 = 4; [1..4] has Q1 = 1.75, Q3 = 3.25.
+    assert iqr([5, 1, 4, 2, 3]) == pytest.approx(2.0)
+    assert iqr([1, 2, 3, 4]) == pytest.approx(1.5)
+    assert iqr([7.0]) == 0.0
+    assert math.isnan(iqr([]))
+
+
+def test_mean_interval() -> None:
+    # [1, 2, 3]: mean 2, sd 1, half-width t(0.975, 2) / sqrt(3) = 4.3027 / 1.7321 = 2.4841.
+    mean, low, high = mean_interval([1.0, 2.0, 3.0])
+    half = stats.t.ppf(0.975, 2) / math.sqrt(3)
+    assert half == pytest.approx(2.4841, abs=1e-4)
+    assert (mean, low, high) == pytest.approx((2.0, 2.0 - half, 2.0 + half))
+    mean, low, high = mean_interval([4.0])
+    assert mean == 4.0 and math.isnan(low) and math.isnan(high)
+    assert all(math.isnan(v) for v in mean_interval([]))
+
+
+# Comparisons -------------------------------------------------------------------------------------
+
+
+def test_holm_on_a_known_example() -> None:
+    # p = [0.01, 0.04, 0.03, 0.005], m = 4. Sorted up: 0.005, 0.01, 0.03, 0.04, times
+    # m, m - 1, ...: 4 * 0.005 = 0.02, 3 * 0.01 = 0.03, 2 * 0.03 = 0.06, 1 * 0.04 = 0.04.
+    # Running maximum: 0.02, 0.03, 0.06, 0.06. Back in the given order: 0.03, 0.06, 0.06, 0.02.
+    assert holm([0.01, 0.04, 0.03, 0.005]) == pytest.approx([0.03, 0.06, 0.06, 0.02])
+
+
+def test_holm_nan_cap_and_empty() -> None:
+    # NaN is not counted: m = 2, so 2 * 0.01 = 0.02 and max(0.02, 1 * 0.02) = 0.02 (not 0.03).
+    adjusted = holm([0.01, NAN, 0.02])
+    assert adjusted[0] == pytest.approx(0.02) and adjusted[2] == pytest.approx(0.02)
+    assert math.isnan(adjusted[1])
+    # 2 * 0.5 = 1.0, then 1 * 0.6 = 0.6 is raised to the running maximum 1.0; 2 * 0.7 is capped.
+    assert holm([0.5, 0.6]) == pytest.approx([1.0, 1.0])
+    assert holm([0.7, 0.9]) == pytest.approx([1.0, 1.0])
+    assert holm([0.03]) == pytest.approx([0.03])
+    assert holm([]) == []
+
+
+def test_holm_is_monotone_and_never_below_the_raw_p() -> None:
+    raw = np.random.default_rng(3).uniform(0.0, 0.3, size=12)
+    adjusted = np.array(holm(list(raw)))
+    order = np.argsort(raw)
+    assert np.all(np.diff(adjusted[order]) >= 0.0)
+    assert np.all(adjusted >= raw) and np.all(adjusted <= 1.0)
+
+
+def test_p_improvement_counts_pairs() -> None:
+    assert p_improvement([3, 4], [1, 2]) == pytest.approx(1.0)
+    # Pairs of [1, 2] and [1, 2]: tie, lose, win, tie: (0.5 + 0 + 1 + 0.5) / 4 = 0.5.
+    assert p_improvement([1, 2], [1, 2]) == pytest.approx(0.5)
+    assert p_improvement([1, 2], [3, 4]) == pytest.approx(0.0)
+    # [2, 4] against [1, 3, 4]: 2 beats 1; 4 beats 1 and 3 and ties 4: 3.5 of 6 pairs.
+    assert p_improvement([2, 4], [1, 3, 4]) == pytest.approx(3.5 / 6)
+    assert p_improvement([1, 3, 4], [2, 4]) == pytest.approx(2.5 / 6)
+    assert math.isnan(p_improvement([], [1.0]))
+    assert math.isnan(p_improvement([1.0], []))
+
+
+def test_p_improvement_interval_on_a_hand_computed_bootstrap() -> None:
+    # y is always 0.5; a resample of x = [0, 1] beats it in 0, 1 or 2 of 2 seeds, with p = 1/4,
+    # 1/2, 1/4: the estimate is 0, 0.5 or 1, and the 95 % percentile interval is [0, 1].
+    assert p_improvement_interval([0.0, 1.0], [0.5, 0.5]) == pytest.approx((0.0, 1.0))
+    # Every seed of x beats every seed of y, in every resample.
+    assert p_improvement_interval([3.0, 4.0], [1.0, 2.0]) == pytest.approx((1.0, 1.0))
+
+
+def test_p_improvement_interval_contains_the_estimate_and_is_reproducible() -> None:
+    other = [v + 1.0 for v in SPREAD[:8]]
+    low, high = p_improvement_interval(SPREAD, other)
+    assert 0.0 <= low < p_improvement(SPREAD, other) < high <= 1.0
+    assert p_improvement_interval(SPREAD, other) == (low, high)
+    assert p_improvement_interval(SPREAD, other, seed=7) != (low, high)
+
+
+def test_p_improvement_interval_edge_cases_without_warnings() -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert nan_pair(p_improvement_interval([1.0], [1.0, 2.0]))
+        assert nan_pair(p_improvement_interval([1.0, 2.0], []))
+        assert p_improvement_interval([1.0, 1.0], [2.0, 2.0]) == (0.0, 0.0)
+        assert p_improvement_interval([2.0, 2.0], [2.0, 2.0]) == (0.5, 0.5)
+
+
+def test_compare_to_best_takes_the_first_of_tied_means() -> None:
+    best, pvalues = compare_to_best({0: [1.0, 3.0], 1: [1.5, 2.5], 2: [], 3: [0.0, 1.0]})
+    assert best == 0
+    assert set(pvalues) == {0, 1, 3} and math.isnan(pvalues[0])
+    assert pvalues[1] == pytest.approx(1.0)
+
+
+# The verdict -------------------------------------------------------------------------------------
+
+
+def test_verdict_on_constructed_groups() -> None:
+    final = {0: [1.0, 2.0, 3.0], 1: [4.0, 5.0, 6.0], 2: [4.5, 5.0, 5.5], 3: [5.0]}
+    result = verdict(
+        final,
+        auc_means={0: 1.0, 1: 3.0, 2: 3.0, 3: 2.0},
+        seconds={0: NAN, 1: 50.0, 2: 40.0, 3: 40.0},
+        iqrs={0: 1.0, 1: 1.0, 2: 0.5, 3: 0.0},
+        p_holm={0: 0.001, 1: NAN, 2: ALPHA, 3: NAN},
+    )
+    # Means 2, 5, 5, 5: group 1 is the first of three best means.
+    assert result.best == 1
+    # Group 2's p = ALPHA is not significant; group 3 has no test; group 0 is worse.
+    assert result.tied == [2]
+    assert result.most_sample_efficient == 1  # 3.0 twice: the first
+    assert result.fastest == 2  # 40 s twice: the first; group 0 never reached (NaN)
+    assert result.most_repeatable == 2  # group 3's IQR 0 is from one seed only
+    assert result == Verdict(best=1, tied=[2], most_sample_efficient=1, fastest=2,
+                             most_repeatable=2)
+
+
+def test_verdict_ties_go_to_the_first_group() -> None:
+    result = verdict({5: [1.0, 2.0], 2: [1.5, 1.5]}, auc_means={5: 1.0, 2: 1.0},
+                     seconds={5: 9.0, 2: 9.0}, iqrs={5: 0.5, 2: 0.5}, p_holm={2: 0.9})
+    assert result == Verdict(best=5, tied=[2], most_sample_efficient=5, fastest=5,
+                             most_repeatable=5)
+
+
+def test_verdict_ignores_nan() -> None:
+    final = {0: [NAN, NAN], 1: [1.0, NAN, 2.0], 2: [0.0, NAN]}
+    result = verdict(final, auc_means={0: NAN, 1: NAN}, seconds={0: NAN, 1: NAN, 2: NAN},
+                     iqrs={0: NAN, 1: 0.5, 2: 0.0}, p_holm={0: NAN, 2: NAN})
+    assert result.best == 1  # mean 1.5 over its two complete seeds
+    assert result.tied == []
+    assert result.most_sample_efficient is None
+    assert result.fastest is None
+    assert result.most_repeatable == 1  # group 2 has one complete seed
+    empty = verdict({}, {}, {}, {}, {})
+    assert empty == Verdict(best=None, tied=[], most_sample_efficient=None, fastest=None,
+                            most_repeatable=None)
+
+
+def test_verdict_is_frozen() -> None:
+    result = verdict({0: [1.0]}, {}, {}, {}, {})
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        result.best = 1  # type: ignore[misc]
