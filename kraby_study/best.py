@@ -57,7 +57,9 @@ def find_best(ledger: StudyLedger) -> Best | None:
         best = best_value(trials, name, definition.get("values", []))
         if best is None:
             return None
-        label = f"{name}={value_label(best.value)}"
+        # A confirm study's values are already labels (t12, ppo=tuned, gamma=0.8).
+        label = (value_label(best.value) if attrs.kind == "confirm"
+                 else f"{name}={value_label(best.value)}")
         seeds = len(best.trials)
         env_keys = ([parameter.split(".", 1)[1]] if parameter.startswith("env.")
                     else list(definition.get("env_keys", [])))
