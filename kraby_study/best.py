@@ -15,6 +15,7 @@ import yaml
 from kraby_study.errors import StoreError
 from kraby_study.plan.confirm import Arm, Source
 from kraby_study.records import (
+    SWEPT_KINDS,
     Outcome,
     best_trial,
     best_value,
@@ -27,9 +28,6 @@ from kraby_study.records import (
     value_label,
 )
 from kraby_study.store.ledger import StudyLedger
-
-SWEPT = ("sweep", "confirm")
-"""Kinds whose best is a value (a sweep's setting, a confirm study's configuration)."""
 
 
 @dataclass(frozen=True)
@@ -51,7 +49,7 @@ def find_best(ledger: StudyLedger) -> Best | None:
     attrs = ledger.attrs
     definition = attrs.definition
     trials = counted(ledger.trials())
-    if attrs.kind in SWEPT:
+    if attrs.kind in SWEPT_KINDS:
         parameter = str(definition["parameter"])
         name = param_name(parameter)
         best = best_value(trials, name, definition.get("values", []))

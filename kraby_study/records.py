@@ -150,6 +150,11 @@ class StudyAttrs:
                       if stored in user_attrs})
 
 
+SWEPT_KINDS = ("sweep", "confirm")
+"""Study kinds whose trials sweep one parameter over listed values (a confirm study's values are
+its configurations' labels): their best is a value, not a trial."""
+
+
 # Keys -------------------------------------------------------------------------------------------
 
 SWEEP_KEY = re.compile(r"^v(\d+)-s(\d+)$")

@@ -13,7 +13,7 @@ import pandas as pd
 from optuna.trial import FrozenTrial
 
 from kraby_study.errors import ConfigError, StoreError
-from kraby_study.records import counted
+from kraby_study.records import SWEPT_KINDS, counted
 from kraby_study.store.connection import Store
 from kraby_study.store.ledger import StudyLedger
 
@@ -68,7 +68,7 @@ def load_study(store: Store, name: str) -> StudyData:
     ledger = store.load(name)
     attrs = ledger.attrs
     kind = attrs.kind if attrs.kind in KINDS else "optuna"
-    if kind in ("sweep", "confirm") and "parameter" not in attrs.definition:
+    if kind in SWEPT_KINDS and "parameter" not in attrs.definition:
         kind = "optuna"
     every = ledger.trials()
     trials = counted(every)

@@ -15,7 +15,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kraby_study.records import Outcome, outcome, param_name, swept_value, value_key, value_label
+from kraby_study.records import (
+    SWEPT_KINDS,
+    Outcome,
+    outcome,
+    param_name,
+    swept_value,
+    value_key,
+    value_label,
+)
 from kraby_study.report.load import StudyData
 from kraby_study.report.style import is_numeric, value_colours
 from kraby_study.stats import (
@@ -43,8 +51,6 @@ TRIAL_COLUMNS = ["number", "key", "seed", "vi", "value", "outcome", "final_score
                  "wall_time", "env_steps", "failure", "model_path"]
 SEED_COLUMNS = ["vi", "seed", "number", "final_score", "first_reward", "auc",
                 "steps_to_threshold", "seconds_to_threshold"]
-SWEEP_KINDS = ("sweep", "confirm")
-"""Kinds whose definition names a swept parameter and its values."""
 
 
 @dataclass
@@ -375,7 +381,7 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     bootstrap = int(option(options, "bootstrap", BOOTSTRAP_REPETITIONS))
     chosen = option(options, "threshold", None)
     definition = data.definition
-    if data.kind in SWEEP_KINDS:
+    if data.kind in SWEPT_KINDS:
         parameter = str(definition["parameter"])
         name: str | None = param_name(parameter)
         planned = list(definition.get("values", []))

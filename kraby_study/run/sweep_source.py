@@ -9,6 +9,7 @@ from optuna.trial import FrozenTrial
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.plan.sweep import StudyPlan
 from kraby_study.records import (
+    SWEPT_KINDS,
     StudyAttrs,
     Tally,
     TrialAttrs,
@@ -27,7 +28,7 @@ from kraby_study.store.ledger import StudyLedger
 def swept_name(plan: StudyPlan) -> str | None:
     """The Optuna parameter name of a sweep's value (a confirm study's configuration); None for
     a single training run."""
-    swept = plan.definition.get("kind") in ("sweep", "confirm")
+    swept = plan.definition.get("kind") in SWEPT_KINDS
     return param_name(plan.parameter) if swept else None
 
 
