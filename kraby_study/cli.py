@@ -223,15 +223,13 @@ def cmd_list(args: argparse.Namespace) -> int:
 def cmd_optuna(args: argparse.Namespace) -> int:
     """An Optuna search over conf/search/<space>.yaml, into the same store."""
     from kraby_study.plan.space import validate_search
-    from kraby_study.plan.sweep import resolved_settings
     from kraby_study.run.search_source import run_search
     from kraby_study.summary import study_progress
 
     overrides = with_default(flag_overrides(args, SEARCH_FLAGS), "budget", "quick")
     cfg = compose_config(overrides)
     validate_search(cfg)
-    kept = [o for o in overrides if not o.startswith("ppo=")]
-    starts = [(f"ppo={name}", resolved_settings(compose_config([*kept, f"ppo={name}"])))
+    starts = [(f"ppo={name}", settings_with_ppo(name, overrides))
               for name in cfg.search.enqueue]
     with open_writer(cfg) as store:
         summary, ledger = run_search(store, cfg, worker_count(cfg), sys.stdout, starts=starts)
@@ -267,14 +265,21 @@ def cmd_confirm(args: argparse.Namespace) -> int:
     return 130 if summary.interrupted else 0
 
 
+def settings_with_ppo(name: str, overrides: Sequence[str]) -> dict[str, Any]:
+    """The resolved settings of the command's overrides with the ppo config ``NAME`` chosen
+    instead of the command's own (a search's warm start, a confirm baseline)."""
+    from kraby_study.plan.sweep import resolved_settings
+
+    kept = [o for o in overrides if not o.startswith("ppo=")]
+    return resolved_settings(compose_config([*kept, f"ppo={name}"]))
+
+
 def baseline_arm(name: str, overrides: Sequence[str]):  # noqa: ANN201 - a plan.confirm.Arm
     """A ppo config file as a confirm arm: the command's settings with ``ppo=NAME``."""
     from kraby_study.plan.confirm import Arm
-    from kraby_study.plan.sweep import resolved_settings
 
-    kept = [o for o in overrides if not o.startswith(("ppo=", "confirm."))]
-    settings = resolved_settings(compose_config([*kept, f"ppo={name}"]))
-    return Arm(label=f"ppo={name}", settings=settings, origin=f"the config ppo={name}")
+    return Arm(label=f"ppo={name}", settings=settings_with_ppo(name, overrides),
+               origin=f"the config ppo={name}")
 
 
 def cmd_best(args: argparse.Namespace) -> int:
