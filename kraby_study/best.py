@@ -10,23 +10,28 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
 import yaml
+from optuna.trial import FrozenTrial
 
 from kraby_study.errors import StoreError
 from kraby_study.plan.confirm import Arm, Source
 from kraby_study.records import (
     SWEPT_KINDS,
     Outcome,
+    Tally,
     best_trial,
-    best_value,
     counted,
     outcome,
     param_name,
     search_key,
     swept_value,
+    tally,
     value_key,
     value_label,
 )
+from kraby_study.selection import DEFAULT_RULE, RULES, selected_index, swept_values
+from kraby_study.store.connection import Store
 from kraby_study.store.ledger import StudyLedger
 
 
@@ -51,20 +56,20 @@ def find_best(ledger: StudyLedger) -> Best | None:
     trials = counted(ledger.trials())
     if attrs.kind in SWEPT_KINDS:
         parameter = str(definition["parameter"])
-        name = param_name(parameter)
-        best = best_value(trials, name, definition.get("values", []))
-        if best is None:
+        chosen = selection_of(ledger)
+        if chosen is None:
             return None
         # A confirm study's values are already labels (t12, ppo=tuned, gamma=0.8).
-        label = (value_label(best.value) if attrs.kind == "confirm"
-                 else f"{name}={value_label(best.value)}")
-        seeds = len(best.trials)
+        label = (value_label(chosen.value) if attrs.kind == "confirm"
+                 else f"{param_name(parameter)}={value_label(chosen.value)}")
+        seeds = len(chosen.trials)
+        rule = "" if chosen.rule == DEFAULT_RULE else f", selected by {chosen.rule}"
         env_keys = ([parameter.split(".", 1)[1]] if parameter.startswith("env.")
                     else list(definition.get("env_keys", [])))
-        return Best(short=f"{label} (mean {best.mean:.4g}, {seeds} seeds)",
+        return Best(short=f"{label} (mean {chosen.mean:.4g}, {seeds} seeds{rule})",
                     description=f"{label} of {attrs.kind} {ledger.name!r}: mean final score "
-                                f"{best.mean:.4g} over {seeds} seed(s)",
-                    settings=best.trials[0].user_attrs.get("settings", {}), env_keys=env_keys)
+                                f"{chosen.mean:.4g} over {seeds} seed(s){rule}",
+                    settings=chosen.trials[0].user_attrs.get("settings", {}), env_keys=env_keys)
     trial = best_trial(trials, ledger.maximize)
     if trial is None:
         return None
@@ -74,6 +79,49 @@ def find_best(ledger: StudyLedger) -> Best | None:
                 description=f"trial {trial.number} of {attrs.kind or 'study'} {ledger.name!r}: "
                             f"score {float(trial.value):.4g} ({params})",  # type: ignore[arg-type]
                 settings=trial.user_attrs.get("settings", {}), env_keys=env_keys)
+
+
+@dataclass(frozen=True)
+class Selected:
+    """The value a stored sweep's selection rule picks."""
+
+    value: Any
+    rule: str
+    mean: float
+    """Its mean final score."""
+    trials: list[FrozenTrial]
+    """Its complete counted trials."""
+    tally: Tally
+    """Outcomes of the study's counted trials."""
+    planned: int
+    """Runs planned."""
+
+    @property
+    def finished(self) -> bool:
+        """No planned run is still to come."""
+        return self.tally.ended >= self.planned
+
+
+def selection_of(ledger: StudyLedger) -> Selected | None:
+    """What a swept study's stored rule (:mod:`kraby_study.selection`) selects among its
+    complete runs; None when none is complete."""
+    attrs = ledger.attrs
+    rule = attrs.select if attrs.select in RULES else DEFAULT_RULE
+    trials = counted(ledger.trials())
+    name, values = swept_values(str(attrs.kind), attrs.definition, trials)
+    # Only the auc rule reads the curves.
+    curves = (ledger.curves([t.number for t in trials]) if rule == "auc"
+              else pd.DataFrame(columns=["number", "step", "mean_reward"]))
+    index = selected_index(trials, curves, name, values, rule)
+    if index is None:
+        return None
+    key = value_key(values[index])
+    done = [t for t in trials if outcome(t) == Outcome.COMPLETE and t.value is not None
+            and value_key(swept_value(t, name, values)) == key]
+    counts = tally(trials)
+    return Selected(value=values[index], rule=rule,
+                    mean=sum(float(t.value) for t in done) / len(done),  # type: ignore[arg-type]
+                    trials=done, tally=counts, planned=max(attrs.planned or 0, len(trials)))
 
 
 def require_best(ledger: StudyLedger) -> Best:
@@ -173,3 +221,60 @@ def _sweep_arms(name: str, parameter: str, planned: list[Any], done: list[Any]) 
                 origin=f"{parameter} = {value_label(values[k])} in sweep {name!r} (mean final "
                        f"score over {len(groups[k])} seed(s))",
                 source_score=means[k]) for k in order]
+
+
+def campaign_best(store: Store, name: str) -> Best:
+    """The settings a finished campaign ends with: its last stage's selected value's, with the
+    env settings any stage or the start set.
+
+    Raises:
+        StoreError: No stage of that campaign is stored, or a stage is not finished (the
+            message names the first one and its progress).
+    """
+    stages = campaign_stages(store, name)
+    if not stages:
+        known = sorted({str(r["name"]) for r in campaign_records(store).values()})
+        raise StoreError(f"no campaign {name!r} in {store.url}"
+                         + (f" (campaigns: {', '.join(known)})" if known else ""))
+    chosen = None
+    for number, stage in enumerate(stages, start=1):
+        done = None
+        if stage["name"] in store.study_names():
+            done = selection_of(store.load(str(stage["name"])))
+        if done is None or not done.finished:
+            progress = (f"{done.tally.complete}/{done.planned} complete" if done is not None
+                        else "not run yet")
+            raise StoreError(f"campaign {name!r} is not finished: stage {number}/{len(stages)} "
+                             f"{stage['name']} is {progress}; rerun `kraby-study run "
+                             f"campaign={name}`")
+        chosen = done
+    assert chosen is not None
+    last = stages[-1]
+    record = next(iter(campaign_records(store, name).values()))
+    env_keys = sorted({str(s["parameter"]).split(".", 1)[1] for s in stages
+                       if str(s["parameter"]).startswith("env.")}
+                      | {key.split(".", 1)[1] for key in record.get("start", {})
+                         if key.startswith("env.")})
+    label = f"{param_name(str(last['parameter']))}={value_label(chosen.value)}"
+    return Best(short=f"campaign {name}: {label}",
+                description=f"campaign {name!r} after its {len(stages)} stages (last: {label} "
+                            f"in {last['name']}, mean final score {chosen.mean:.4g} over "
+                            f"{len(chosen.trials)} seed(s), {chosen.rule})",
+                settings=chosen.trials[0].user_attrs.get("settings", {}), env_keys=env_keys)
+
+
+def campaign_records(store: Store, name: str | None = None) -> dict[str, dict[str, Any]]:
+    """Stored study name -> its campaign record, for every campaign stage (of ``name``),
+    latest stage first."""
+    records = {}
+    for study in store.study_names():
+        record = store.load(study).attrs.campaign
+        if record and (name is None or record.get("name") == name):
+            records[study] = record
+    return dict(sorted(records.items(), key=lambda item: -int(item[1].get("stage", 0))))
+
+
+def campaign_stages(store: Store, name: str) -> list[dict[str, Any]]:
+    """The stages of a stored campaign, as its latest stored stage records them."""
+    records = campaign_records(store, name)
+    return list(next(iter(records.values()))["stages"]) if records else []

@@ -7,6 +7,7 @@ user input runs before anything is written.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -25,7 +26,10 @@ OVERRIDES_HELP = ("Hydra overrides, e.g. study=ent_coef budget=quick ppo.n_steps
 EPILOG = """\
 config groups (conf/): env=leg, ppo=start|tuned, budget=full|quick|smoke,
 study=observation|batch_size|n_steps|n_epochs|gamma|clip_range|learning_rate|gae_lambda|
-ent_coef|n_envs, search=ppo (the Optuna space).
+ent_coef|n_envs, campaign=documented (the nine studies in order, each with the earlier
+winners), search=ppo (the Optuna space).
+A study file may take a setting from a finished study's selected value: ppo.gamma:
+${winner:gamma}.
 Any setting can be overridden with key=value (ppo.gamma=0.8); a flag such as --storage URL is
 the same as its key=value form (storage=URL), on every command that takes it.
 Your own YAML files in ./conf/<group>/ extend these groups and win over packaged files of the
@@ -157,19 +161,39 @@ def run_options(cfg: DictConfig) -> dict[str, Any]:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Run a study's sweep: every value x seed, resumable."""
+    from kraby_study.config.winner import winners_from
     from kraby_study.plan.sweep import expand_study
-    from kraby_study.run.sweep_source import run_plan
+    from kraby_study.winners import StoreWinners
 
-    cfg = compose_config(flag_overrides(args, [STORAGE, WORKERS]))
-    plan = expand_study(cfg)
-    with open_writer(cfg) as store:
-        summary, counts = run_plan(store, plan, worker_count(cfg), sys.stdout,
-                                   **run_options(cfg))
+    overrides = flag_overrides(args, [STORAGE, WORKERS])
+    lookup = StoreWinners()
+    with winners_from(lookup):
+        cfg = compose_config(overrides)
+    if cfg.campaign is not None:
+        return run_campaign_command(cfg, overrides)
+    plan = dataclasses.replace(expand_study(cfg), inputs=[i.stored() for i in lookup.inputs])
+    summary, counts = run_stage(cfg, plan)
     total = len(plan.specs)
     print(f"study {plan.name}: {counts.complete}/{total} complete, {counts.failed} failed"
           + (f", {total - counts.ended} left (rerun the same command to continue)"
              if counts.ended < total else ""))
     return 130 if summary.interrupted else 0
+
+
+def run_stage(cfg: DictConfig, plan: Any) -> tuple[Any, Any]:
+    """Run a sweep's plan on the command's store and workers: (RunSummary, Tally)."""
+    from kraby_study.run.sweep_source import run_plan
+
+    with open_writer(cfg) as store:
+        return run_plan(store, plan, worker_count(cfg), sys.stdout, **run_options(cfg))
+
+
+def run_campaign_command(cfg: DictConfig, overrides: Sequence[str]) -> int:
+    """``run campaign=NAME``: every stage in order, resumable."""
+    from kraby_study.plan.campaign import campaign_of
+    from kraby_study.run.campaign_run import run_campaign
+
+    return run_campaign(campaign_of(cfg, overrides), run_stage, sys.stdout)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -286,18 +310,21 @@ def cmd_best(args: argparse.Namespace) -> int:
     """Print a study's best settings and write them as a ppo config file."""
     from pathlib import Path
 
-    from kraby_study.best import require_best, write_config
+    from kraby_study.best import campaign_best, require_best, write_config
     from kraby_study.config.compose import USER_CONF_DIR
     from kraby_study.store.connection import opened
 
     chosen, overrides = stored_study(flag_overrides(args, [STORAGE, BEST_OF]))
+    if chosen and args.campaign:
+        raise ConfigError("give --campaign NAME or --study-name NAME, not both")
     cfg = compose_config(overrides)
     name = chosen or str(cfg.search.name)
-    config_name = args.name or f"best_{name}"
+    config_name = args.name or (f"campaign_{args.campaign}" if args.campaign else f"best_{name}")
     if not config_name.replace("_", "").replace("-", "").isalnum():
         raise ConfigError(f"--name {config_name!r}: use letters, digits, _ and -")
     with opened(cfg.storage, create=False, writer=False) as store:
-        best = require_best(store.load(name))
+        best = (campaign_best(store, args.campaign) if args.campaign
+                else require_best(store.load(name)))
     path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
     write_config(best, path)
     print(f"best: {best.description}")
@@ -332,14 +359,15 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                 parser_class=_Parser)
     commands: list[tuple[str, Callable[[argparse.Namespace], int], str]] = [
-        ("run", cmd_run, "run a documented sweep (study=NAME): values x seeds, resumable"),
+        ("run", cmd_run, "run a documented sweep (study=NAME) or a chain of them "
+         "(campaign=NAME): values x seeds, resumable"),
         ("train", cmd_train, "one training run (ppo=tuned by default), model saved"),
         ("list", cmd_list, "the studies in the store with their progress"),
         ("optuna", cmd_optuna, "an Optuna search (TPE, pruning) over conf/search/ppo.yaml"),
         ("confirm", cmd_confirm, "retrain a search's top configurations (or a sweep's top "
          "values, or baselines) on fresh seeds, into study NAME-confirm"),
-        ("best", cmd_best, "print a study's best settings and write them as "
-         "./conf/ppo/NAME.yaml"),
+        ("best", cmd_best, "print a study's selected settings (or a campaign's, --campaign) and "
+         "write them as ./conf/ppo/NAME.yaml"),
         ("report", cmd_report, "redraw every figure and table of the stored studies into "
          "--out (default reports/); --study-name NAME for one"),
     ]
@@ -374,7 +402,10 @@ def build_parser() -> argparse.ArgumentParser:
         "NAME-confirm is resumable like run; report it, then `kraby-study best --study-name "
         "NAME-confirm` writes the confirmed winner's settings.\n\n" + EPILOG)
     parsers["best"].add_argument("--name", help="config name to write in ./conf/ppo/ (default "
-                                 "best_<study>)")
+                                 "best_<study>, or campaign_<NAME>)")
+    parsers["best"].add_argument("--campaign", metavar="NAME",
+                                 help="write the settings a finished campaign ends with (its "
+                                 "last stage's selected value, with every earlier winner)")
     report = parsers["report"]
     report.add_argument("--format", choices=["png", "svg"], default="png",
                         help="figure format (default png)")

@@ -129,6 +129,14 @@ class StudyAttrs:
     """A search's sampler (tpe or random)."""
     sampler_seed: int | None = field(default=None, metadata={"stored": "sampler_seed"})
     """A search's sampler seed."""
+    select: str | None = None
+    """A sweep's selection rule (:mod:`kraby_study.selection`); None: final_score. Not part
+    of the definition: choosing another rule changes no run."""
+    inputs: list[dict[str, Any]] | None = None
+    """Settings taken from earlier studies' selected values: setting, value, study, rule."""
+    campaign: dict[str, Any] | None = None
+    """A campaign stage's place: the campaign's name, this stage's number (from 1) and every
+    stage (study, parameter, select, documented)."""
 
     @staticmethod
     def stored_names() -> dict[str, str]:
@@ -291,6 +299,25 @@ def param_name(parameter: str) -> str:
     return parameter.split(".")[-1]
 
 
+def is_numeric(values: Sequence[Any]) -> bool:
+    """True when every value is a real number (bools are not)."""
+    return bool(values) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in values)
+
+
+def ordered_values(planned: list[Any], found: list[Any], sort: bool = True) -> list[Any]:
+    """Planned values plus any other value found, sorted when all are numbers (and ``sort``)."""
+    values = list(planned)
+    known = {value_key(v) for v in values}
+    for value in found:
+        if value is not None and value_key(value) not in known:
+            known.add(value_key(value))
+            values.append(value)
+    if sort and is_numeric(values):
+        values.sort(key=float)
+    return values
+
+
 K = TypeVar("K", bound=Hashable)
 
 
@@ -315,35 +342,6 @@ def swept_value(trial: FrozenTrial, name: str, planned: Sequence[Any]) -> Any:
     if parsed is not None and parsed[0] < len(planned):
         return planned[parsed[0]]
     return None
-
-
-@dataclass(frozen=True)
-class BestValue:
-    """The winner of a sweep: the value with the highest mean score over its complete seeds."""
-
-    value: Any
-    mean: float
-    trials: list[FrozenTrial]
-    """Its complete counted trials."""
-
-
-def best_value(trials: Iterable[FrozenTrial], name: str,
-               planned: Sequence[Any] = ()) -> BestValue | None:
-    """The best value of a sweep's counted trials; None when no trial is complete."""
-    groups: dict[Hashable, list[FrozenTrial]] = {}
-    values: dict[Hashable, Any] = {}
-    for trial in trials:
-        if outcome(trial) != Outcome.COMPLETE or trial.value is None:
-            continue
-        value = swept_value(trial, name, planned)
-        groups.setdefault(value_key(value), []).append(trial)
-        values.setdefault(value_key(value), value)
-    scores = {k: [float(t.value) for t in group] for k, group in groups.items()}  # type: ignore[arg-type]
-    best = best_group(scores)
-    if best is None:
-        return None
-    return BestValue(value=values[best], mean=math.fsum(scores[best]) / len(scores[best]),
-                     trials=groups[best])
 
 
 def best_trial(trials: Iterable[FrozenTrial], maximize: bool = True) -> FrozenTrial | None:

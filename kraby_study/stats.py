@@ -253,6 +253,15 @@ def holm(pvalues: Sequence[float]) -> list[float]:
     return [float(v) for v in adjusted]
 
 
+def holm_vs_best(scores: Mapping[int, Sequence[float]]) -> tuple[int | None, dict[int, float]]:
+    """The best group and every other group's Welch p-value against it, Holm-corrected over
+    the study's comparisons (:func:`compare_to_best`, then :func:`holm`); NaN for the best
+    itself and where no test is possible. A group tied with the best has p >= ALPHA."""
+    best, pvalues = compare_to_best({g: list(v) for g, v in scores.items()})
+    groups = list(pvalues)
+    return best, dict(zip(groups, holm([pvalues[g] for g in groups]), strict=True))
+
+
 def _p_improvement_along(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
     u = stats.mannwhitneyu(x, y, axis=axis).statistic
     return u / (x.shape[axis] * y.shape[axis])

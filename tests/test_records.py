@@ -1,12 +1,13 @@
 """The record schema (kraby_study.records) on hand-made Optuna trials: outcomes, which attempt
-counts, tallies, the equality rule of swept values, the best value and trial, and the stored
-attribute names."""
+counts, tallies, the equality rule of swept values, the selected value, the best trial, and the
+stored attribute names."""
 
 from __future__ import annotations
 
 import random
 from typing import Any
 
+import pandas as pd
 import pytest
 from optuna.distributions import FloatDistribution, IntDistribution
 from optuna.trial import FrozenTrial, TrialState, create_trial
@@ -18,7 +19,6 @@ from kraby_study.records import (
     Tally,
     TrialAttrs,
     best_trial,
-    best_value,
     counted,
     failure,
     failure_kind,
@@ -33,6 +33,7 @@ from kraby_study.records import (
     train_key,
     value_key,
 )
+from kraby_study.selection import samples, select
 
 COMPLETE, PRUNED, FAIL = TrialState.COMPLETE, TrialState.PRUNED, TrialState.FAIL
 RUNNING, WAITING = TrialState.RUNNING, TrialState.WAITING
@@ -137,22 +138,25 @@ def test_value_key_compares_numbers_by_value_and_the_rest_by_json() -> None:
     assert value_key("default") != value_key("with_tip")
 
 
-def test_best_value_groups_one_and_one_point_zero_as_one_value() -> None:
+def chosen(trials: list[FrozenTrial], name: str, values: list[Any]) -> tuple[Any, float] | None:
+    """The value the final_score rule selects, and its mean; None when none is complete."""
+    found = samples(trials, pd.DataFrame(columns=["number", "step", "mean_reward"]), name, values)
+    vi = select("final_score", found.final, found.aucs, found.seconds)
+    return None if vi is None else (values[vi], sum(found.final[vi]) / len(found.final[vi]))
+
+
+def test_selection_groups_one_and_one_point_zero_as_one_value() -> None:
     trials = [
         trial(0, COMPLETE, 3.0, params={"n_epochs": 1}),
         trial(1, COMPLETE, 1.0, params={"n_epochs": 1.0}),
         trial(2, COMPLETE, 2.5, params={"n_epochs": 2}),
     ]
-    best = best_value(trials, "n_epochs")
     # One group {1, 1.0}: mean (3 + 1) / 2 = 2 < 2.5, so 2 wins (apart, 1 would win with 3).
-    assert best is not None
-    assert (best.value, best.mean, numbers(best.trials)) == (2, 2.5, [2])
-    only_ones = best_value(trials[:2], "n_epochs")
-    assert only_ones is not None
-    assert (only_ones.value, only_ones.mean, numbers(only_ones.trials)) == (1, 2.0, [0, 1])
+    assert chosen(trials, "n_epochs", [1, 2]) == (2, 2.5)
+    assert chosen(trials[:2], "n_epochs", [1, 2]) == (1, 2.0)
 
 
-def test_best_value_takes_the_highest_mean_over_complete_trials_only() -> None:
+def test_selection_takes_the_highest_mean_over_complete_trials_only() -> None:
     trials = [
         trial(0, COMPLETE, -2.0, params={"gamma": 0.5}),
         trial(1, COMPLETE, -4.0, params={"gamma": 0.5}),  # gamma 0.5: mean -3
@@ -161,18 +165,15 @@ def test_best_value_takes_the_highest_mean_over_complete_trials_only() -> None:
         trial(4, PRUNED, 9.0, params={"gamma": 0.99}),  # its last intermediate value: no score
         trial(5, RUNNING, params={"gamma": 0.99}),
     ]
-    best = best_value(trials, "gamma")
-    assert best is not None
-    assert (best.value, best.mean, numbers(best.trials)) == (0.9, -1.0, [2])
-    assert best_value(trials[3:], "gamma") is None
+    assert chosen(trials, "gamma", [0.5, 0.9, 0.99]) == (0.9, -1.0)
+    assert chosen(trials[3:], "gamma", [0.5, 0.9, 0.99]) is None
 
 
-@pytest.mark.parametrize("first,second", [(0.2, 0.1), (0.1, 0.2)])
-def test_a_tie_goes_to_the_first_value(first: float, second: float) -> None:
-    trials = [trial(0, COMPLETE, 1.0, params={"clip_range": first}),
-              trial(1, COMPLETE, 1.0, params={"clip_range": second})]
-    best = best_value(trials, "clip_range")
-    assert best is not None and best.value == first
+@pytest.mark.parametrize("values", [[0.2, 0.1], [0.1, 0.2]])
+def test_a_tie_goes_to_the_first_value_in_the_study_order(values: list[float]) -> None:
+    trials = [trial(0, COMPLETE, 1.0, params={"clip_range": 0.1}),
+              trial(1, COMPLETE, 1.0, params={"clip_range": 0.2})]
+    assert chosen(trials, "clip_range", values) == (values[0], 1.0)
 
 
 def test_the_swept_value_comes_from_the_params_the_queued_params_or_the_key() -> None:
@@ -187,10 +188,9 @@ def test_the_swept_value_comes_from_the_params_the_queued_params_or_the_key() ->
     assert swept_value(trial(4, FAIL, key="t4"), "clip_range", planned) is None
 
 
-def test_best_value_reads_the_value_of_a_trial_without_params_from_its_key() -> None:
+def test_selection_reads_the_value_of_a_trial_without_params_from_its_key() -> None:
     trials = [trial(0, COMPLETE, 1.0, key="v0-s0"), trial(1, COMPLETE, 5.0, key="v1-s0")]
-    best = best_value(trials, "gamma", planned=[0.8, 0.9])
-    assert best is not None and (best.value, best.mean) == (0.9, 5.0)
+    assert chosen(trials, "gamma", [0.8, 0.9]) == (0.9, 5.0)
 
 
 def test_best_trial_maximises_or_minimises_over_complete_trials() -> None:

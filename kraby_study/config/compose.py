@@ -15,6 +15,7 @@ from hydra.plugins.search_path_plugin import SearchPathPlugin
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from kraby_study.config import winner
 from kraby_study.config.schema import register_schema
 from kraby_study.config.validate import validate
 from kraby_study.errors import ConfigError
@@ -77,6 +78,9 @@ class UserConfFirst(SearchPathPlugin):
             search_path.prepend(provider="kraby-user", path=f"file://{user_dir}")
 
 
+UNCHOSEN = ("study", "campaign")
+"""Config groups that are empty unless chosen."""
+
 RENAMED = {"physics_processes": "shards"}
 """Old setting names still accepted on the command line (see the README's changelog)."""
 
@@ -91,9 +95,15 @@ def renamed(overrides: Sequence[str]) -> list[str]:
 
 
 def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
-    """Compose conf/config.yaml with overrides; raise ConfigError with a one-line message."""
+    """Compose conf/config.yaml with overrides; raise ConfigError with a one-line message.
+
+    With ``check`` the config is resolved (``${winner:...}`` through the lookup the caller
+    installed, :func:`kraby_study.config.winner.winners_from`) and validated; without, it keeps
+    its interpolations.
+    """
     overrides = renamed(overrides)
     register_schema()
+    winner.register()
     Plugins.instance().register(UserConfFirst)
     GlobalHydra.instance().clear()
     try:
@@ -101,9 +111,18 @@ def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
             cfg = compose(config_name="config", overrides=list(overrides))
     except (HydraException, OmegaConfBaseException, ValueError) as err:
         raise ConfigError(_one_line(err)) from None
+    except AssertionError:
+        # OmegaConf asserts when an override reaches under a group that is not chosen.
+        unchosen = [o for o in overrides
+                    if o.split("=", 1)[0].partition(".")[::2][0] in UNCHOSEN and "." in
+                    o.split("=", 1)[0]]
+        raise ConfigError("cannot apply " + (" ".join(unchosen) or "the overrides")
+                          + ": its config group is not chosen (e.g. study.values=... needs "
+                          "study=NAME)") from None
     finally:
         GlobalHydra.instance().clear()
     OmegaConf.set_readonly(cfg, False)
     if check:
+        winner.resolve(cfg)
         validate(cfg)
     return cfg

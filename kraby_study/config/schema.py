@@ -74,6 +74,11 @@ class StudyConfig:
     """The values tried, in the order figures list them."""
     description: str = ""
     """What the study asks, shown by ``list`` and in reports."""
+    select: str = "final_score"
+    """How the study's value is selected once it is finished (the report's ``selected`` column,
+    ``${winner:NAME}``, ``best``): final_score (highest mean final score), auc (highest mean
+    AUC) or fastest_tied (lowest mean training time among the values tied with the best final
+    score). See docs/campaigns.md."""
 
 
 @dataclass
@@ -172,6 +177,33 @@ class ConfirmConfig:
 
 
 @dataclass
+class StageConfig:
+    """One stage of a campaign: a study run after the earlier stages, with their winners."""
+
+    study: str = MISSING
+    """A study config name (conf/study/NAME.yaml or ./conf/study/NAME.yaml)."""
+    select: str | None = None
+    """The stage's selection rule; null: the study file's study.select."""
+    documented: Any = None
+    """The value the documented work chose, shown beside the selected one (null: none)."""
+
+
+@dataclass
+class CampaignConfig:
+    """A chain of studies, each run with the values the earlier ones selected."""
+
+    name: str = MISSING
+    """Prefix of the stages' stored names: stage STUDY is stored as NAME-STUDY."""
+    description: str = ""
+    """What the campaign reproduces, shown in reports."""
+    start: dict[str, Any] = field(default_factory=dict)
+    """The settings the first stage starts from, as dotted keys (ppo.gamma: 0.9); they win over
+    the study files' own settings."""
+    stages: list[StageConfig] = MISSING
+    """The stages, in the order they run."""
+
+
+@dataclass
 class KrabyConfig:
     """Everything a command needs: composed from conf/config.yaml and the command line."""
 
@@ -179,6 +211,7 @@ class KrabyConfig:
     ppo: PPOConfig = field(default_factory=PPOConfig)
     budget: BudgetConfig = field(default_factory=BudgetConfig)
     study: StudyConfig | None = None
+    campaign: CampaignConfig | None = None
     search: SearchConfig = field(default_factory=SearchConfig)
     report: ReportConfig = field(default_factory=ReportConfig)
     confirm: ConfirmConfig = field(default_factory=ConfirmConfig)

@@ -10,6 +10,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from kraby_study.config.schema import PPOConfig
 from kraby_study.errors import ConfigError
+from kraby_study.selection import check_rule
 from kraby_study.store.connection import check_url
 
 
@@ -118,6 +119,12 @@ def validate(cfg: DictConfig) -> None:
              f"confirm.seeds must be at least 2 (an interval needs two), got {cfg.confirm.seeds}")
     if cfg.report.threshold is not None:
         _finite("report.threshold", float(cfg.report.threshold))
+    if cfg.study is not None:
+        check_rule(str(cfg.study.select))
+    if cfg.campaign is not None:
+        for stage in cfg.campaign.stages:
+            if stage.select is not None:
+                check_rule(str(stage.select), f"campaign stage {stage.study}: select")
 
 
 def cores() -> int:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +19,7 @@ from kraby_study.config.validate import (
 )
 from kraby_study.errors import ConfigError, first_line
 from kraby_study.plan.spec import TrialSpec
-from kraby_study.records import param_name, sweep_key, train_key, value_key, value_label
+from kraby_study.records import StudyAttrs, param_name, sweep_key, train_key, value_key, value_label
 from kraby_study.store.connection import sqlite_path
 
 SWEEPABLE_ROOTS = ("env", "ppo")
@@ -34,6 +34,17 @@ class StudyPlan:
     values: list[Any]
     specs: list[TrialSpec]
     definition: dict[str, Any]
+    select: str | None = None
+    """A sweep's selection rule (stored beside the definition, not in it)."""
+    inputs: list[dict[str, Any]] = field(default_factory=list)
+    """Settings taken from earlier studies' selected values (``Input.stored()``)."""
+    campaign: dict[str, Any] | None = None
+    """A campaign stage's place in its campaign (``Campaign.record``)."""
+
+    def notes(self) -> StudyAttrs:
+        """What is stored beside the definition: rule, inputs, campaign."""
+        return StudyAttrs(select=self.select, inputs=self.inputs or None,
+                          campaign=self.campaign)
 
     @property
     def fingerprint(self) -> str:
@@ -132,7 +143,7 @@ def expand_study(cfg: DictConfig) -> StudyPlan:
         "curve_every": int(cfg.budget.curve_every),
     }
     return StudyPlan(name=str(study.name), parameter=str(study.parameter), values=values,
-                     specs=specs, definition=definition)
+                     specs=specs, definition=definition, select=str(study.select))
 
 
 def single_run(cfg: DictConfig) -> StudyPlan:

@@ -13,6 +13,7 @@ from typing import Any, TextIO
 
 from kraby_study.errors import ConfigError, first_line
 from kraby_study.report import search_output, sweep_output
+from kraby_study.report.campaign_output import campaigns, write_campaign
 from kraby_study.report.document import (
     Block,
     Heading,
@@ -99,6 +100,7 @@ def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
     if data.kind in SWEEP_LIKE:
         sweep = build_sweep(data, options)
         report = sweep_output.write_sweep(sweep, folder, rel, fmt)
+        report.sweep = sweep
         candidates = sweep_output.policy_candidates(sweep)
     elif data.ledger.objectives > 1:
         folder.mkdir(parents=True, exist_ok=True)
@@ -127,7 +129,8 @@ def _overview(reports: list[StudyReport]) -> Table:
 
 
 def index_blocks(url: str, reports: list[StudyReport],
-                 bootstrap: int = BOOTSTRAP_REPETITIONS) -> list[Block]:
+                 bootstrap: int = BOOTSTRAP_REPETITIONS,
+                 campaigns: list[Block] | None = None) -> list[Block]:
     """The index page: what the numbers mean, an overview, then every study's section."""
     blocks: list[Block] = [
         Heading(TITLE, 1),
@@ -142,6 +145,7 @@ def index_blocks(url: str, reports: list[StudyReport],
     if any(report.kind in SWEEP_LIKE for report in reports):
         blocks.append(Text("Sweep tables. " + sweep_output.metric_notes(bootstrap)))
     blocks.append(_overview(reports))
+    blocks += campaigns or []
     for report in reports:
         blocks += report.blocks
     return blocks
@@ -203,13 +207,22 @@ def write_report(url: str, out: Path | str, study: str | None = None, fmt: str =
     for data in studies:
         rel = folder_name(data.name, taken)
         reports.append(report_study(data, out / rel, rel, fmt, url, policy, options))
+    sweeps = {r.name: r.sweep for r in reports if r.sweep is not None}
+    chains: list[Block] = []
+    chain_files: list[Path] = []
+    # A campaign is drawn from all its stages: only when the whole store is reported.
+    for name, record in (campaigns(sweeps) if study is None else {}).items():
+        rel = folder_name(name, taken)
+        blocks, files = write_campaign(name, record, sweeps, out / rel, rel)
+        chains += blocks
+        chain_files += files
     blocks = index_blocks(url, reports, int(option(options, "bootstrap",
-                                                   BOOTSTRAP_REPETITIONS)))
+                                                   BOOTSTRAP_REPETITIONS)), chains)
     markdown, html = out / "index.md", out / "index.html"
     markdown.write_text(to_markdown(blocks), encoding="utf-8")
     html.write_text(to_html(blocks, TITLE), encoding="utf-8")
     return ReportIndex(out=out, markdown=markdown, html=html, studies=reports,
-                       seconds=time.perf_counter() - start)
+                       seconds=time.perf_counter() - start, campaign_files=chain_files)
 
 
 def run_report(url: str, out: Path | str, study: str | None = None, fmt: str = "png",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from kraby_study.report.document import Block
 
@@ -21,6 +22,7 @@ class StudyReport:
         files: Every file written, in the order the index lists them.
         blocks: The study's section of the index.
         notes: Things a reader should know (skipped figures, missing models, ...).
+        sweep: The tables of a sweep-like study (a ``report.sweep_tables.Sweep``), else None.
     """
 
     name: str
@@ -31,6 +33,7 @@ class StudyReport:
     files: list[Path] = field(default_factory=list)
     blocks: list[Block] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    sweep: Any = None
 
 
 @dataclass
@@ -43,6 +46,7 @@ class ReportIndex:
         html: ``out/index.html``.
         studies: One report per study, in store order.
         seconds: Time taken.
+        campaign_files: The campaigns' tables (``<campaign>/campaign.csv``).
     """
 
     out: Path
@@ -50,8 +54,10 @@ class ReportIndex:
     html: Path
     studies: list[StudyReport]
     seconds: float = 0.0
+    campaign_files: list[Path] = field(default_factory=list)
 
     @property
     def files(self) -> list[Path]:
         """Every file written, index pages first."""
-        return [self.markdown, self.html] + [f for s in self.studies for f in s.files]
+        return ([self.markdown, self.html] + self.campaign_files
+                + [f for s in self.studies for f in s.files])

@@ -17,6 +17,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
+from kraby_study.records import is_numeric
+
 DPI = 150
 WIDE = (10.0, 4.2)
 """Two panels side by side, or one panel and a legend."""
@@ -69,12 +71,6 @@ def save(fig: Figure, path: Path) -> Path:
     fig.savefig(path, dpi=DPI, metadata=metadata)
     fig.clear()
     return path
-
-
-def is_numeric(values: Sequence[Any]) -> bool:
-    """True when every value is a real number (bools are not)."""
-    return bool(values) and all(
-        isinstance(v, int | float) and not isinstance(v, bool) for v in values)
 
 
 def value_colours(values: Sequence[Any]) -> list[tuple[float, float, float, float]]:

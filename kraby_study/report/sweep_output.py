@@ -12,13 +12,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kraby_study.records import Outcome
+from kraby_study.records import Outcome, value_label
 from kraby_study.report import sweep_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
 from kraby_study.report.results import StudyReport
 from kraby_study.report.style import number, styled
 from kraby_study.report.sweep_tables import Sweep, arms_frame
+from kraby_study.selection import RULE_TEXT
 from kraby_study.stats import (
     ALPHA,
     AUC_NAME,
@@ -303,8 +304,25 @@ def describe_sweep(sweep: Sweep) -> str:
                 f"seeds each{budget}. Status: {sweep.status()}.")
     if not sweep.parameter:
         return f"Single training run, {seeds} seed(s){budget}. Status: {sweep.status()}."
+    inputs = sweep.data.ledger.attrs.inputs or []
+    taken = "; ".join(f"{i['setting']} = {value_label(i['value'])}, selected in {i['study']}"
+                      f" ({i['rule']})" for i in inputs)
     return (f"Sweep of {sweep.parameter} over {len(sweep.values)} values, {seeds} seeds each"
-            f"{budget}. Status: {sweep.status()}.")
+            f"{budget}. Status: {sweep.status()}."
+            + (f" Settings from earlier studies: {taken}." if taken else ""))
+
+
+def selection_text(sweep: Sweep) -> str | None:
+    """Which value the study's rule selects (None for a single-run study)."""
+    if not sweep.parameter:
+        return None
+    rule = f"rule {sweep.rule}: {RULE_TEXT[sweep.rule]}"
+    chosen = sweep.summary.index[sweep.summary["selected"].astype(bool)]
+    if len(chosen):
+        return f"Selected ({rule}): {sweep.labels[int(chosen[0])]}."
+    if not sweep.finished:
+        return f"Selected ({rule}): none until the {sweep.counts['pending']} pending run(s) end."
+    return f"Selected ({rule}): none, no run is complete."
 
 
 def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
@@ -345,7 +363,8 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
     tables = _tables(sweep, folder)
     failed = failed_items(sweep)
     arms, winner = confirm_blocks(sweep)
-    said = Text(verdict(sweep))
+    chosen = selection_text(sweep)
+    said = Text(verdict(sweep) + (f" {chosen}" if chosen else ""))
     details: list[Block] = [summary_table(sweep), Text(threshold_text(sweep))]
     if failed:
         details += [Text(f"Failed or pruned runs ({len(failed)}), not in the figures:"),

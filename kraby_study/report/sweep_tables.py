@@ -19,13 +19,13 @@ from kraby_study.records import (
     SWEPT_KINDS,
     Outcome,
     outcome,
-    param_name,
     swept_value,
     value_key,
     value_label,
 )
 from kraby_study.report.load import StudyData
-from kraby_study.report.style import is_numeric, value_colours
+from kraby_study.report.style import value_colours
+from kraby_study.selection import DEFAULT_RULE, RULES, selected_index, swept_values
 from kraby_study.stats import (
     ALPHA,
     BOOTSTRAP_REPETITIONS,
@@ -35,7 +35,7 @@ from kraby_study.stats import (
     default_threshold,
     describe,
     first_reach,
-    holm,
+    holm_vs_best,
     iqm,
     iqm_interval,
     iqr,
@@ -95,6 +95,9 @@ class Sweep:
     untrained: float = math.nan
     bootstrap: int = BOOTSTRAP_REPETITIONS
     verdict: Verdict = field(default_factory=lambda: Verdict(None, [], None, None, None))
+    rule: str = DEFAULT_RULE
+    """The study's selection rule; the summary's ``selected`` column marks the value it
+    selects once no run is pending."""
 
     @property
     def kind(self) -> str:
@@ -129,19 +132,6 @@ class Sweep:
         """Index of the best value (highest mean final score), if any run is complete."""
         marked = self.summary.index[self.summary["mark"] == "best"]
         return int(marked[0]) if len(marked) else None
-
-
-def ordered_values(planned: list[Any], found: list[Any], sort: bool = True) -> list[Any]:
-    """Planned values plus any other value found, sorted when all are numbers (and ``sort``)."""
-    values = list(planned)
-    known = {value_key(v) for v in values}
-    for value in found:
-        if value is not None and value_key(value) not in known:
-            known.add(value_key(value))
-            values.append(value)
-    if sort and is_numeric(values):
-        values.sort(key=float)
-    return values
 
 
 def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.DataFrame:
@@ -201,9 +191,10 @@ def summarise(trials: pd.DataFrame, labels: list[str],
     time = describe(done, "vi", "wall_time")
     counts = pd.crosstab(trials["vi"], trials["outcome"])
     scores = _finals(done)
-    best, pvalues = compare_to_best(scores)
+    _, pvalues = compare_to_best(scores)
+    best, corrected = holm_vs_best(scores)
     raw = [pvalues.get(vi, np.nan) for vi in range(len(labels))]
-    adjusted = holm(raw)
+    adjusted = [corrected.get(vi, np.nan) for vi in range(len(labels))]
     rows = []
     for vi, label in enumerate(labels):
         count = counts.loc[vi] if vi in counts.index else pd.Series(dtype=int)
@@ -362,6 +353,12 @@ def arms_frame(sweep: Sweep) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def study_rule(data: StudyData) -> str:
+    """The stored selection rule of a study (final_score when none or unknown)."""
+    rule = data.ledger.attrs.select
+    return rule if rule in RULES else DEFAULT_RULE
+
+
 def option(options: Any, name: str, default: Any) -> Any:
     """A report option (an attribute of ``options``), or ``default`` when it or ``options`` is
     None."""
@@ -383,10 +380,7 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     definition = data.definition
     if data.kind in SWEPT_KINDS:
         parameter = str(definition["parameter"])
-        name: str | None = param_name(parameter)
-        planned = list(definition.get("values", []))
-        found = [swept_value(t, name, planned) for t in data.trials]
-        values = ordered_values(planned, found, sort=data.kind != "confirm")
+        name, values = swept_values(data.kind, definition, data.trials)
         labels = [value_label(v) for v in values]
     else:
         parameter, name, values, labels = "", None, [SINGLE_LABEL], [SINGLE_LABEL]
@@ -401,11 +395,16 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     seeds = seed_metrics(trials, curves, threshold)
     summary = add_curve_metrics(summary, seeds)
     colours = value_colours(labels if data.kind == "confirm" else values)
-    return Sweep(data=data, parameter=parameter, name=name or SINGLE_LABEL, values=values,
+    sweep = Sweep(data=data, parameter=parameter, name=name or SINGLE_LABEL, values=values,
+                 rule=study_rule(data),
                  labels=labels, colours=colours, trials=trials, curves=curves,
                  bands=curve_bands(curves), summary=summary, seeds=seeds, threshold=threshold,
                  threshold_default=is_default, untrained=untrained, bootstrap=bootstrap,
                  verdict=study_verdict(summary, seeds))
+    chosen = (selected_index(data.trials, data.curves, name, values, sweep.rule)
+              if name and sweep.finished else None)
+    sweep.summary["selected"] = [vi == chosen for vi in sweep.summary.index]
+    return sweep
 
 
 def legend_label(sweep: Sweep, vi: int) -> str:

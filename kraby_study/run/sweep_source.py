@@ -84,6 +84,7 @@ def run_plan(store: Store, plan: StudyPlan, workers: int, stream: TextIO,
     kind = str(plan.definition.get("kind"))
     ledger = store.define(plan.name, StudyAttrs(kind=kind, definition=plan.definition,
                                                 fingerprint=plan.fingerprint))
+    ledger.update(plan.notes())
     requeue_orphans(ledger, stream)
     source = SweepSource(ledger, plan)
     source.queue_missing()

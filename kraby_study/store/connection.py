@@ -311,13 +311,22 @@ class Store:
             if stored.fingerprint is None:
                 for key, value in attrs.stored().items():
                     study.set_user_attr(key, value)
-        if stored.fingerprint is not None and stored.fingerprint != attrs.fingerprint:
-            changed = describe_change(stored.definition, attrs.definition)
-            raise StoreError(f"study {name!r} in {self.url} was defined differently ({changed}); "
-                             "choose another name (study.name=...) or another storage")
+        check_same_definition(name, self.url, stored, attrs)
         from kraby_study.store.ledger import StudyLedger
 
         return StudyLedger(self, study)
+
+
+def check_same_definition(name: str, url: str, stored: StudyAttrs, attrs: StudyAttrs) -> None:
+    """Refuse a study stored under ``name`` with another definition than ``attrs``.
+
+    Raises:
+        StoreError: The fingerprints differ; the message names the first changed settings.
+    """
+    if stored.fingerprint is not None and stored.fingerprint != attrs.fingerprint:
+        changed = describe_change(stored.definition, attrs.definition)
+        raise StoreError(f"study {name!r} in {url} was defined differently ({changed}); "
+                         "choose another name (study.name=...) or another storage")
 
 
 def describe_change(old: dict[str, Any], new: dict[str, Any], prefix: str = "") -> str:

@@ -1,0 +1,146 @@
+"""Which value of a finished sweep is selected: the rules a campaign carries forward.
+
+One implementation serves the report's ``selected`` column, ``${winner:...}`` and ``best``. The
+rules read the same per-seed numbers the report shows, and the ties are the report's ties
+(:func:`kraby_study.stats.holm_vs_best`):
+
+- ``final_score``: the highest mean final score (the report's "best").
+- ``auc``: the highest mean AUC over the seeds with a curve (the most sample-efficient).
+- ``fastest_tied``: among the best value and the values tied with it (Holm-corrected Welch
+  p >= 0.05), the lowest mean training time in seconds: the documented "good compromise" when
+  a slower value is not measurably better.
+
+Ties inside a rule go to the first group in order; NaN never wins.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Hashable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import pandas as pd
+from optuna.trial import FrozenTrial
+
+from kraby_study.errors import ConfigError
+from kraby_study.records import (
+    Outcome,
+    TrialAttrs,
+    best_group,
+    ordered_values,
+    outcome,
+    param_name,
+    swept_value,
+    value_key,
+)
+from kraby_study.stats import ALPHA, auc, holm_vs_best
+
+RULES = ("final_score", "auc", "fastest_tied")
+DEFAULT_RULE = "final_score"
+RULE_TEXT = {
+    "final_score": "highest mean final score",
+    "auc": "highest mean AUC (sample efficiency)",
+    "fastest_tied": (f"lowest mean training time among the values tied with the best final "
+                     f"score (Holm-corrected Welch p >= {ALPHA})"),
+}
+
+K = TypeVar("K", bound=Hashable)
+
+
+def check_rule(rule: str, where: str = "study.select") -> str:
+    """The rule, or ConfigError naming the known ones."""
+    if rule not in RULES:
+        raise ConfigError(f"{where} must be one of {', '.join(RULES)}, got {rule!r}")
+    return rule
+
+
+def _means(groups: Mapping[K, Sequence[float]]) -> dict[K, float]:
+    out = {}
+    for group, values in groups.items():
+        kept = [float(v) for v in values if not math.isnan(float(v))]
+        if kept:
+            out[group] = math.fsum(kept) / len(kept)
+    return out
+
+
+def select(rule: str, final: Mapping[K, Sequence[float]], aucs: Mapping[K, Sequence[float]],
+           seconds: Mapping[K, Sequence[float]]) -> K | None:
+    """The selected group under ``rule``; None when no group can be selected.
+
+    Args:
+        rule: final_score, auc or fastest_tied.
+        final: Final scores of the complete seeds, by group, in the study's order.
+        aucs: AUC of each complete seed with a curve, by group.
+        seconds: Training time of each complete seed, by group.
+    """
+    check_rule(rule)
+    scores = {g: [float(v) for v in vs if not math.isnan(float(v))] for g, vs in final.items()}
+    if rule == "final_score":
+        return best_group(scores)
+    if rule == "auc":
+        return best_group({g: [m] for g, m in _means(aucs).items()})
+    best, p_holm = holm_vs_best(scores)
+    if best is None:
+        return None
+    tied = [best] + [g for g in scores if g != best and p_holm.get(g, math.nan) >= ALPHA]
+    times = _means(seconds)
+    timed = {g: [-times[g]] for g in tied if g in times}
+    return best_group(timed) if timed else best
+
+
+@dataclass(frozen=True)
+class Samples:
+    """Per-seed numbers of a sweep's complete runs, grouped by value (in the study's order)."""
+
+    values: list[Any]
+    final: dict[int, list[float]]
+    aucs: dict[int, list[float]]
+    seconds: dict[int, list[float]]
+
+
+def samples(trials: Sequence[FrozenTrial], curves: pd.DataFrame, name: str,
+            values: Sequence[Any]) -> Samples:
+    """The samples of a sweep's counted trials; ``curves`` holds their curve points (columns
+    number, step, mean_reward). A trial whose value is not in ``values`` is left out."""
+    index = {value_key(v): i for i, v in enumerate(values)}
+    final: dict[int, list[float]] = {}
+    aucs: dict[int, list[float]] = {}
+    seconds: dict[int, list[float]] = {}
+    ordered = curves.sort_values(["number", "step"], kind="stable")
+    rewards = {int(n): g["mean_reward"].to_numpy(dtype=float)
+               for n, g in ordered.groupby("number", sort=False)}
+    for trial in trials:
+        if outcome(trial) != Outcome.COMPLETE or trial.value is None:
+            continue
+        vi = index.get(value_key(swept_value(trial, name, values)))
+        if vi is None:
+            continue
+        final.setdefault(vi, []).append(float(trial.value))
+        if trial.number in rewards:
+            aucs.setdefault(vi, []).append(auc(rewards[trial.number]))
+        wall = TrialAttrs.of(trial).wall_time
+        if wall is not None:
+            seconds.setdefault(vi, []).append(float(wall))
+    order = sorted(final)
+    return Samples(values=list(values), final={vi: final[vi] for vi in order},
+                   aucs={vi: aucs.get(vi, []) for vi in order},
+                   seconds={vi: seconds.get(vi, []) for vi in order})
+
+
+def swept_values(kind: str, definition: Mapping[str, Any],
+                 trials: Sequence[FrozenTrial]) -> tuple[str, list[Any]]:
+    """A swept study's parameter name and its values in the order reports list them: the
+    planned values and any other found, numbers ascending (a confirm study keeps its order)."""
+    name = param_name(str(definition["parameter"]))
+    planned = list(definition.get("values", []))
+    found = [swept_value(t, name, planned) for t in trials]
+    return name, ordered_values(planned, found, sort=kind != "confirm")
+
+
+def selected_index(trials: Sequence[FrozenTrial], curves: pd.DataFrame, name: str,
+                   values: Sequence[Any], rule: str) -> int | None:
+    """Index in ``values`` of the value ``rule`` selects among the complete runs; None when
+    none is complete."""
+    found = samples(trials, curves, name, values)
+    return select(rule, found.final, found.aucs, found.seconds)

@@ -1,0 +1,118 @@
+"""Where ``${winner:STUDY}`` values come from: the selected values of finished studies in the
+command's store (:func:`kraby_study.best.selection_of`), with a record of each one taken.
+
+A standalone study names stored studies directly; a campaign stage names earlier stages by their
+study, stored as ``<campaign>-<study>``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from omegaconf import DictConfig
+
+from kraby_study.best import Selected, selection_of
+from kraby_study.errors import ConfigError, StoreError
+from kraby_study.records import SWEPT_KINDS, counted, tally, value_label
+from kraby_study.store.connection import opened, study_exists
+
+
+class Unfinished(StoreError):
+    """The study a ``${winner:...}`` names is not stored yet, or has runs still to come."""
+
+
+@dataclass(frozen=True)
+class Input:
+    """A setting taken from an earlier study's selected value."""
+
+    setting: str
+    value: Any
+    study: str
+    rule: str
+
+    def stored(self) -> dict[str, Any]:
+        """As kept in the study's attributes."""
+        return {"setting": self.setting, "value": self.value, "study": self.study,
+                "rule": self.rule}
+
+    def text(self) -> str:
+        """``ppo.gamma = 0.8, selected in documented-gamma``."""
+        return f"{self.setting} = {value_label(self.value)}, selected in {self.study}"
+
+
+def carried(selected: Selected, parameter: str, definition: dict[str, Any]) -> Any:
+    """The value a selection carries into later settings.
+
+    A ppo.batch_size equal to its study's whole rollout carries as null (one minibatch of the
+    whole rollout, nminibatches 1), so it stays one batch when a later stage changes n_steps
+    or n_envs; any other value carries as it is.
+    """
+    if parameter == "ppo.batch_size" and selected.value is not None:
+        ppo = definition.get("settings", {}).get("ppo", {})
+        if int(selected.value) == int(ppo.get("n_steps", 0)) * int(ppo.get("n_envs", 0)):
+            return None
+    return selected.value
+
+
+@dataclass
+class StoreWinners:
+    """A :class:`kraby_study.config.winner.Lookup` reading the command's store.
+
+    Attributes:
+        names: For a campaign stage: study -> stored name of the earlier stages it may name;
+            None for a standalone study (stored studies are named directly).
+        inputs: Every value taken, in the order they were resolved.
+    """
+
+    names: dict[str, str] | None = None
+    inputs: list[Input] = field(default_factory=list)
+    _cache: dict[str, tuple[Selected, str, dict[str, Any]]] = field(default_factory=dict)
+
+    def stored_name(self, study: str, setting: str, root: DictConfig) -> str:
+        """The stored study a reference names; ConfigError for one it may not name."""
+        where = f"{setting}: ${{winner:{study}}}"
+        if self.names is None:
+            current = root.get("study")
+            if current is not None and str(current.get("name")) == study:
+                raise ConfigError(f"{where} refers to the study itself")
+            return study
+        if study not in self.names:
+            raise ConfigError(f"{where}: {study!r} is not an earlier stage of the campaign")
+        return self.names[study]
+
+    def __call__(self, study: str, setting: str, root: DictConfig) -> Any:
+        name = self.stored_name(study, setting, root)
+        if name not in self._cache:
+            self._cache[name] = _read(str(root.storage), name, f"{setting}: ${{winner:{study}}}")
+        selected, parameter, definition = self._cache[name]
+        value = carried(selected, parameter, definition)
+        self.inputs.append(Input(setting=setting, value=value, study=name, rule=selected.rule))
+        return value
+
+
+def _read(url: str, name: str, where: str) -> tuple[Selected, str, dict[str, Any]]:
+    """The selection of a finished stored sweep, its parameter and definition.
+
+    Raises:
+        Unfinished: The study is not stored, or has runs still to come.
+        StoreError: It is not a sweep, or none of its runs is complete.
+    """
+    if not study_exists(url, name):
+        raise Unfinished(f"{where}: no study {name!r} in the store yet; run it first")
+    with opened(url, create=False, writer=False) as store:
+        ledger = store.load(name)
+        attrs = ledger.attrs
+        if attrs.kind not in SWEPT_KINDS or "parameter" not in attrs.definition:
+            raise StoreError(f"{where}: study {name!r} is not a sweep, so it selects no value")
+        trials = counted(ledger.trials())
+        counts = tally(trials)
+        planned = max(attrs.planned or 0, len(trials))
+        if counts.ended < planned:
+            raise Unfinished(f"{where}: study {name!r} is incomplete ({counts.complete}/{planned}"
+                             " complete); finish it first")
+        selected = selection_of(ledger)
+    if selected is None:
+        raise StoreError(f"{where}: study {name!r} has no selectable value (0/{planned} complete,"
+                         f" {counts.failed} failed, {counts.pruned} pruned)")
+    return selected, str(attrs.definition["parameter"]), dict(attrs.definition)

@@ -1,0 +1,299 @@
+"""Campaigns: stages run in order with the earlier stages' selected values, `${winner:...}` in
+a study file, the report's campaign table, `best --campaign`, and bad input."""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import signal
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import yaml
+from conftest import (
+    SERVER,
+    TINY,
+    children,
+    file_digest,
+    fresh_database,
+    has_study,
+    load,
+    run_cli,
+    spawn_cli,
+    sqlite_url,
+    wait_for,
+)
+from optuna.trial import TrialState
+
+from kraby_study.best import selection_of
+from kraby_study.config.compose import compose_config
+from kraby_study.plan.sweep import expand_study
+from kraby_study.records import StudyAttrs, TrialAttrs, counted
+from kraby_study.run.sweep_source import SweepSource
+from kraby_study.store.connection import opened
+
+SEEDS = "budget.seeds=2"
+STUDIES = {
+    # name: (parameter, values, extra settings of the study file)
+    "s_gamma": ("ppo.gamma", [0.5, 0.99], {}),
+    "s_clip": ("ppo.clip_range", [0.1, 0.3], {}),
+    "s_ent": ("ppo.ent_coef", [0.0, 0.05], {}),
+    # Bad ones: a winner of a later stage, and of itself.
+    "s_fwd": ("ppo.gae_lambda", [0.9, 0.95], {"ppo": {"clip_range": "${winner:s_clip}"}}),
+    "s_self": ("ppo.gae_lambda", [0.9, 0.95], {"ppo": {"vf_coef": "${winner:s_self}"}}),
+    # A standalone study taking the campaign's first winner.
+    "s_after": ("ppo.ent_coef", [0.0, 0.05], {"ppo": {"gamma": "${winner:tri-s_gamma}"}}),
+    "s_absent": ("ppo.ent_coef", [0.0, 0.05], {"ppo": {"gamma": "${winner:nope}"}}),
+    "s_me": ("ppo.ent_coef", [0.0, 0.05], {"ppo": {"gamma": "${winner:s_me}"}}),
+}
+CAMPAIGNS = {
+    "tri": {"name": "tri", "description": "Three smoke stages.", "start": {"ppo.gamma": 0.9},
+            "stages": [{"study": "s_gamma", "documented": 0.99},
+                       {"study": "s_clip", "documented": 0.3},
+                       {"study": "s_ent", "select": "fastest_tied", "documented": 0.0}]},
+    "fwd": {"name": "fwd", "stages": [{"study": "s_fwd"}, {"study": "s_clip"}]},
+    "selfref": {"name": "selfref", "stages": [{"study": "s_gamma"}, {"study": "s_self"}]},
+    "unknown": {"name": "unknown", "stages": [{"study": "s_gamma"}, {"study": "nope"}]},
+    "twice": {"name": "twice", "stages": [{"study": "s_gamma"}, {"study": "s_gamma"}]},
+}
+
+
+def write_conf(folder: Path) -> None:
+    """The test's own studies and campaigns, in ./conf/ as a user writes them."""
+    for name, (parameter, values, extra) in STUDIES.items():
+        body = {"study": {"name": name, "parameter": parameter, "values": values}, **extra}
+        path = folder / "conf" / "study" / f"{name}.yaml"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("# @package _global_\n" + yaml.safe_dump(body, sort_keys=False))
+    for name, body in CAMPAIGNS.items():
+        path = folder / "conf" / "campaign" / f"{name}.yaml"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("# @package campaign\n" + yaml.safe_dump(body, sort_keys=False))
+
+
+@pytest.fixture(scope="module")
+def ran(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """A folder where the three-stage campaign `tri` ran to the end (once for the module)."""
+    folder = tmp_path_factory.mktemp("campaign")
+    write_conf(folder)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.chdir(folder)
+        assert run_cli("run", "campaign=tri", *TINY, SEEDS) == 0
+    yield folder
+
+
+@pytest.fixture
+def inside(ran: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.chdir(ran)
+    return ran
+
+
+def db(folder: Path) -> Path:
+    return folder / "studies" / "kraby.db"
+
+
+def selected(folder: Path, name: str) -> object:
+    with opened(sqlite_url(db(folder)), create=False, writer=False) as store:
+        chosen = selection_of(store.load(name))
+    assert chosen is not None and chosen.finished
+    return chosen.value
+
+
+def settings_of(folder: Path, name: str) -> list[dict]:
+    return [TrialAttrs.of(t).settings for t in counted(load(db(folder), name).trials)]
+
+
+def test_each_stage_runs_with_the_values_the_earlier_stages_selected(inside: Path) -> None:
+    gamma, clip = selected(inside, "tri-s_gamma"), selected(inside, "tri-s_clip")
+    for settings in settings_of(inside, "tri-s_gamma"):
+        assert settings["ppo"]["clip_range"] == 0.2  # the packaged default until stage 2
+    for settings in settings_of(inside, "tri-s_clip"):
+        assert settings["ppo"]["gamma"] == gamma
+    for settings in settings_of(inside, "tri-s_ent"):
+        assert (settings["ppo"]["gamma"], settings["ppo"]["clip_range"]) == (gamma, clip)
+    for name, planned in (("tri-s_gamma", 4), ("tri-s_clip", 4), ("tri-s_ent", 4)):
+        trials = counted(load(db(inside), name).trials)
+        assert len(trials) == planned and all(t.value is not None for t in trials)
+    attrs = StudyAttrs.of(load(db(inside), "tri-s_ent").user_attrs)
+    assert attrs.inputs == [
+        {"setting": "ppo.gamma", "value": gamma, "study": "tri-s_gamma", "rule": "final_score"},
+        {"setting": "ppo.clip_range", "value": clip, "study": "tri-s_clip",
+         "rule": "final_score"}]
+    assert attrs.select == "fastest_tied"
+    assert attrs.campaign is not None and attrs.campaign["stage"] == 3
+
+
+def test_the_stage_definition_holds_the_resolved_value(inside: Path) -> None:
+    gamma = selected(inside, "tri-s_gamma")
+    attrs = StudyAttrs.of(load(db(inside), "tri-s_clip").user_attrs)
+    assert attrs.definition["settings"]["ppo"]["gamma"] == gamma
+
+
+def test_rerunning_a_finished_campaign_runs_nothing(inside: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    before = {name: len(load(db(inside), name).trials)
+              for name in ("tri-s_gamma", "tri-s_clip", "tri-s_ent")}
+    assert run_cli("run", "campaign=tri", *TINY, SEEDS) == 0
+    after = {name: len(load(db(inside), name).trials) for name in before}
+    assert after == before
+    out = capsys.readouterr().out
+    assert "3/3 stages finished" in out and out.count("0 to run") == 3
+
+
+def test_the_report_writes_the_campaign_table_and_one_selected_row_per_study(
+        inside: Path, tmp_path: Path) -> None:
+    out = tmp_path / "report"
+    assert run_cli("report", "--no-policy", "--out", str(out)) == 0
+    with open(out / "tri" / "campaign.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert [r["study"] for r in rows] == ["tri-s_gamma", "tri-s_clip", "tri-s_ent"]
+    assert [r["rule"] for r in rows] == ["final_score", "final_score", "fastest_tied"]
+    assert [r["documented"] for r in rows] == ["0.99", "0.3", "0"]
+    for row in rows:
+        value = selected(inside, row["study"])
+        assert row["selected"] == f"{value:g}"
+        assert row["agree"] == str(float(row["selected"]) == float(row["documented"]))
+        with open(out / row["study"] / "summary.csv", newline="") as handle:
+            summary = list(csv.DictReader(handle))
+        marked = [r["value"] for r in summary if r["selected"] == "True"]
+        assert marked == [row["selected"]]
+    index = (out / "index.md").read_text()
+    assert "## Campaign tri" in index and "Settings the campaign ends with (after stage 3/3)" \
+        in index
+    gamma = selected(inside, "tri-s_gamma")
+    assert f"ppo.gamma = {gamma:g}, selected in tri-s_gamma (final_score)" in index
+
+
+def test_best_campaign_writes_the_settings_the_campaign_ends_with(inside: Path) -> None:
+    assert run_cli("best", "--campaign", "tri") == 0
+    written = yaml.safe_load((inside / "conf" / "ppo" / "campaign_tri.yaml").read_text())
+    assert written["ppo"]["gamma"] == selected(inside, "tri-s_gamma")
+    assert written["ppo"]["clip_range"] == selected(inside, "tri-s_clip")
+    assert written["ppo"]["ent_coef"] == selected(inside, "tri-s_ent")
+    assert run_cli("best", "--campaign", "nope") == 2
+
+
+def test_a_standalone_study_takes_a_stored_winner(inside: Path) -> None:
+    assert run_cli("run", "study=s_after", *TINY, "budget.seeds=1") == 0
+    gamma = selected(inside, "tri-s_gamma")
+    assert all(s["ppo"]["gamma"] == gamma for s in settings_of(inside, "s_after"))
+    attrs = StudyAttrs.of(load(db(inside), "s_after").user_attrs)
+    assert attrs.inputs == [{"setting": "ppo.gamma", "value": gamma, "study": "tri-s_gamma",
+                             "rule": "final_score"}]
+
+
+@pytest.mark.parametrize("args,message", [
+    (["campaign=nope"], "Could not find 'campaign/nope'"),
+    (["campaign=unknown"], "campaign unknown, stage 2 (nope): "),
+    (["campaign=twice"], "campaign twice lists study s_gamma twice"),
+    (["campaign=fwd"], "campaign fwd, stage 1 (s_fwd): ppo.clip_range: ${winner:s_clip} refers "
+                       "to a later stage (2)"),
+    (["campaign=selfref"], "campaign selfref, stage 2 (s_self): ppo.vf_coef: ${winner:s_self} "
+                           "refers to the stage itself"),
+    (["campaign=tri", "ppo.gamma=0.5"], "ppo.gamma is selected by stage s_gamma of campaign tri"),
+    (["campaign=tri", "study=s_gamma"], "campaign tri runs its own studies"),
+    (["campaign=tri", "campaign.stages.0.select=best"], "select must be one of"),
+    (["study=s_absent"], "ppo.gamma: ${winner:nope}: no study 'nope' in the store yet"),
+    (["study=s_me"], "ppo.gamma: ${winner:s_me} refers to the study itself"),
+])
+def test_bad_campaign_input_is_one_line_and_writes_nothing(
+        workdir: Path, capsys: pytest.CaptureFixture[str], args: list[str], message: str) -> None:
+    write_conf(workdir)
+    assert run_cli("run", *args, *TINY) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+    assert not (workdir / "studies").exists()
+
+
+def test_a_changed_stored_stage_is_refused_before_any_work(
+        ran: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    shutil.copytree(ran, tmp_path / "copy")
+    monkeypatch.chdir(tmp_path / "copy")
+    digest = file_digest(db(tmp_path / "copy"))
+    assert run_cli("run", "campaign=tri", *TINY, SEEDS, "budget.steps=1024") == 2
+    err = capsys.readouterr().err
+    assert "campaign tri, stage 1 (s_gamma): study 'tri-s_gamma'" in err
+    assert "steps: 512 -> 1024" in err
+    assert file_digest(db(tmp_path / "copy")) == digest
+
+
+def test_a_winner_of_an_unfinished_study_says_how_far_it_is(
+        inside: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    url = sqlite_url(tmp_path / "half.db")
+    cfg = compose_config(["study=s_gamma", *TINY, SEEDS, f"storage={url}"])
+    plan = expand_study(cfg)
+    with opened(url) as store:  # queued, never run: 0 of 4 complete
+        ledger = store.define(plan.name, StudyAttrs(kind="sweep", definition=plan.definition,
+                                                    fingerprint=plan.fingerprint))
+        SweepSource(ledger, plan).queue_missing()
+    assert run_cli("run", "study=s_clip", *TINY, f"storage={url}",
+                   "ppo.gamma=${winner:s_gamma}") == 2
+    err = capsys.readouterr().err
+    assert "study 's_gamma' is incomplete (0/4 complete)" in err
+
+
+SLOWER = [a if not a.startswith("budget.steps") else "budget.steps=2048" for a in TINY]
+FAST_HEARTBEAT = ["heartbeat_interval=1", "heartbeat_grace=4"]
+STAGES = ("tri-s_gamma", "tri-s_clip", "tri-s_ent")
+
+
+def complete_keys(url: str, name: str) -> list[str]:
+    """The keys of a study's complete trials, one entry per complete trial (so a key run twice
+    shows twice)."""
+    if not has_study(url, name):
+        return []
+    return sorted(str(t.user_attrs["key"]) for t in load(url, name).get_trials()
+                  if t.state == TrialState.COMPLETE)
+
+
+@pytest.mark.slow
+def test_a_killed_campaign_resumes_where_it_stopped(workdir: Path, store_url: str) -> None:
+    write_conf(workdir)
+    args = ["run", "campaign=tri", "workers=2", f"storage={store_url}", SEEDS, *SLOWER,
+            *FAST_HEARTBEAT]
+    proc = spawn_cli(*args, cwd=workdir)
+    wait_for(lambda: len(complete_keys(store_url, "tri-s_clip")) >= 1, proc=proc)
+    for pid in [proc.pid, *children(proc.pid, workers_only=False)]:
+        os.kill(pid, signal.SIGKILL)
+    proc.wait()
+    first = [t.number for t in load(store_url, "tri-s_gamma").get_trials()]
+    assert len(complete_keys(store_url, "tri-s_gamma")) == 4
+    assert 1 <= len(complete_keys(store_url, "tri-s_clip")) < 4
+    assert not has_study(store_url, "tri-s_ent")
+    if not store_url.startswith("sqlite"):
+        time.sleep(5)  # a server waits for the heartbeat grace (4 s) before taking them over
+    proc = spawn_cli(*args, cwd=workdir)
+    out, _ = proc.communicate(timeout=600)
+    assert proc.returncode == 0, out
+    assert "3/3 stages finished" in out
+    assert [t.number for t in load(store_url, "tri-s_gamma").get_trials()] == first
+    for name in STAGES:
+        keys = complete_keys(store_url, name)
+        assert len(keys) == 4 and len(set(keys)) == 4, (name, keys)
+
+
+@pytest.mark.slow
+@pytest.mark.postgres
+@pytest.mark.skipif(not SERVER, reason="KRABY_TEST_POSTGRES_URL is not set")
+def test_two_commands_on_postgresql_share_one_campaign(workdir: Path) -> None:
+    write_conf(workdir)
+    with fresh_database() as url:
+        args = ["run", "campaign=tri", "workers=1", f"storage={url}", SEEDS, *SLOWER,
+                *FAST_HEARTBEAT]
+        procs = [spawn_cli(*args, cwd=workdir) for _ in range(2)]
+        outs = [p.communicate(timeout=600)[0] for p in procs]
+        for proc, out in zip(procs, outs, strict=True):
+            assert proc.returncode == 0, out
+            assert "3/3 stages finished" in out
+        for name in STAGES:
+            keys = complete_keys(url, name)
+            assert len(keys) == 4 and len(set(keys)) == 4, (name, keys)
+        # Both commands took part: each ran trials of the campaign.
+        ran = [sum(out.count(f"] {p}") for p in ("gamma=", "clip_range=", "ent_coef="))
+               for out in outs]
+        assert all(count >= 1 for count in ran), ran
