@@ -23,6 +23,15 @@ from kraby_study.store.connection import study_exists
 TINY = ["budget=smoke", "budget.steps=512", "budget.curve_every=64", "ppo.n_envs=4",
         "ppo.n_steps=32", "ppo.n_epochs=2", "ppo.net_arch=[8]", "save_models=false"]
 
+FAST_HEARTBEAT = ["heartbeat_interval=1", "heartbeat_grace=4"]
+"""A server notices a stopped command's trials within seconds."""
+
+
+def tiny_with_steps(steps: int) -> list[str]:
+    """TINY with longer runs, for tests that must catch a trial while it runs."""
+    return [a if not a.startswith("budget.steps") else f"budget.steps={steps}" for a in TINY]
+
+
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 from conftest import (
+    FAST_HEARTBEAT,
     SERVER,
     TINY,
     children,
@@ -24,6 +25,7 @@ from conftest import (
     run_cli,
     spawn_cli,
     sqlite_url,
+    tiny_with_steps,
     wait_for,
 )
 from optuna.trial import TrialState
@@ -237,8 +239,7 @@ def test_a_winner_of_an_unfinished_study_says_how_far_it_is(
     assert "study 's_gamma' is incomplete (0/4 complete)" in err
 
 
-SLOWER = [a if not a.startswith("budget.steps") else "budget.steps=2048" for a in TINY]
-FAST_HEARTBEAT = ["heartbeat_interval=1", "heartbeat_grace=4"]
+SLOWER = tiny_with_steps(2048)
 STAGES = ("tri-s_gamma", "tri-s_clip", "tri-s_ent")
 
 

@@ -17,6 +17,7 @@ import optuna
 import pytest
 import sqlalchemy as sa
 from conftest import (
+    FAST_HEARTBEAT,
     SERVER,
     TINY,
     children,
@@ -24,6 +25,7 @@ from conftest import (
     has_study,
     run_cli,
     spawn_cli,
+    tiny_with_steps,
     wait_for,
 )
 from optuna.trial import TrialState
@@ -35,8 +37,7 @@ from kraby_study.run.runner import Retrying
 pytestmark = [pytest.mark.postgres,
               pytest.mark.skipif(not SERVER, reason="KRABY_TEST_POSTGRES_URL is not set")]
 
-FAST_HEARTBEAT = ["heartbeat_interval=1", "heartbeat_grace=4"]
-LONGER = [a if not a.startswith("budget.steps") else "budget.steps=4096" for a in TINY]
+LONGER = tiny_with_steps(4096)
 SPACE = """\
 name: pgsearch
 sampler: tpe

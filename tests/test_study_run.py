@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 from conftest import (
+    FAST_HEARTBEAT,
     TINY,
     children,
     file_digest,
@@ -20,6 +21,7 @@ from conftest import (
     run_cli,
     spawn_cli,
     sqlite_url,
+    tiny_with_steps,
     wait_for,
     write_study_file,
 )
@@ -223,8 +225,7 @@ def _running_trials(db: Path | str, name: str) -> int:
     return len(load(db, name).get_trials(deepcopy=False, states=(TrialState.RUNNING,)))
 
 
-SLOWER = [a if not a.startswith("budget.steps") else "budget.steps=4096" for a in TINY]
-FAST_HEARTBEAT = ["heartbeat_interval=1", "heartbeat_grace=4"]
+SLOWER = tiny_with_steps(4096)
 
 
 @pytest.mark.slow
