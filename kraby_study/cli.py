@@ -16,8 +16,8 @@ from typing import Any
 from omegaconf import DictConfig
 
 from kraby_study.config.compose import compose_config
-from kraby_study.config.validate import worker_count
-from kraby_study.errors import ConfigError, DatabaseLost, StoreError, first_line
+from kraby_study.errors import ClusterLost, ConfigError, DatabaseLost, StoreError, first_line
+from kraby_study.run.executor import executor_for
 from kraby_study.store.connection import LOST_DATABASE
 
 OVERRIDES_HELP = ("Hydra overrides, e.g. study=ent_coef budget=quick ppo.n_steps=64 workers=2 "
@@ -30,6 +30,8 @@ ent_coef|n_envs, campaign=documented (the nine studies in order, each with the e
 winners), search=ppo (the Optuna space).
 A study file may take a setting from a finished study's selected value: ppo.gamma:
 ${winner:gamma}.
+executor=local|ray: trials run in worker processes here, or as Ray actors on a cluster
+(ray.address=auto|host:port; null starts a Ray instance here); the command writes the store.
 Any setting can be overridden with key=value (ppo.gamma=0.8); a flag such as --storage URL is
 the same as its key=value form (storage=URL), on every command that takes it.
 Your own YAML files in ./conf/<group>/ extend these groups and win over packaged files of the
@@ -86,8 +88,9 @@ def _at_least_two(text: str) -> int:
 
 STORAGE = Flag("--storage", "storage", "database URL, as storage=URL (default "
                "sqlite:///studies/kraby.db)", "URL")
-WORKERS = Flag("--workers", "workers", "trials at once, each in its own worker process, as "
-               "workers=N (default: one per core)", "N", _positive_int)
+WORKERS = Flag("--workers", "workers", "trials at once, each in its own worker process (or Ray "
+               "actor), as workers=N (default: one per core; executor=ray: the cluster's CPUs "
+               "/ ray.cpus_per_trial)", "N", _positive_int)
 BEST_OF = Flag("--study-name", "study", "the stored study, as study=NAME (default: the "
                "search's name, ppo_search)", "NAME")
 REPORTED = Flag("--study-name", "study", "report this stored study only, as study=NAME "
@@ -154,9 +157,9 @@ def open_writer(cfg: DictConfig):  # noqa: ANN201 - a context manager of Store
 
 
 def run_options(cfg: DictConfig) -> dict[str, Any]:
-    """Heartbeat period, database patience and shards of a running command."""
+    """Heartbeat period and database patience of a running command."""
     return {"heartbeat_seconds": float(cfg.heartbeat_interval),
-            "retry_seconds": float(cfg.db_retry_seconds), "shards": cfg.shards}
+            "retry_seconds": float(cfg.db_retry_seconds)}
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -172,7 +175,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if cfg.campaign is not None:
         return run_campaign_command(cfg, overrides)
     plan = dataclasses.replace(expand_study(cfg), inputs=[i.stored() for i in lookup.inputs])
-    summary, counts = run_stage(cfg, plan)
+    with executor_for(cfg) as executor:
+        summary, counts = run_stage(cfg, plan, executor)
     total = len(plan.specs)
     print(f"study {plan.name}: {counts.complete}/{total} complete, {counts.failed} failed"
           + (f", {total - counts.ended} left (rerun the same command to continue)"
@@ -180,12 +184,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 130 if summary.interrupted else 0
 
 
-def run_stage(cfg: DictConfig, plan: Any) -> tuple[Any, Any]:
-    """Run a sweep's plan on the command's store and workers: (RunSummary, Tally)."""
+def run_stage(cfg: DictConfig, plan: Any, executor: Any) -> tuple[Any, Any]:
+    """Run a sweep's plan on the command's store and executor: (RunSummary, Tally)."""
     from kraby_study.run.sweep_source import run_plan
 
     with open_writer(cfg) as store:
-        return run_plan(store, plan, worker_count(cfg), sys.stdout, **run_options(cfg))
+        return run_plan(store, plan, executor, executor.workers(cfg.workers), sys.stdout,
+                        **run_options(cfg))
 
 
 def run_campaign_command(cfg: DictConfig, overrides: Sequence[str]) -> int:
@@ -193,7 +198,10 @@ def run_campaign_command(cfg: DictConfig, overrides: Sequence[str]) -> int:
     from kraby_study.plan.campaign import campaign_of
     from kraby_study.run.campaign_run import run_campaign
 
-    return run_campaign(campaign_of(cfg, overrides), run_stage, sys.stdout)
+    campaign = campaign_of(cfg, overrides)
+    with executor_for(cfg) as executor:
+        return run_campaign(campaign, lambda stage_cfg, plan: run_stage(stage_cfg, plan, executor),
+                            sys.stdout)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -204,8 +212,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     cfg = compose_config(with_default(flag_overrides(args, [STORAGE]), "ppo", "tuned"))
     plan = single_run(cfg)
-    with open_writer(cfg) as store:
-        summary, _ = run_plan(store, plan, 1, sys.stdout, **run_options(cfg))
+    with executor_for(cfg) as executor, open_writer(cfg) as store:
+        summary, _ = run_plan(store, plan, executor, 1, sys.stdout, **run_options(cfg))
         trial = latest_by_key(store.load(plan.name).trials()).get(plan.specs[0].key)
     if trial is None:
         return 130 if summary.interrupted else 1
@@ -255,8 +263,9 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     validate_search(cfg)
     starts = [(f"ppo={name}", settings_with_ppo(name, overrides))
               for name in cfg.search.enqueue]
-    with open_writer(cfg) as store:
-        summary, ledger = run_search(store, cfg, worker_count(cfg), sys.stdout, starts=starts)
+    with executor_for(cfg) as executor, open_writer(cfg) as store:
+        summary, ledger = run_search(store, cfg, executor, executor.workers(cfg.workers),
+                                     sys.stdout, starts=starts)
         state = study_progress(ledger)
     print(f"search {state.name}: {state.complete} complete, {state.pruned} pruned, "
           f"{state.failed} failed of {state.total}; best {state.best}")
@@ -278,9 +287,9 @@ def cmd_confirm(args: argparse.Namespace) -> int:
         with opened(cfg.storage, create=False, writer=False) as store:
             source = confirm_source(store.load(str(cfg.confirm.study)), int(cfg.confirm.top))
     plan = confirm_plan(cfg, source, baselines)
-    with open_writer(cfg) as store:
-        summary, counts = run_plan(store, plan, worker_count(cfg), sys.stdout,
-                                   **run_options(cfg))
+    with executor_for(cfg) as executor, open_writer(cfg) as store:
+        summary, counts = run_plan(store, plan, executor, executor.workers(cfg.workers),
+                                   sys.stdout, **run_options(cfg))
     total = len(plan.specs)
     print(f"confirm {plan.name}: {counts.complete}/{total} complete, {counts.failed} failed"
           + (f", {total - counts.ended} left (rerun the same command to continue)"
@@ -431,7 +440,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, StoreError) as err:
         print(f"kraby-study: error: {err}", file=sys.stderr)
         return 2
-    except DatabaseLost as err:
+    except (DatabaseLost, ClusterLost) as err:
         print(f"kraby-study: error: {err}", file=sys.stderr)
         return 1
     except LOST_DATABASE as err:

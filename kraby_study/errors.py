@@ -15,6 +15,11 @@ class DatabaseLost(RuntimeError):
     """The database stayed out of reach longer than the command was told to wait."""
 
 
+class ClusterLost(RuntimeError):
+    """The machines running the trials (a Ray cluster) stayed out of reach longer than the
+    command was told to wait."""
+
+
 def first_line(err: BaseException) -> str:
     """The first line of an exception's message (of the driver's error, for database errors);
     the exception's type name when the message is empty."""

@@ -15,7 +15,6 @@ import pytest
 
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.records import Failure, Outcome, failure_kind
-from kraby_study.run import runner
 from kraby_study.run.pool import Event
 from kraby_study.run.progress import Progress
 from kraby_study.run.result import TrialResult
@@ -138,7 +137,7 @@ class FakePool:
             if kind in ("result", "died"):
                 del self.playing[number]
             if kind == "died":
-                payload = (spec, payload)
+                payload = (spec, f"exit code {payload}")
             out.append(Event(kind, number, payload))
         return out
 
@@ -152,7 +151,7 @@ class FakePool:
 
 
 class Pools:
-    """Stands in for the WorkerPool class: builds a FakePool with the scripts the test set."""
+    """Stands in for an executor: its pool is a FakePool with the scripts the test set."""
 
     def __init__(self) -> None:
         self.made: list[FakePool] = []
@@ -164,33 +163,32 @@ class Pools:
         the ``interrupt_at``-th events() call."""
         self.scripts, self.interrupt_at = scripts, interrupt_at
 
-    def __call__(self, size: int, shards: int = 1) -> FakePool:
-        pool = FakePool(size, shards, self.scripts, self.interrupt_at)
+    def pool(self, size: int) -> FakePool:
+        """The executor's pool: a FakePool playing the scripts."""
+        pool = FakePool(size, 1, self.scripts, self.interrupt_at)
         self.made.append(pool)
         return pool
 
     @property
-    def pool(self) -> FakePool:
+    def only(self) -> FakePool:
         """The one pool run_trials built."""
         assert len(self.made) == 1
         return self.made[0]
 
 
 @pytest.fixture
-def pools(monkeypatch: pytest.MonkeyPatch) -> Pools:
-    made = Pools()
-    monkeypatch.setattr(runner, "WorkerPool", made)
-    return made
+def pools() -> Pools:
+    return Pools()
 
 
-def run(source: FakeSource, workers: int) -> tuple[RunSummary, str]:
+def run(pools: Pools, source: FakeSource, workers: int) -> tuple[RunSummary, str]:
     """run_trials on the fake pool, a heartbeat on every turn of its loop; the summary and
     what the progress printed."""
     stream = io.StringIO()
     total = len(source.queue) + len(source.comes_back)
     progress = Progress("test", total, 0, stream=stream, live=False)
-    summary = run_trials(source, workers, progress, heartbeat_seconds=0.0, poll_seconds=0.01,
-                         shards=1)
+    summary = run_trials(source, workers, progress, pools, heartbeat_seconds=0.0,
+                         poll_seconds=0.01)
     return summary, stream.getvalue()
 
 
@@ -200,14 +198,14 @@ def test_every_claimed_trial_is_recorded_once_with_its_result(pools: Pools) -> N
     pools.script({n: runs(("progress", 100), ("progress", 900), ("result", expected[n]))
                    for n in scores})
     source = FakeSource(5)
-    summary, _ = run(source, workers=2)
+    summary, _ = run(pools, source, workers=2)
     assert sorted(n for n, _, _ in source.recorded) == [0, 1, 2, 3, 4]  # each once
     assert source.results() == expected
     assert all(s == spec(n) for n, s, _ in source.recorded)
     assert [n for kind, n in source.log if kind == "claim"] == [0, 1, 2, 3, 4]
     assert summary == RunSummary(complete=5)
     assert source.requeued == []
-    assert pools.pool.closed  # the workers are stopped at the end
+    assert pools.only.closed  # the workers are stopped at the end
 
 
 def test_the_summary_counts_complete_failed_and_pruned(pools: Pools) -> None:
@@ -215,7 +213,7 @@ def test_the_summary_counts_complete_failed_and_pruned(pools: Pools) -> None:
                 Outcome.FAILED, Outcome.COMPLETE]
     pools.script({n: runs(("result", result(o))) for n, o in enumerate(outcomes)})
     source = FakeSource(len(outcomes))
-    summary, out = run(source, workers=3)
+    summary, out = run(pools, source, workers=3)
     assert summary == RunSummary(complete=3, failed=2, pruned=1, interrupted=False)
     assert {n: r.outcome for n, r in source.results().items()} == dict(enumerate(outcomes))
     assert "[6/6]" in out
@@ -226,9 +224,9 @@ def test_at_most_workers_trials_run_at_once(pools: Pools) -> None:
     pools.script({n: runs(*[("progress", 10)] * (n % 3), ("result", result()))
                    for n in range(7)})
     source = FakeSource(7)
-    run(source, workers=3)
-    assert pools.pool.size == 3
-    assert pools.pool.most_at_once == 3
+    run(pools, source, workers=3)
+    assert pools.only.size == 3
+    assert pools.only.most_at_once == 3
     # Seen from the store: never more than 3 claimed trials without their record.
     open_trials: set[int] = set()
     for kind, number in source.log:
@@ -244,7 +242,7 @@ def test_heartbeats_name_the_running_trials(pools: Pools) -> None:
     pools.script({0: runs(("progress", 1), ("progress", 2), ("result", result())),
                    1: runs(("result", result()))})
     source = FakeSource(2)
-    run(source, workers=2)
+    run(pools, source, workers=2)
     assert source.heartbeats, "no heartbeat"
     running: set[int] = set()
     for kind, item in source.log:
@@ -261,9 +259,9 @@ def test_a_trial_whose_worker_died_runs_again_under_its_number(pools: Pools) -> 
     pools.script({1: [[("progress", 300), ("died", -9)],
                        [("progress", 500), ("result", result(score=4.0))]]})
     source = FakeSource(3)
-    summary, out = run(source, workers=2)
-    assert [n for n, _ in pools.pool.submitted].count(1) == 2
-    assert [s for n, s in pools.pool.submitted if n == 1] == [spec(1), spec(1)]
+    summary, out = run(pools, source, workers=2)
+    assert [n for n, _ in pools.only.submitted].count(1) == 2
+    assert [s for n, s in pools.only.submitted if n == 1] == [spec(1), spec(1)]
     assert [n for kind, n in source.log if kind == "claim"] == [0, 1, 2]  # not claimed again
     assert sorted(n for n, _, _ in source.recorded) == [0, 1, 2]
     assert source.results()[1] == result(score=4.0)
@@ -276,8 +274,8 @@ def test_a_trial_whose_worker_dies_every_time_is_recorded_as_failed(
     codes = [-9, 137, -11, 1, 2][:MAX_WORKER_DEATHS]
     pools.script({0: [[("progress", 10), ("died", code)] for code in codes]})
     source = FakeSource(2)
-    summary, _ = run(source, workers=2)
-    assert [n for n, _ in pools.pool.submitted].count(0) == MAX_WORKER_DEATHS  # not once more
+    summary, _ = run(pools, source, workers=2)
+    assert [n for n, _ in pools.only.submitted].count(0) == MAX_WORKER_DEATHS  # not once more
     assert [n for n, _, _ in source.recorded].count(0) == 1
     failed = source.results()[0]
     assert failed.outcome == Outcome.FAILED
@@ -293,9 +291,9 @@ def test_a_checkpoint_is_answered_with_what_the_source_said(pools: Pools) -> Non
                 ("result", TrialResult(outcome=Outcome.PRUNED, pruned_at=500))),
     })
     source = FakeSource(2, answers={0: True, 1: False})
-    summary, _ = run(source, workers=2)
+    summary, _ = run(pools, source, workers=2)
     assert sorted(source.checkpoints) == [(0, 500, 1.5), (1, 500, -3.0)]
-    assert sorted(pools.pool.replies) == [(0, True), (1, False)]
+    assert sorted(pools.only.replies) == [(0, True), (1, False)]
     assert summary == RunSummary(complete=1, pruned=1)
 
 
@@ -306,7 +304,7 @@ def test_ctrl_c_gives_the_running_trials_back_and_keeps_what_ended(
     pools.script({0: runs(("progress", 10), ("result", result())), 1: long, 2: long},
            interrupt_at=4)
     source = FakeSource(4)
-    summary, out = run(source, workers=2)
+    summary, out = run(pools, source, workers=2)
     assert summary.interrupted is True
     assert (summary.complete, summary.failed, summary.pruned) == (1, 0, 0)
     assert [n for n, _, _ in source.recorded] == [0]
@@ -314,7 +312,7 @@ def test_ctrl_c_gives_the_running_trials_back_and_keeps_what_ended(
     assert all(s == spec(n) for n, s, _ in source.requeued)
     assert all(failure_kind(reason) == Failure.INTERRUPTED for _, _, reason in source.requeued)
     assert ("claim", 3) not in source.log  # nothing new is started after Ctrl-C
-    assert pools.pool.closed[0] is True  # the workers are stopped at once, not politely
+    assert pools.only.closed[0] is True  # the workers are stopped at once, not politely
     assert "queued for the next run" in out
 
 
@@ -322,7 +320,7 @@ def test_it_waits_for_trials_that_other_commands_may_give_back(pools: Pools) -> 
     # Trial 5 is another command's: it can be claimed only after the queue was found empty,
     # while the source says trials run elsewhere.
     source = FakeSource(1, elsewhere=[True], comes_back=[5])
-    summary, _ = run(source, workers=1)
+    summary, _ = run(pools, source, workers=1)
     assert [n for kind, n in source.log if kind == "claim"] == [0, 5]
     assert sorted(n for n, _, _ in source.recorded) == [0, 5]
     assert summary == RunSummary(complete=2)
@@ -330,6 +328,6 @@ def test_it_waits_for_trials_that_other_commands_may_give_back(pools: Pools) -> 
 
 def test_it_ends_when_nothing_is_left_here_or_elsewhere(pools: Pools) -> None:
     source = FakeSource(1, comes_back=[5])  # never claimed: nothing runs elsewhere
-    summary, _ = run(source, workers=1)
+    summary, _ = run(pools, source, workers=1)
     assert [n for n, _, _ in source.recorded] == [0]
     assert summary == RunSummary(complete=1)

@@ -204,6 +204,20 @@ class CampaignConfig:
 
 
 @dataclass
+class RayConfig:
+    """Where ``executor=ray`` runs trials (see docs/architecture.md, Executors)."""
+
+    address: str | None = None
+    """null: start a Ray instance on this machine for the command; ``auto`` or ``host:port``:
+    join a running cluster."""
+    cpus_per_trial: int | None = None
+    """CPUs each trial reserves on its node; null: the trial's shards (1 unless set)."""
+    runtime_env: dict[str, Any] | None = None
+    """Ray's runtime_env for the trials (e.g. {working_dir: ...}); null: every node has the
+    project installed at the same path."""
+
+
+@dataclass
 class KrabyConfig:
     """Everything a command needs: composed from conf/config.yaml and the command line."""
 
@@ -217,8 +231,13 @@ class KrabyConfig:
     confirm: ConfirmConfig = field(default_factory=ConfirmConfig)
     storage: str = "sqlite:///studies/kraby.db"
     """Database URL: a SQLite file (created on demand) or postgresql+psycopg://user@host/db."""
+    executor: str = "local"
+    """What runs the trials: local (worker processes on this machine) or ray (a Ray cluster);
+    either way this command stays the only writer of the store."""
+    ray: RayConfig = field(default_factory=RayConfig)
     workers: int | None = None
-    """Worker processes; null means one per core."""
+    """Trials at once; null: one per core (local), or the cluster's CPUs / ray.cpus_per_trial
+    (ray)."""
     shards: int | None = None
     """Processes stepping each trial's legs, each a shard of them; null: the cores the workers
     leave (cores // workers). Results are the same for any number."""

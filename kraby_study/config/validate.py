@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import os
 from typing import Any
@@ -111,6 +112,7 @@ def validate(cfg: DictConfig) -> None:
     for name in ("workers", "shards"):
         if cfg[name] is not None:
             _require(int(cfg[name]) >= 1, f"{name} must be at least 1, got {cfg[name]}")
+    validate_executor(cfg)
     _require(int(cfg.seed) >= 0, f"seed must be >= 0, got {cfg.seed}")
     _require(int(cfg.report.bootstrap) >= 100,
              f"report.bootstrap must be at least 100 resamples, got {cfg.report.bootstrap}")
@@ -127,17 +129,28 @@ def validate(cfg: DictConfig) -> None:
                 check_rule(str(stage.select), f"campaign stage {stage.study}: select")
 
 
+EXECUTORS = ("local", "ray")
+
+
+def validate_executor(cfg: DictConfig) -> None:
+    """The executor is known, and Ray is installed when it is asked for."""
+    _require(str(cfg.executor) in EXECUTORS,
+             f"executor must be one of {', '.join(EXECUTORS)}, got {cfg.executor!r}")
+    if cfg.ray.cpus_per_trial is not None:
+        _require(int(cfg.ray.cpus_per_trial) >= 1,
+                 f"ray.cpus_per_trial must be at least 1, got {cfg.ray.cpus_per_trial}")
+    if cfg.executor == "ray":
+        _require(importlib.util.find_spec("ray") is not None,
+                 "executor=ray needs Ray, which is not installed: pip install "
+                 "'kraby-study[ray]'")
+
+
 def cores() -> int:
     """The cores this process may run on."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not Linux
         return max(1, os.cpu_count() or 1)
-
-
-def worker_count(cfg: DictConfig) -> int:
-    """Worker processes to use: the configured number, or one per core."""
-    return int(cfg.workers) if cfg.workers is not None else cores()
 
 
 def to_container(cfg: DictConfig | Any) -> Any:

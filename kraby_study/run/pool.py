@@ -13,7 +13,7 @@ import sys
 from dataclasses import dataclass
 from multiprocessing import Pipe
 from multiprocessing.connection import Connection, wait
-from typing import Any
+from typing import Any, Protocol
 
 from kraby_study.plan.spec import TrialSpec
 
@@ -28,12 +28,47 @@ class _Slot:
 
 @dataclass(frozen=True)
 class Event:
-    """Something a worker said or did: progress, checkpoint, result or died."""
+    """Something a worker said or did: progress, checkpoint, result or died.
+
+    The payload is the step (progress), (step, value) (checkpoint), the TrialResult (result),
+    or (spec, why) (died: why the worker is gone, e.g. ``exit code -9``).
+    """
 
     kind: str
     number: int
     payload: Any = None
-    slot: _Slot | None = None
+    slot: Any = None
+    """Where the trial runs, for a reply to a checkpoint."""
+
+
+def as_event(message: tuple[Any, ...], slot: Any) -> Event:
+    """A worker's message, ``(kind, number, *rest)``, as an Event."""
+    kind, number, *rest = message
+    payload = (rest[0], rest[1]) if kind == "checkpoint" else rest[0]
+    return Event(kind, number, payload, slot)
+
+
+class Pool(Protocol):
+    """Trial slots that run specs and report back: the seam between the runner and whatever
+    runs trials (worker processes here, a Ray cluster). The runner alone writes the store."""
+
+    def idle(self) -> int:
+        """How many more trials the pool can take now."""
+
+    def submit(self, number: int, spec: TrialSpec) -> None:
+        """Start a trial in an idle slot."""
+
+    def running(self) -> dict[int, TrialSpec]:
+        """The trials being run, by trial number."""
+
+    def events(self, timeout: float) -> list[Event]:
+        """What the trials said or did within ``timeout`` seconds."""
+
+    def reply(self, event: Event, keep_going: bool) -> None:
+        """Answer a checkpoint: True lets the trial go on, False prunes it."""
+
+    def close(self, terminate: bool = False) -> None:
+        """Stop every slot: politely when idle, at once when ``terminate``."""
 
 
 class WorkerPool:
@@ -86,7 +121,7 @@ class WorkerPool:
                 slot.conn.close()
                 code = _exit_code(slot.process)
                 if slot.number is not None:
-                    out.append(Event("died", slot.number, (slot.spec, code)))
+                    out.append(Event("died", slot.number, (slot.spec, f"exit code {code}")))
         return out
 
     @staticmethod
@@ -94,14 +129,10 @@ class WorkerPool:
         """Adds what the worker said to ``out``; False when its pipe has ended."""
         try:
             while slot.conn.poll():
-                kind, number, *rest = slot.conn.recv()
-                if kind == "result":
+                event = as_event(slot.conn.recv(), slot)
+                if event.kind == "result":
                     slot.number, slot.spec = None, None
-                    out.append(Event(kind, number, rest[0], slot))
-                elif kind == "checkpoint":
-                    out.append(Event(kind, number, (rest[0], rest[1]), slot))
-                else:
-                    out.append(Event(kind, number, rest[0], slot))
+                out.append(event)
         except (EOFError, OSError):
             return False
         return True

@@ -1,9 +1,10 @@
 """Schedule trials on worker processes and record what they return.
 
 The runner is the same for sweeps, searches and single runs: a TrialSource hands out claimed
-trials and records their results (in the parent process: the single writer), a WorkerPool runs
-them. A worker that dies has its trial run again; Ctrl-C stops everything, keeping what is
-complete and queueing the interrupted trials for the next run.
+trials and records their results (in the parent process: the single writer), an executor's pool
+runs them (worker processes here, or a Ray cluster). A worker that dies has its trial run again;
+Ctrl-C stops everything, keeping what is complete and queueing the interrupted trials for the
+next run.
 """
 
 from __future__ import annotations
@@ -14,11 +15,11 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TextIO
 
-from kraby_study.config.validate import cores
-from kraby_study.errors import DatabaseLost, first_line
+from kraby_study.errors import ClusterLost, DatabaseLost, first_line
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.records import Failure, Outcome, failure
-from kraby_study.run.pool import Event, WorkerPool
+from kraby_study.run.executor import Executor
+from kraby_study.run.pool import Event, Pool
 from kraby_study.run.progress import Progress
 from kraby_study.run.result import TrialResult
 from kraby_study.store.connection import LOST_DATABASE
@@ -136,7 +137,7 @@ class _Run:
     """The state of one command's scheduling loop: one handler per worker event."""
 
     source: TrialSource
-    pool: WorkerPool
+    pool: Pool
     progress: Progress
     summary: RunSummary = field(default_factory=RunSummary)
     deaths: dict[int, int] = field(default_factory=dict)
@@ -165,15 +166,15 @@ class _Run:
         self.finish(event.number, spec, event.payload)
 
     def on_died(self, event: Event, spec: TrialSpec) -> None:
-        _, code = event.payload
+        _, why = event.payload
         self.deaths[event.number] = self.deaths.get(event.number, 0) + 1
         if self.deaths[event.number] >= MAX_WORKER_DEATHS:
-            reason = f"its worker died {MAX_WORKER_DEATHS} times (last exit code {code})"
+            reason = f"its worker died {MAX_WORKER_DEATHS} times (last {why})"
             self.finish(event.number, spec, TrialResult(outcome=Outcome.FAILED,
                                                         failure=failure(Failure.ERROR, reason)))
         else:
             # Same trial, new worker: the trial stays claimed, so nothing is lost.
-            self.progress.interrupt(spec.label, f"worker exit code {code}, rerun")
+            self.progress.interrupt(spec.label, f"worker {why}, rerun")
             self.submit(event.number, spec)
 
     def finish(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
@@ -181,29 +182,26 @@ class _Run:
         self.summary.count(result.outcome)
         self.progress.finish(spec.label, result)
 
-    def stop(self) -> None:
-        """Ctrl-C: stop the workers and give their trials back to run next time."""
+    def stop(self, why: str = "stopped by the user") -> None:
+        """Ctrl-C (or the executor's machines lost): stop the workers and give their trials
+        back to run next time."""
         self.summary.interrupted = True
         running = self.pool.running()
         self.pool.close(terminate=True)
         for number, spec in running.items():
-            self.source.requeue(number, spec, failure(Failure.INTERRUPTED, "stopped by the user"))
+            self.source.requeue(number, spec, failure(Failure.INTERRUPTED, why))
             self.progress.interrupt(spec.label, "queued for the next run")
 
 
-def run_trials(source: TrialSource, workers: int, progress: Progress,
-               heartbeat_seconds: float = 5.0, poll_seconds: float = 2.0,
-               shards: int | None = None) -> RunSummary:
-    """Run every trial the source hands out on ``workers`` processes.
-
-    Each trial steps its legs in ``shards`` processes; None gives it the cores the workers
-    leave idle, so a lone trial uses the whole machine.
+def run_trials(source: TrialSource, workers: int, progress: Progress, executor: Executor,
+               heartbeat_seconds: float = 5.0, poll_seconds: float = 2.0) -> RunSummary:
+    """Run every trial the source hands out, ``workers`` at once on the executor's pool.
 
     When nothing is left to claim but other commands still run trials of the study (several
     machines on PostgreSQL), it keeps polling: a trial whose owner died comes back to the queue
     once its heartbeat is stale, and this command runs it.
     """
-    pool = WorkerPool(workers, shards if shards is not None else max(1, cores() // workers))
+    pool = executor.pool(workers)
     run = _Run(source, pool, progress)
     handlers = {"progress": run.on_progress, "checkpoint": run.on_checkpoint,
                 "result": run.on_result, "died": run.on_died}
@@ -232,6 +230,9 @@ def run_trials(source: TrialSource, workers: int, progress: Progress,
                     handlers[event.kind](event, spec)
     except KeyboardInterrupt:
         run.stop()
+    except ClusterLost:
+        run.stop("the cluster running it was lost")
+        raise
     finally:
         ctrl_c.restore()
         pool.close()

@@ -28,6 +28,7 @@ from kraby_study.records import (
     search_key,
     value_label,
 )
+from kraby_study.run.executor import Executor
 from kraby_study.run.progress import Progress
 from kraby_study.run.runner import Retrying, RunSummary, run_trials
 from kraby_study.run.source import StudySource, requeue_orphans
@@ -115,7 +116,7 @@ def warm_start(ledger: StudyLedger, cfg: DictConfig,
     return queued
 
 
-def run_search(store: Store, cfg: DictConfig, workers: int, stream: TextIO,
+def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, stream: TextIO,
                live: bool | None = None, starts: Sequence[tuple[str, dict[str, Any]]] = (),
                ) -> tuple[RunSummary, StudyLedger]:
     """Run a search until its study holds ``search.trials`` trials; a new search evaluates the
@@ -141,5 +142,5 @@ def run_search(store: Store, cfg: DictConfig, workers: int, stream: TextIO,
           f"{cfg.search.sampler} sampler, {cfg.search.pruner} pruner", file=stream, flush=True)
     progress = Progress(ledger.name, source.total, done, stream, live)
     summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream), slots, progress,
-                         heartbeat_seconds=float(cfg.heartbeat_interval), shards=cfg.shards)
+                         executor, heartbeat_seconds=float(cfg.heartbeat_interval))
     return summary, ledger

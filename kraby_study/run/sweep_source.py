@@ -18,6 +18,7 @@ from kraby_study.records import (
     param_name,
     tally,
 )
+from kraby_study.run.executor import Executor
 from kraby_study.run.progress import Progress
 from kraby_study.run.runner import Retrying, RunSummary, run_trials
 from kraby_study.run.source import StudySource, requeue_orphans
@@ -75,12 +76,11 @@ class SweepSource(StudySource):
         return [latest[key] for key in self.specs if key in latest]
 
 
-def run_plan(store: Store, plan: StudyPlan, workers: int, stream: TextIO,
+def run_plan(store: Store, plan: StudyPlan, executor: Executor, workers: int, stream: TextIO,
              live: bool | None = None, heartbeat_seconds: float = 5.0,
-             retry_seconds: float = 60.0,
-             shards: int | None = None) -> tuple[RunSummary, Tally]:
-    """Queue, run and record a plan's trials; returns this command's summary and the
-    outcomes of the plan's runs."""
+             retry_seconds: float = 60.0) -> tuple[RunSummary, Tally]:
+    """Queue, run and record a plan's trials, ``workers`` at once on the executor; returns
+    this command's summary and the outcomes of the plan's runs."""
     kind = str(plan.definition.get("kind"))
     ledger = store.define(plan.name, StudyAttrs(kind=kind, definition=plan.definition,
                                                 fingerprint=plan.fingerprint))
@@ -95,6 +95,6 @@ def run_plan(store: Store, plan: StudyPlan, workers: int, stream: TextIO,
           f"{before.failed} failed, {pending} to run on {slots} worker(s)", file=stream,
           flush=True)
     progress = Progress(plan.name, len(plan.specs), before.ended, stream, live)
-    summary = run_trials(Retrying(source, retry_seconds, stream), slots, progress,
-                         heartbeat_seconds=heartbeat_seconds, shards=shards)
+    summary = run_trials(Retrying(source, retry_seconds, stream), slots, progress, executor,
+                         heartbeat_seconds=heartbeat_seconds)
     return summary, tally(source.counted())

@@ -13,6 +13,28 @@ import signal
 import sys
 import traceback
 from multiprocessing.connection import Connection
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from kraby_study.plan.spec import TrialSpec
+    from kraby_study.run.callback import CheckpointHook, ProgressHook
+    from kraby_study.run.result import TrialResult
+
+
+def attempt(spec: TrialSpec, shards: int, checkpoint: CheckpointHook | None,
+            progress: ProgressHook) -> TrialResult:
+    """Run one trial; an exception (a bug, a bad environment) comes back as a failed result,
+    so it never kills the worker or the study."""
+    from kraby_study.records import Failure, Outcome, failure
+    from kraby_study.run.result import TrialResult
+    from kraby_study.run.trial import run_trial
+
+    try:
+        return run_trial(spec, checkpoint if spec.checkpoint_every else None, progress,
+                         shards=shards)
+    except Exception as err:
+        last = traceback.format_exception_only(type(err), err)[-1].strip()
+        return TrialResult(outcome=Outcome.FAILED, failure=failure(Failure.ERROR, last))
 
 
 def serve(conn: Connection, shards: int) -> None:
@@ -20,10 +42,6 @@ def serve(conn: Connection, shards: int) -> None:
     import torch
 
     torch.set_num_threads(1)
-    from kraby_study.records import Failure, Outcome, failure
-    from kraby_study.run.result import TrialResult
-    from kraby_study.run.trial import run_trial
-
     while True:
         try:
             message = conn.recv()
@@ -40,12 +58,7 @@ def serve(conn: Connection, shards: int) -> None:
             conn.send(("checkpoint", number, step, value))
             return bool(conn.recv())
 
-        try:
-            result = run_trial(spec, checkpoint if spec.checkpoint_every else None, progress,
-                               shards=shards)
-        except Exception as err:  # a bug or a bad environment must not kill the study
-            last = traceback.format_exception_only(type(err), err)[-1].strip()
-            result = TrialResult(outcome=Outcome.FAILED, failure=failure(Failure.ERROR, last))
+        result = attempt(spec, shards, checkpoint, progress)
         try:
             conn.send(("result", number, result))
         except OSError:

@@ -1,0 +1,317 @@
+"""Trials on a Ray cluster: ``executor=ray``.
+
+Each trial slot is a Ray actor reserving ``ray.cpus_per_trial`` CPUs on some node. The actor runs
+one trial at a time with the same code as a local worker (:func:`kraby_study.run.worker.attempt`)
+and keeps its messages (progress, checkpoints, the result) in an outbox that the command drains,
+so the command's process stays the only writer of the store, and a SQLite file serves a whole
+cluster. An actor that dies (its process killed, its node lost) ends its trial with a ``died``
+event, and the runner runs the trial again. When the cluster itself stays out of reach for
+``db_retry_seconds``, the command stops with one line; complete trials are stored already.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import queue
+import socket
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from kraby_study.errors import ClusterLost, ConfigError, first_line
+from kraby_study.plan.spec import TrialSpec
+from kraby_study.run.pool import Event, as_event
+from kraby_study.run.worker import attempt
+
+os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+# Ray starts its workers at niceness 15; a local worker runs at the command's own priority.
+os.environ.setdefault("RAY_worker_niceness", "0")
+# Ray ends a driver that lost its cluster's head after 60 s, with no word of ours; the command
+# decides itself (RayPool's patience) and stops with one line, its complete trials stored.
+os.environ.setdefault("RAY_gcs_rpc_server_reconnect_timeout_s", str(7 * 24 * 3600))
+import ray  # noqa: E402 - after the settings above
+
+DRAIN_SECONDS = 1.0
+"""How long an actor holds a drain call open waiting for a message."""
+LOCAL_OBJECT_STORE = 200 * 1024 * 1024
+"""Object store of a Ray instance the command starts itself: results are small."""
+
+
+class TrialActor:
+    """One trial slot on a Ray node: runs trials one at a time and keeps their messages.
+
+    Ray runs its methods in threads (``max_concurrency``), so ``drain`` and ``reply`` answer
+    while ``run`` trains.
+    """
+
+    def __init__(self, shards: int) -> None:
+        import torch
+
+        torch.set_num_threads(1)  # as a local worker: the same results, one core per trial
+        self._shards = shards
+        self._outbox: queue.Queue[tuple[Any, ...]] = queue.Queue()
+        self._replies: queue.Queue[bool] = queue.Queue()
+
+    def ready(self) -> int:
+        """The actor's process id, once it is placed and started."""
+        return os.getpid()
+
+    def run(self, number: int, spec: TrialSpec) -> None:
+        """Train one trial; its messages and result go to the outbox."""
+
+        def progress(step: int) -> None:
+            self._outbox.put(("progress", number, step))
+
+        def checkpoint(step: int, value: float) -> bool:
+            self._outbox.put(("checkpoint", number, step, value))
+            return self._replies.get()
+
+        self._outbox.put(("result", number, attempt(spec, self._shards, checkpoint, progress)))
+
+    def drain(self, wait: float) -> list[tuple[Any, ...]]:
+        """The messages kept so far, waiting up to ``wait`` seconds for a first one."""
+        try:
+            out = [self._outbox.get(timeout=wait)]
+        except queue.Empty:
+            return []
+        while True:
+            try:
+                out.append(self._outbox.get_nowait())
+            except queue.Empty:
+                return out
+
+    def reply(self, keep_going: bool) -> None:
+        """The command's answer to the checkpoint the trial waits on."""
+        self._replies.put(keep_going)
+
+
+@dataclass
+class _Slot:
+    actor: Any
+    ready: Any
+    """The actor's ready() call; None once it answered."""
+    born: float = field(default_factory=time.monotonic)
+    number: int | None = None
+    spec: TrialSpec | None = None
+    run: Any = None
+    drain: Any = None
+
+
+class RayPool:
+    """Up to ``size`` trial actors on the cluster, started when there is work for them.
+
+    An actor stays between trials (no new process per trial). When a slot's new actor cannot be
+    placed (a node was lost and the others are full), an actor whose trial has ended is let go,
+    so the cluster's remaining CPUs serve the trials still to run.
+    """
+
+    def __init__(self, size: int, shards: int, cpus: int, patience: float) -> None:
+        self.size = size
+        self._actor = ray.remote(TrialActor).options(
+            num_cpus=cpus, max_concurrency=3, max_restarts=0, max_task_retries=0)
+        self._shards = shards
+        self._patience = patience
+        self._slots: list[_Slot] = []
+        self._silent_since: float | None = None
+        self.lost = False
+        """Whether the cluster was given up on: nothing more is asked of it."""
+
+    def idle(self) -> int:
+        """How many more trials the pool can take now."""
+        return self.size - sum(1 for s in self._slots if s.number is not None)
+
+    def submit(self, number: int, spec: TrialSpec) -> None:
+        """Run a trial on an idle actor, starting one if needed."""
+        slot = next((s for s in self._slots if s.number is None), None)
+        if slot is None:
+            actor = self._actor.remote(self._shards)
+            slot = _Slot(actor, actor.ready.remote())
+            self._slots.append(slot)
+        slot.number, slot.spec = number, spec
+        slot.run, slot.drain = slot.actor.run.remote(number, spec), None
+
+    def running(self) -> dict[int, TrialSpec]:
+        """The trials being run, by trial number."""
+        return {s.number: s.spec for s in self._slots if s.number is not None and s.spec}
+
+    def events(self, timeout: float) -> list[Event]:
+        """What the actors said or did within ``timeout`` seconds.
+
+        Raises:
+            ClusterLost: No call has reached the cluster for ``patience`` seconds.
+        """
+        busy = [s for s in self._slots if s.number is not None]
+        for slot in busy:
+            if slot.drain is None:
+                slot.drain = slot.actor.drain.remote(DRAIN_SECONDS)
+        calls = {ref: slot for slot in busy for ref in (slot.drain, slot.run) if ref is not None}
+        if not calls:
+            return []
+        ready, _ = ray.wait(list(calls), num_returns=1, timeout=timeout)
+        if ready:
+            ready, _ = ray.wait(list(calls), num_returns=len(calls), timeout=0)
+        self._note_reach(bool(ready), busy)
+        out: list[Event] = []
+        for ref in ready:
+            slot = calls[ref]
+            if slot not in self._slots or ref not in (slot.drain, slot.run):
+                continue  # the slot was let go, or this call ended with its trial
+            try:
+                got = ray.get(ref)
+            except ray.exceptions.RayError as err:
+                self._gone(slot, f"lost on Ray ({type(err).__name__})", out)
+                continue
+            if ref is slot.run:
+                slot.run = None  # the result comes through the outbox
+            else:
+                slot.drain = None
+                self._deliver(slot, got, out)
+        self._let_go_for_unplaced()
+        return out
+
+    def _deliver(self, slot: _Slot, messages: list[tuple[Any, ...]], out: list[Event]) -> None:
+        for message in messages:
+            event = as_event(message, slot)
+            if event.kind == "result":
+                slot.number, slot.spec, slot.run, slot.drain = None, None, None, None
+            out.append(event)
+
+    def _gone(self, slot: _Slot, why: str, out: list[Event]) -> None:
+        self._slots.remove(slot)
+        _kill(slot.actor)
+        if slot.number is not None:
+            out.append(Event("died", slot.number, (slot.spec, why)))
+
+    def _note_reach(self, answered: bool, busy: list[_Slot]) -> None:
+        """Stop after ``patience`` seconds in which no trial's actor answered.
+
+        A living actor answers each drain within DRAIN_SECONDS, so silence from all of them
+        means the cluster is gone, or has no node left to place them on.
+        """
+        if answered or not busy:
+            self._silent_since = None
+            return
+        now = time.monotonic()
+        self._silent_since = self._silent_since or now
+        if now - self._silent_since >= self._patience:
+            self.lost = True
+            raise ClusterLost(f"no trial actor answered for {self._patience:.0f} s: the Ray "
+                              "cluster is lost or has no CPU left for a trial; giving up "
+                              "(complete trials are stored; rerun to resume)")
+
+    def _let_go_for_unplaced(self) -> None:
+        """Let idle actors go while a newer actor waits to be placed (a node was lost)."""
+        starting = [s for s in self._slots if s.ready is not None]
+        if not starting:
+            return
+        done, _ = ray.wait([s.ready for s in starting], num_returns=len(starting), timeout=0)
+        for slot in starting:
+            if slot.ready in done:
+                slot.ready = None
+        waiting = [s for s in starting if s.ready is not None
+                   and time.monotonic() - s.born > 10.0]
+        idle = [s for s in self._slots if s.number is None and s.ready is None]
+        for slot in idle[:len(waiting)]:
+            self._slots.remove(slot)
+            _kill(slot.actor)
+
+    @staticmethod
+    def reply(event: Event, keep_going: bool) -> None:
+        """Answer a checkpoint: True lets the trial go on, False prunes it."""
+        event.slot.actor.reply.remote(keep_going)
+
+    def close(self, terminate: bool = False) -> None:
+        """Let every actor go (their trials, if any, stop with them)."""
+        if not self.lost:
+            for slot in self._slots:
+                _kill(slot.actor)
+        self._slots.clear()
+
+
+def _kill(actor: Any) -> None:
+    try:
+        ray.kill(actor, no_restart=True)
+    except Exception:  # noqa: BLE001 - already gone, or the cluster is
+        pass
+
+
+@dataclass(frozen=True)
+class RayExecutor:
+    """Trials as Ray actors on the connected cluster.
+
+    Attributes:
+        shards: Processes stepping each trial's legs.
+        cpus: CPUs each trial reserves on its node.
+        patience: Seconds the cluster may stay out of reach before the command stops.
+    """
+
+    shards: int
+    cpus: int
+    patience: float
+
+    def workers(self, configured: int | None) -> int:
+        """The configured number, or the cluster's CPUs / cpus per trial."""
+        if configured is not None:
+            return int(configured)
+        return max(1, int(ray.cluster_resources().get("CPU", 0)) // self.cpus)
+
+    def pool(self, size: int) -> RayPool:
+        """``size`` trial actors, started when there is work for them."""
+        return RayPool(size, self.shards, self.cpus, self.patience)
+
+
+def _check_reachable(address: str | None, patience: float) -> None:
+    """Fail fast on a ``host:port`` that nothing listens on: Ray itself would wait for it as
+    long as it waits for a lost head (see above)."""
+    if address is None or ":" not in address or address.startswith("ray://"):
+        return
+    host, _, port = address.rpartition(":")
+    deadline = time.monotonic() + patience
+    while True:
+        try:
+            socket.create_connection((host, int(port)), timeout=5.0).close()
+            return
+        except (OSError, ValueError) as err:
+            if isinstance(err, ValueError) or time.monotonic() >= deadline:
+                raise ConnectionError(f"nothing answers at {address} ({first_line(err)})") \
+                    from None
+            time.sleep(1.0)
+
+
+@contextmanager
+def ray_executor(cfg: DictConfig) -> Iterator[RayExecutor]:
+    """Connect to ``ray.address`` (None: a Ray instance of the command's own) for the block.
+
+    Raises:
+        ConfigError: The cluster cannot be reached, or no node has cpus_per_trial CPUs.
+    """
+    address = None if cfg.ray.address is None else str(cfg.ray.address)
+    shards = int(cfg.shards or cfg.ray.cpus_per_trial or 1)
+    cpus = int(cfg.ray.cpus_per_trial or shards)
+    runtime_env = (None if cfg.ray.runtime_env is None
+                   else OmegaConf.to_container(cfg.ray.runtime_env, resolve=True))
+    options: dict[str, Any] = {"address": address, "runtime_env": runtime_env,
+                               "include_dashboard": False, "log_to_driver": False,
+                               "logging_level": logging.WARNING}
+    if address is None:  # a Ray instance of the command's own, on loopback only
+        options.update(object_store_memory=LOCAL_OBJECT_STORE, _node_ip_address="127.0.0.1")
+    try:
+        _check_reachable(address, float(cfg.db_retry_seconds))
+        ray.init(**options)
+    except Exception as err:  # noqa: BLE001 - Ray raises several kinds; each is one line here
+        where = "a local Ray instance" if address is None else f"the Ray cluster at {address}"
+        raise ConfigError(f"cannot start {where}: {first_line(err)}") from None
+    try:
+        biggest = max((n["Resources"].get("CPU", 0) for n in ray.nodes() if n["Alive"]),
+                      default=0)
+        if biggest < cpus:
+            raise ConfigError(f"no Ray node has {cpus} CPU(s) for a trial (the largest has "
+                              f"{biggest:g}); lower ray.cpus_per_trial")
+        yield RayExecutor(shards=shards, cpus=cpus, patience=float(cfg.db_retry_seconds))
+    finally:
+        ray.shutdown()

@@ -1,0 +1,310 @@
+"""executor=ray: the same results as the local executor, trials run again when a Ray worker or
+node dies, and bad input in one line. Each test starts its own Ray processes on loopback and
+stops every one of them."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from conftest import (
+    SERVER,
+    TINY,
+    fresh_database,
+    load,
+    run_cli,
+    spawn_cli,
+    sqlite_url,
+    tiny_with_steps,
+    wait_for,
+)
+from optuna.trial import TrialState
+
+from kraby_study.store.connection import opened
+
+pytest.importorskip("ray")
+
+RAY = str(Path(sys.executable).with_name("ray"))
+# Test clusters live on loopback, for one test each: no token to share between the nodes.
+os.environ.setdefault("RAY_AUTH_MODE", "disabled")
+os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+
+SLOWER = tiny_with_steps(4096)
+
+
+def outcomes(db: Path, name: str) -> dict[str, list[TrialState]]:
+    """Each planned run's attempts, by key, in order."""
+    out: dict[str, list[TrialState]] = {}
+    for trial in load(db, name).get_trials():
+        out.setdefault(str(trial.user_attrs["key"]), []).append(trial.state)
+    return out
+
+
+def scores(db: Path, name: str) -> dict[str, tuple[float, list[float]]]:
+    """The final score and learning curve of each complete run, by key."""
+    with opened(sqlite_url(db), create=False, writer=False) as store:
+        ledger = store.load(name)
+        trials = {t.number: t for t in ledger.trials() if t.state == TrialState.COMPLETE}
+        curves = ledger.curves(list(trials))
+    return {str(t.user_attrs["key"]): (t.value, curves[curves.number == n].mean_reward.tolist())
+            for n, t in trials.items()}
+
+
+def ray_processes(marker: str) -> list[int]:
+    """Processes whose command line holds ``marker`` (a cluster's own temporary folder)."""
+    out = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            try:
+                if marker.encode() in (proc / "cmdline").read_bytes():
+                    out.append(int(proc.name))
+            except OSError:
+                pass
+    return out
+
+
+def descendants(pids: list[int]) -> list[int]:
+    """The processes below these (Ray's agents and workers are children of a raylet)."""
+    parents: dict[int, list[int]] = {}
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            try:
+                ppid = int((proc / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            parents.setdefault(ppid, []).append(int(proc.name))
+    out, todo = [], list(pids)
+    while todo:
+        for child in parents.get(todo.pop(), []):
+            out.append(child)
+            todo.append(child)
+    return out
+
+
+def kill_all(pids: list[int]) -> None:
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+class Cluster:
+    """A Ray cluster of one-CPU nodes on loopback, in its own temporary folder."""
+
+    def __init__(self, folder: Path, port: int) -> None:
+        self.folder, self.port = folder, port
+        self.address = f"127.0.0.1:{port}"
+
+    def start(self, head: bool) -> int:
+        """Start a node; returns its raylet's process id."""
+        before = set(self.raylets())
+        where = (["--head", f"--port={self.port}", "--include-dashboard=false",
+                  f"--temp-dir={self.folder}"] if head else [f"--address={self.address}"])
+        subprocess.run([RAY, "start", *where, "--num-cpus=1", "--node-ip-address=127.0.0.1",
+                        "--object-store-memory=100000000"], check=True,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        (raylet,) = set(self.raylets()) - before
+        return raylet
+
+    def raylets(self) -> list[int]:
+        return [p for p in ray_processes(str(self.folder))
+                if b"raylet/raylet" in Path(f"/proc/{p}/cmdline").read_bytes()]
+
+    def stop(self) -> None:
+        """SIGKILL every process of the cluster and everything they started."""
+        own = ray_processes(str(self.folder))
+        kill_all(own + descendants(own))
+
+
+@pytest.fixture
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
+    # Ray's socket paths must stay short: a folder of its own right under /tmp.
+    folder = Path(f"/tmp/kr{os.getpid()}")
+    made = Cluster(folder, 6400 + os.getpid() % 1000)
+    try:
+        yield made
+    finally:
+        made.stop()
+        subprocess.run(["rm", "-rf", str(folder)], check=False)
+
+
+def local_ray_processes(before: set[int]) -> set[int]:
+    """Ray processes started since ``before`` (a command's own local Ray instance)."""
+    return {p for p in ray_processes("ray/") if p not in before}
+
+
+def test_a_ray_sweep_gives_the_local_executors_exact_scores(workdir: Path) -> None:
+    before = set(ray_processes("ray/"))
+    common = ["study=gamma", *TINY, "study.values=[0.8,0.99]", "workers=2"]
+    assert run_cli("run", *common, f"storage={sqlite_url(workdir / 'local.db')}") == 0
+    proc = spawn_cli("run", *common, f"storage={sqlite_url(workdir / 'ray.db')}",
+                     "executor=ray", cwd=workdir)
+    out, _ = proc.communicate(timeout=600)
+    assert proc.returncode == 0, out
+    local, on_ray = scores(workdir / "local.db", "gamma"), scores(workdir / "ray.db", "gamma")
+    assert len(local) == 4 and on_ray == local  # bit for bit: scores and every curve point
+    assert not local_ray_processes(before)  # the command stopped its own Ray instance
+
+
+@pytest.mark.parametrize("args,message", [
+    (["executor=dask"], "executor must be one of local, ray, got 'dask'"),
+    (["executor=ray", "ray.cpus_per_trial=0"], "ray.cpus_per_trial must be at least 1"),
+    (["executor=ray", "ray.cpus_per_trial=64"], "no Ray node has 64 CPU(s) for a trial"),
+])
+def test_bad_executor_input_is_one_line_and_writes_nothing(
+        workdir: Path, capsys: pytest.CaptureFixture[str], args: list[str], message: str) -> None:
+    assert run_cli("run", "study=gamma", *TINY, *args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+    assert not (workdir / "studies").exists()
+
+
+def test_executor_ray_without_ray_names_the_extra(
+        workdir: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "ray" else real(name, *a))
+    assert run_cli("run", "study=gamma", *TINY, "executor=ray") == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("kraby-study: error: executor=ray needs Ray, which is not installed: pip "
+                   "install 'kraby-study[ray]'")
+    assert not (workdir / "studies").exists()
+
+
+def test_an_unreachable_cluster_is_one_line_and_writes_nothing(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("run", "study=gamma", *TINY, "executor=ray", "ray.address=127.0.0.1:1",
+                   "db_retry_seconds=2") == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "cannot start the Ray cluster at 127.0.0.1:1" in err
+    assert not (workdir / "studies").exists()
+
+
+@pytest.mark.slow
+def test_a_killed_ray_worker_has_its_trial_run_again(workdir: Path) -> None:
+    db = workdir / "ray.db"
+    before = set(ray_processes("ray/"))
+    proc = spawn_cli("run", "study=clip_range", *SLOWER, "budget.seeds=1", "workers=2",
+                     "executor=ray", f"storage={sqlite_url(db)}", cwd=workdir)
+    try:
+        wait_for(lambda: len(actors(before)) == 2 and db.exists(), proc=proc)
+        time.sleep(3)  # both trials are training
+        kill_all(actors(before)[:1])
+        out, _ = proc.communicate(timeout=600)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, out
+    assert "(worker lost on Ray (ActorDiedError)), rerun" in out
+    runs = outcomes(db, "clip_range")
+    # One trial per planned run, each complete: the killed one was run again under its number.
+    assert sorted(runs) == [f"v{i}-s0" for i in range(4)]
+    assert all(states == [TrialState.COMPLETE] for states in runs.values()), runs
+    assert not local_ray_processes(before)
+
+
+def actors(before: set[int]) -> list[int]:
+    """Trial actors started since ``before``."""
+    return [p for p in local_ray_processes(before) | set(ray_processes("ray::TrialActor"))
+            if b"ray::TrialActor" in Path(f"/proc/{p}/cmdline").read_bytes()]
+
+
+@pytest.mark.slow
+def test_a_lost_node_has_its_trials_run_on_the_others(workdir: Path, cluster: Cluster) -> None:
+    cluster.start(head=True)
+    second = cluster.start(head=False)
+    db = workdir / "ray.db"
+    proc = spawn_cli("run", "study=clip_range", *SLOWER, "budget.seeds=1", "workers=2",
+                     "executor=ray", f"ray.address={cluster.address}",
+                     f"storage={sqlite_url(db)}", cwd=workdir)
+    try:
+        # Both nodes hold a trial: each node's raylet has a trial actor below it.
+        wait_for(lambda: all(any(b"ray::TrialActor" in _cmd(c) for c in descendants([r]))
+                             for r in cluster.raylets()), proc=proc)
+        time.sleep(3)
+        kill_all([second, *descendants([second])])
+        out, _ = proc.communicate(timeout=600)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, out
+    assert "worker lost on Ray" in out
+    runs = outcomes(db, "clip_range")
+    assert sorted(runs) == [f"v{i}-s0" for i in range(4)]
+    assert all(states == [TrialState.COMPLETE] for states in runs.values()), runs
+
+
+def _cmd(pid: int) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
+
+
+@pytest.mark.slow
+def test_a_lost_cluster_stops_the_command_in_one_line(workdir: Path, cluster: Cluster) -> None:
+    cluster.start(head=True)
+    db = workdir / "ray.db"
+    proc = spawn_cli("run", "study=clip_range", *tiny_with_steps(40960), "budget.seeds=1",
+                     "workers=1", "executor=ray", f"ray.address={cluster.address}",
+                     "db_retry_seconds=5", f"storage={sqlite_url(db)}", cwd=workdir)
+    try:
+        wait_for(lambda: db.exists() and bool(actors(set())), proc=proc)
+        cluster.stop()
+        out, _ = proc.communicate(timeout=300)
+    finally:
+        proc.kill()
+    assert proc.returncode == 1, out
+    assert out.strip().splitlines()[-1] == (
+        "kraby-study: error: no trial actor answered for 5 s: the Ray cluster is lost or has "
+        "no CPU left for a trial; giving up (complete trials are stored; rerun to resume)")
+    # Nothing is left marked running: the trial that ran is queued again for the next run.
+    trials = load(db, "clip_range").get_trials()
+    assert not [t for t in trials if t.state == TrialState.RUNNING]
+    lost = [t for t in trials if "the cluster running it was lost" in
+            str(t.user_attrs.get("failure"))]
+    assert len(lost) == 1, [t.user_attrs for t in trials]
+
+
+@pytest.mark.slow
+def test_a_search_on_ray_answers_its_checkpoints_as_a_local_one(workdir: Path) -> None:
+    from test_search import TINY_SPACE
+
+    (workdir / "conf" / "search").mkdir(parents=True)
+    (workdir / "conf" / "search" / "tiny.yaml").write_text(TINY_SPACE)
+    common = ["optuna", "--trials", "3", "search=tiny", "--workers", "1", *TINY,
+              "budget.seeds=2"]
+    assert run_cli(*common, f"storage={sqlite_url(workdir / 'local.db')}") == 0
+    proc = spawn_cli(*common, f"storage={sqlite_url(workdir / 'ray.db')}", "executor=ray",
+                     cwd=workdir)
+    out, _ = proc.communicate(timeout=600)
+    assert proc.returncode == 0, out
+
+    def trials(db: Path) -> list[tuple]:
+        return [(t.state, t.params, t.value, t.intermediate_values)
+                for t in load(db, "tiny").get_trials()]
+
+    local = trials(workdir / "local.db")
+    assert len(local) == 3 and all(len(t[3]) >= 2 for t in local)
+    assert trials(workdir / "ray.db") == local
+
+
+@pytest.mark.slow
+@pytest.mark.postgres
+@pytest.mark.skipif(not SERVER, reason="KRABY_TEST_POSTGRES_URL is not set")
+def test_a_ray_sweep_writes_a_postgresql_store(workdir: Path) -> None:
+    with fresh_database() as url:
+        proc = spawn_cli("run", "study=gamma", *TINY, "study.values=[0.8,0.99]", "workers=2",
+                         "executor=ray", f"storage={url}", cwd=workdir)
+        out, _ = proc.communicate(timeout=600)
+        assert proc.returncode == 0, out
+        states = [t.state for t in load(url, "gamma").get_trials()]
+        assert states == [TrialState.COMPLETE] * 4
