@@ -9,7 +9,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -56,17 +56,18 @@ def scores(db: Path, name: str) -> dict[str, tuple[float, list[float]]]:
             for n, t in trials.items()}
 
 
+def cmdline(pid: int) -> bytes:
+    """A process's command line; empty once it is gone."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
+
+
 def ray_processes(marker: str) -> list[int]:
     """Processes whose command line holds ``marker`` (a cluster's own temporary folder)."""
-    out = []
-    for proc in Path("/proc").iterdir():
-        if proc.name.isdigit():
-            try:
-                if marker.encode() in (proc / "cmdline").read_bytes():
-                    out.append(int(proc.name))
-            except OSError:
-                pass
-    return out
+    return [int(p.name) for p in Path("/proc").iterdir()
+            if p.name.isdigit() and marker.encode() in cmdline(int(p.name))]
 
 
 def descendants(pids: list[int]) -> list[int]:
@@ -114,8 +115,7 @@ class Cluster:
         return raylet
 
     def raylets(self) -> list[int]:
-        return [p for p in ray_processes(str(self.folder))
-                if b"raylet/raylet" in Path(f"/proc/{p}/cmdline").read_bytes()]
+        return [p for p in ray_processes(str(self.folder)) if b"raylet/raylet" in cmdline(p)]
 
     def stop(self) -> None:
         """SIGKILL every process of the cluster and everything they started."""
@@ -190,32 +190,46 @@ def test_an_unreachable_cluster_is_one_line_and_writes_nothing(
     assert not (workdir / "studies").exists()
 
 
+def actors() -> list[int]:
+    """Every trial actor's process on this machine."""
+    return [p for p in ray_processes("ray::TrialActor") if cmdline(p).startswith(b"ray::Trial")]
+
+
+def killed_midway(workdir: Path, args: list[str], ready: Callable[[], bool],
+                  victims: Callable[[], list[int]]) -> tuple[int, str]:
+    """Run a command, SIGKILL ``victims()`` once ``ready()`` holds and both trials have trained
+    a few seconds; (exit code, output) of the command."""
+    proc = spawn_cli("run", "study=clip_range", *SLOWER, "budget.seeds=1", "workers=2",
+                     "executor=ray", *args, cwd=workdir)
+    try:
+        wait_for(ready, proc=proc)
+        time.sleep(3)
+        kill_all(victims())
+        out, _ = proc.communicate(timeout=600)
+    finally:
+        proc.kill()
+    return proc.returncode, out
+
+
+def each_run_complete_once(db: Path) -> None:
+    """One trial per planned run of the 4, each complete: a killed one ran again under its
+    number."""
+    runs = outcomes(db, "clip_range")
+    assert sorted(runs) == [f"v{i}-s0" for i in range(4)]
+    assert all(states == [TrialState.COMPLETE] for states in runs.values()), runs
+
+
 @pytest.mark.slow
 def test_a_killed_ray_worker_has_its_trial_run_again(workdir: Path) -> None:
     db = workdir / "ray.db"
     before = set(ray_processes("ray/"))
-    proc = spawn_cli("run", "study=clip_range", *SLOWER, "budget.seeds=1", "workers=2",
-                     "executor=ray", f"storage={sqlite_url(db)}", cwd=workdir)
-    try:
-        wait_for(lambda: len(actors(before)) == 2 and db.exists(), proc=proc)
-        time.sleep(3)  # both trials are training
-        kill_all(actors(before)[:1])
-        out, _ = proc.communicate(timeout=600)
-    finally:
-        proc.kill()
-    assert proc.returncode == 0, out
+    code, out = killed_midway(workdir, [f"storage={sqlite_url(db)}"],
+                              ready=lambda: len(actors()) == 2 and db.exists(),
+                              victims=lambda: actors()[:1])
+    assert code == 0, out
     assert "(worker lost on Ray (ActorDiedError)), rerun" in out
-    runs = outcomes(db, "clip_range")
-    # One trial per planned run, each complete: the killed one was run again under its number.
-    assert sorted(runs) == [f"v{i}-s0" for i in range(4)]
-    assert all(states == [TrialState.COMPLETE] for states in runs.values()), runs
+    each_run_complete_once(db)
     assert not local_ray_processes(before)
-
-
-def actors(before: set[int]) -> list[int]:
-    """Trial actors started since ``before``."""
-    return [p for p in local_ray_processes(before) | set(ray_processes("ray::TrialActor"))
-            if b"ray::TrialActor" in Path(f"/proc/{p}/cmdline").read_bytes()]
 
 
 @pytest.mark.slow
@@ -223,30 +237,18 @@ def test_a_lost_node_has_its_trials_run_on_the_others(workdir: Path, cluster: Cl
     cluster.start(head=True)
     second = cluster.start(head=False)
     db = workdir / "ray.db"
-    proc = spawn_cli("run", "study=clip_range", *SLOWER, "budget.seeds=1", "workers=2",
-                     "executor=ray", f"ray.address={cluster.address}",
-                     f"storage={sqlite_url(db)}", cwd=workdir)
-    try:
-        # Both nodes hold a trial: each node's raylet has a trial actor below it.
-        wait_for(lambda: all(any(b"ray::TrialActor" in _cmd(c) for c in descendants([r]))
-                             for r in cluster.raylets()), proc=proc)
-        time.sleep(3)
-        kill_all([second, *descendants([second])])
-        out, _ = proc.communicate(timeout=600)
-    finally:
-        proc.kill()
-    assert proc.returncode == 0, out
+
+    def on_both_nodes() -> bool:  # each node's raylet has a trial actor below it
+        return all(any(cmdline(c).startswith(b"ray::Trial") for c in descendants([r]))
+                   for r in cluster.raylets())
+
+    code, out = killed_midway(workdir, [f"ray.address={cluster.address}",
+                                        f"storage={sqlite_url(db)}"],
+                              ready=on_both_nodes,
+                              victims=lambda: [second, *descendants([second])])
+    assert code == 0, out
     assert "worker lost on Ray" in out
-    runs = outcomes(db, "clip_range")
-    assert sorted(runs) == [f"v{i}-s0" for i in range(4)]
-    assert all(states == [TrialState.COMPLETE] for states in runs.values()), runs
-
-
-def _cmd(pid: int) -> bytes:
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes()
-    except OSError:
-        return b""
+    each_run_complete_once(db)
 
 
 @pytest.mark.slow
@@ -257,7 +259,7 @@ def test_a_lost_cluster_stops_the_command_in_one_line(workdir: Path, cluster: Cl
                      "workers=1", "executor=ray", f"ray.address={cluster.address}",
                      "db_retry_seconds=5", f"storage={sqlite_url(db)}", cwd=workdir)
     try:
-        wait_for(lambda: db.exists() and bool(actors(set())), proc=proc)
+        wait_for(lambda: db.exists() and bool(actors()), proc=proc)
         cluster.stop()
         out, _ = proc.communicate(timeout=300)
     finally:
