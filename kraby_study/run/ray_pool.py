@@ -38,6 +38,8 @@ import ray  # noqa: E402 - after the settings above
 
 DRAIN_SECONDS = 1.0
 """How long an actor holds a drain call open waiting for a message."""
+PLACEMENT_SECONDS = 10.0
+"""An actor not started after this long is taken to wait for a CPU, not to be starting."""
 LOCAL_OBJECT_STORE = 200 * 1024 * 1024
 """Object store of a Ray instance the command starts itself: results are small."""
 
@@ -214,7 +216,7 @@ class RayPool:
             if slot.ready in done:
                 slot.ready = None
         waiting = [s for s in starting if s.ready is not None
-                   and time.monotonic() - s.born > 10.0]
+                   and time.monotonic() - s.born > PLACEMENT_SECONDS]
         idle = [s for s in self._slots if s.number is None and s.ready is None]
         for slot in idle[:len(waiting)]:
             self._slots.remove(slot)
