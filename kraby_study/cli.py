@@ -11,7 +11,7 @@ import dataclasses
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from omegaconf import DictConfig
 
@@ -19,6 +19,9 @@ from kraby_study.config.compose import compose_config
 from kraby_study.errors import ClusterLost, ConfigError, DatabaseLost, StoreError, first_line
 from kraby_study.run.executor import executor_for
 from kraby_study.store.connection import LOST_DATABASE
+
+if TYPE_CHECKING:
+    from kraby_study.run.executor import Executor
 
 OVERRIDES_HELP = ("Hydra overrides, e.g. study=ent_coef budget=quick ppo.n_steps=64 workers=2 "
                   "storage=sqlite:///studies/kraby.db")
@@ -184,7 +187,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 130 if summary.interrupted else 0
 
 
-def run_stage(cfg: DictConfig, plan: Any, executor: Any) -> tuple[Any, Any]:
+def run_stage(cfg: DictConfig, plan: Any, executor: Executor) -> tuple[Any, Any]:
     """Run a sweep's plan on the command's store and executor: (RunSummary, Tally)."""
     from kraby_study.run.sweep_source import run_plan
 

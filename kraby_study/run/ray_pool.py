@@ -273,13 +273,15 @@ def _check_reachable(address: str | None, patience: float) -> None:
     if address is None or ":" not in address or address.startswith("ray://"):
         return
     host, _, port = address.rpartition(":")
+    if not port.isdigit():
+        raise ConnectionError(f"{address!r} is not host:port")
     deadline = time.monotonic() + patience
     while True:
         try:
             socket.create_connection((host, int(port)), timeout=5.0).close()
             return
-        except (OSError, ValueError) as err:
-            if isinstance(err, ValueError) or time.monotonic() >= deadline:
+        except OSError as err:
+            if time.monotonic() >= deadline:
                 raise ConnectionError(f"nothing answers at {address} ({first_line(err)})") \
                     from None
             time.sleep(1.0)
