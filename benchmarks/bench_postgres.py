@@ -22,7 +22,7 @@ from pathlib import Path
 
 import sqlalchemy as sa
 
-from kraby_study.store.connection import Store
+from kraby_study.store.store import Store
 
 STUDY = ["study=clip_range", "budget.seeds=2", "budget.steps=8192", "budget.curve_every=1024",
          "save_models=false", "workers=1"]

@@ -11,6 +11,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -19,8 +20,11 @@ import numpy as np
 import optuna
 
 from kraby_study.report import write_report
-from kraby_study.report.synthetic import add_search, add_sweep, sweep_runs
-from kraby_study.store.connection import Store
+from kraby_study.store.store import Store
+
+# The synthetic stores are a test fixture (tests/synthetic.py), shared with this benchmark.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from synthetic import add_search, add_sweep, sweep_runs  # noqa: E402
 
 SWEEPS = [
     ("ent_coef", "ppo.ent_coef", [1e-8, 1e-6, 1e-4, 1e-3, 3e-3, 0.01, 0.03, 0.1, 0.3, 1.0]),

@@ -1,7 +1,8 @@
 """The kraby-study command: subcommands and flags become Hydra overrides, then work is done.
 
 main() only wires arguments to the functions that do the work; every check that can fail on
-user input runs before anything is written.
+user input runs before anything is written. Each command imports what it needs when it runs,
+so ``--help`` and a refused input load no training, database or statistics code.
 """
 
 from __future__ import annotations
@@ -13,15 +14,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from omegaconf import DictConfig
-
-from kraby_study.config.compose import compose_config
 from kraby_study.errors import ClusterLost, ConfigError, DatabaseLost, StoreError, first_line
-from kraby_study.run.executor import executor_for
-from kraby_study.store.connection import LOST_DATABASE
 
 if TYPE_CHECKING:
+    from omegaconf import DictConfig
+
+    from kraby_study.plan.spec import StudyPlan
+    from kraby_study.records import Tally
     from kraby_study.run.executor import Executor
+    from kraby_study.run.runner import CommandRun
 
 OVERRIDES_HELP = ("Hydra overrides, e.g. study=ent_coef budget=quick ppo.n_steps=64 workers=2 "
                   "storage=sqlite:///studies/kraby.db")
@@ -151,9 +152,16 @@ def stored_study(overrides: Sequence[str]) -> tuple[str | None, list[str]]:
     return (names[0] if names else None), [o for o in overrides if not o.startswith("study=")]
 
 
+def compose_config(overrides: Sequence[str]) -> DictConfig:
+    """The command's config (Hydra and the schema are loaded on first use)."""
+    from kraby_study.config.compose import compose_config as compose
+
+    return compose(overrides)
+
+
 def open_writer(cfg: DictConfig):  # noqa: ANN201 - a context manager of Store
     """The store a command writes to, with the configured heartbeat timing."""
-    from kraby_study.store.connection import opened
+    from kraby_study.store.store import opened
 
     return opened(cfg.storage, heartbeat_interval=int(cfg.heartbeat_interval),
                   heartbeat_grace=int(cfg.heartbeat_grace))
@@ -167,9 +175,9 @@ def run_options(cfg: DictConfig) -> dict[str, Any]:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Run a study's sweep: every value x seed, resumable."""
+    from kraby_study.answers.winners import StoreWinners
     from kraby_study.config.winner import winners_from
     from kraby_study.plan.sweep import expand_study
-    from kraby_study.winners import StoreWinners
 
     overrides = flag_overrides(args, [STORAGE, WORKERS])
     lookup = StoreWinners()
@@ -178,18 +186,20 @@ def cmd_run(args: argparse.Namespace) -> int:
     if cfg.campaign is not None:
         return run_campaign_command(cfg, overrides)
     plan = dataclasses.replace(expand_study(cfg), inputs=[i.stored() for i in lookup.inputs])
+    # Loaded once the input is known to be good: a refused input answers at once.
+    from kraby_study.run.executor import executor_for
+    from kraby_study.run.plan_source import closing_line
+
     with executor_for(cfg) as executor:
         summary, counts = run_stage(cfg, plan, executor)
-    total = len(plan.specs)
-    print(f"study {plan.name}: {counts.complete}/{total} complete, {counts.failed} failed"
-          + (f", {total - counts.ended} left (rerun the same command to continue)"
-             if counts.ended < total else ""))
+    print(closing_line("study", plan, counts))
     return 130 if summary.interrupted else 0
 
 
-def run_stage(cfg: DictConfig, plan: Any, executor: Executor) -> tuple[Any, Any]:
-    """Run a sweep's plan on the command's store and executor: (RunSummary, Tally)."""
-    from kraby_study.run.sweep_source import run_plan
+def run_stage(cfg: DictConfig, plan: StudyPlan, executor: Executor) -> tuple[CommandRun, Tally]:
+    """Run a plan on the command's store and executor: (what this command ran, the plan's
+    outcomes)."""
+    from kraby_study.run.plan_source import run_plan
 
     with open_writer(cfg) as store:
         return run_plan(store, plan, executor, executor.workers(cfg.workers), sys.stdout,
@@ -200,6 +210,7 @@ def run_campaign_command(cfg: DictConfig, overrides: Sequence[str]) -> int:
     """``run campaign=NAME``: every stage in order, resumable."""
     from kraby_study.plan.campaign import campaign_of
     from kraby_study.run.campaign_run import run_campaign
+    from kraby_study.run.executor import executor_for
 
     campaign = campaign_of(cfg, overrides)
     with executor_for(cfg) as executor:
@@ -209,35 +220,21 @@ def run_campaign_command(cfg: DictConfig, overrides: Sequence[str]) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     """One training run, stored like a trial, its model saved."""
-    from kraby_study.plan.sweep import single_run
-    from kraby_study.records import Outcome, TrialAttrs, latest_by_key, outcome
-    from kraby_study.run.sweep_source import run_plan
+    from kraby_study.plan.train import train_plan
+    from kraby_study.run.executor import executor_for
+    from kraby_study.run.plan_source import run_plan, train_outcome
 
     cfg = compose_config(with_default(flag_overrides(args, [STORAGE]), "ppo", "tuned"))
-    plan = single_run(cfg)
+    plan = train_plan(cfg)
     with executor_for(cfg) as executor, open_writer(cfg) as store:
         summary, _ = run_plan(store, plan, executor, 1, sys.stdout, **run_options(cfg))
-        trial = latest_by_key(store.load(plan.name).trials()).get(plan.specs[0].key)
-    if trial is None:
-        return 130 if summary.interrupted else 1
-    attrs = TrialAttrs.of(trial)
-    line = f"train {plan.name} seed {cfg.seed}: {outcome(trial)}"
-    if trial.value is not None:
-        line += f", final score {trial.value:.4g} over {attrs.env_steps} steps"
-    if attrs.failure:
-        line += f" ({attrs.failure})"
-    print(line)
-    if attrs.model_path and trial.value is not None:
-        print(f"model: {attrs.model_path}")
-    if summary.interrupted:
-        return 130
-    return 0 if outcome(trial) == Outcome.COMPLETE else 1
+        return train_outcome(store, plan, summary, int(cfg.seed), sys.stdout)
 
 
 def cmd_list(args: argparse.Namespace) -> int:
     """The studies in the store with their progress."""
-    from kraby_study.store.connection import opened
-    from kraby_study.summary import study_progress
+    from kraby_study.answers.standing import study_standing
+    from kraby_study.store.store import opened
 
     cfg = compose_config(flag_overrides(args, [STORAGE]))
     with opened(cfg.storage, create=False, writer=False) as store:
@@ -245,10 +242,11 @@ def cmd_list(args: argparse.Namespace) -> int:
         if not names:
             print(f"no studies in {cfg.storage}")
             return 0
-        rows = [study_progress(store.load(name)) for name in names]
-    header = ("study", "kind", "complete", "failed", "pruned", "running", "best so far")
-    table = [header] + [(p.name, p.kind, f"{p.complete}/{p.total}", str(p.failed),
-                         str(p.pruned), str(p.running), p.best) for p in rows]
+        rows = [study_standing(store.load(name)) for name in names]
+    header = ("study", "kind", "complete", "failed", "pruned", "running", "selected so far")
+    table = [header] + [(p.name, p.kind.value, f"{p.tally.complete}/{p.tally.planned}",
+                         str(p.tally.failed), str(p.tally.pruned), str(p.tally.running),
+                         p.selected) for p in rows]
     widths = [max(len(row[i]) for row in table) for i in range(len(header))]
     for row in table:
         print("  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)))
@@ -257,9 +255,11 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 def cmd_optuna(args: argparse.Namespace) -> int:
     """An Optuna search over conf/search/<space>.yaml, into the same store."""
+    from kraby_study.answers.standing import study_standing
+    from kraby_study.plan.settings import settings_with_ppo
     from kraby_study.plan.space import validate_search
+    from kraby_study.run.executor import executor_for
     from kraby_study.run.search_source import run_search
-    from kraby_study.summary import study_progress
 
     overrides = with_default(flag_overrides(args, SEARCH_FLAGS), "budget", "quick")
     cfg = compose_config(overrides)
@@ -269,18 +269,20 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     with executor_for(cfg) as executor, open_writer(cfg) as store:
         summary, ledger = run_search(store, cfg, executor, executor.workers(cfg.workers),
                                      sys.stdout, starts=starts)
-        state = study_progress(ledger)
-    print(f"search {state.name}: {state.complete} complete, {state.pruned} pruned, "
-          f"{state.failed} failed of {state.total}; best {state.best}")
+        state = study_standing(ledger)
+    counts = state.tally
+    print(f"search {state.name}: {counts.complete} complete, {counts.pruned} pruned, "
+          f"{counts.failed} failed of {counts.planned}; best {state.selected}")
     return 130 if summary.interrupted else 0
 
 
 def cmd_confirm(args: argparse.Namespace) -> int:
     """Retrain a study's top configurations (and baselines) on fresh seeds."""
-    from kraby_study.best import confirm_source
-    from kraby_study.plan.confirm import confirm_plan
-    from kraby_study.run.sweep_source import run_plan
-    from kraby_study.store.connection import opened
+    from kraby_study.answers.configurations import confirmed_study
+    from kraby_study.plan.confirm import baseline_arm, confirm_plan
+    from kraby_study.run.executor import executor_for
+    from kraby_study.run.plan_source import closing_line, run_plan
+    from kraby_study.store.store import opened
 
     overrides = flag_overrides(args, CONFIRM_FLAGS)
     cfg = compose_config(with_default(overrides, "budget", "quick"))
@@ -288,43 +290,25 @@ def cmd_confirm(args: argparse.Namespace) -> int:
     source = None
     if cfg.confirm.study is not None:
         with opened(cfg.storage, create=False, writer=False) as store:
-            source = confirm_source(store.load(str(cfg.confirm.study)), int(cfg.confirm.top))
+            source = confirmed_study(store.load(str(cfg.confirm.study)), int(cfg.confirm.top))
     plan = confirm_plan(cfg, source, baselines)
     with executor_for(cfg) as executor, open_writer(cfg) as store:
         summary, counts = run_plan(store, plan, executor, executor.workers(cfg.workers),
                                    sys.stdout, **run_options(cfg))
-    total = len(plan.specs)
-    print(f"confirm {plan.name}: {counts.complete}/{total} complete, {counts.failed} failed"
-          + (f", {total - counts.ended} left (rerun the same command to continue)"
-             if counts.ended < total else "")
+    print(closing_line("confirm", plan, counts)
           + f"; report it with `kraby-study report --study-name {plan.name}`")
     return 130 if summary.interrupted else 0
 
 
-def settings_with_ppo(name: str, overrides: Sequence[str]) -> dict[str, Any]:
-    """The resolved settings of the command's overrides with the ppo config ``NAME`` chosen
-    instead of the command's own (a search's warm start, a confirm baseline)."""
-    from kraby_study.plan.sweep import resolved_settings
-
-    kept = [o for o in overrides if not o.startswith("ppo=")]
-    return resolved_settings(compose_config([*kept, f"ppo={name}"]))
-
-
-def baseline_arm(name: str, overrides: Sequence[str]):  # noqa: ANN201 - a plan.confirm.Arm
-    """A ppo config file as a confirm arm: the command's settings with ``ppo=NAME``."""
-    from kraby_study.plan.confirm import Arm
-
-    return Arm(label=f"ppo={name}", settings=settings_with_ppo(name, overrides),
-               origin=f"the config ppo={name}")
-
-
 def cmd_best(args: argparse.Namespace) -> int:
-    """Print a study's best settings and write them as a ppo config file."""
+    """Print a study's selected settings and write them as a ppo config file."""
     from pathlib import Path
 
-    from kraby_study.best import campaign_best, require_best, write_config
+    from kraby_study.answers.campaign import campaign_selection
+    from kraby_study.answers.selected import require_selection
     from kraby_study.config.compose import USER_CONF_DIR
-    from kraby_study.store.connection import opened
+    from kraby_study.config.ppo_file import write_ppo_config
+    from kraby_study.store.store import opened
 
     chosen, overrides = stored_study(flag_overrides(args, [STORAGE, BEST_OF]))
     if chosen and args.campaign:
@@ -335,11 +319,11 @@ def cmd_best(args: argparse.Namespace) -> int:
     if not config_name.replace("_", "").replace("-", "").isalnum():
         raise ConfigError(f"--name {config_name!r}: use letters, digits, _ and -")
     with opened(cfg.storage, create=False, writer=False) as store:
-        best = (campaign_best(store, args.campaign) if args.campaign
-                else require_best(store.load(name)))
+        chosen = (campaign_selection(store, args.campaign) if args.campaign
+                  else require_selection(store.load(name)))
     path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
-    write_config(best, path)
-    print(f"best: {best.description}")
+    write_ppo_config(chosen.settings, chosen.env_keys, chosen.description, path)
+    print(f"best: {chosen.description}")
     print(f"wrote {path}: use it with `kraby-study train ppo={config_name}` or "
           f"`kraby-study run ppo={config_name} study=...`")
     return 0
@@ -435,9 +419,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     if unknown:
         parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     args.overrides = list(args.overrides) + extras
-    import optuna
-
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
     try:
         return int(args.func(args))
     except (ConfigError, StoreError) as err:
@@ -446,13 +427,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (DatabaseLost, ClusterLost) as err:
         print(f"kraby-study: error: {err}", file=sys.stderr)
         return 1
-    except LOST_DATABASE as err:
-        # A database that fails outside the retried calls (while a study is being opened).
-        print(f"kraby-study: error: database error: {first_line(err)}", file=sys.stderr)
-        return 1
     except KeyboardInterrupt:
         print("kraby-study: interrupted", file=sys.stderr)
         return 130
+    except Exception as err:
+        if not _lost_database(err):
+            raise
+        # A database that fails outside the retried calls (while a study is being opened).
+        print(f"kraby-study: error: database error: {first_line(err)}", file=sys.stderr)
+        return 1
+
+
+def _lost_database(err: Exception) -> bool:
+    """A database out of reach; only a command that opened a store (so loaded it) has one."""
+    if "kraby_study.store.store" not in sys.modules:
+        return False
+    from kraby_study.store.store import LOST_DATABASE
+
+    return isinstance(err, LOST_DATABASE)
 
 
 if __name__ == "__main__":

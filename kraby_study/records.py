@@ -1,5 +1,8 @@
 """What a stored trial is: one record schema for the runner, ``list``, ``best`` and the report.
 
+The lowest layer of kraby-study: it imports no database, Optuna or statistics code, so config
+and plan may use it and stay pure. Optuna's trials are read here by their state's name.
+
 Every study (a sweep, a search, a single training run) is an Optuna study. kraby-study adds:
 
 - on the study, the attributes of :class:`StudyAttrs` (what kind of study, how it was defined);
@@ -20,9 +23,12 @@ import re
 from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
-from optuna.trial import FrozenTrial, TrialState
+from kraby_study.errors import ConfigError
+
+if TYPE_CHECKING:
+    from optuna.trial import FrozenTrial
 
 
 class Outcome(StrEnum):
@@ -64,22 +70,87 @@ def failure_kind(reason: str | None) -> Failure | None:
         return None
 
 
-@dataclass
-class TrialAttrs:
-    """The user attributes kraby-study stores on a trial (every field optional on read)."""
+class StudyKind(StrEnum):
+    """What made a stored study, in the words every command and the report use."""
 
-    key: str | None = None
-    """Identity of the planned run within its study, stable across attempts (see the key
-    functions below): ``v<value index>-s<seed>`` in sweeps, ``s<seed>`` for ``train``,
-    ``t<trial number>`` in searches."""
-    seed: int | None = None
-    """Seed of the run's first training run (a search trial trains seed, seed + 1, ...)."""
-    settings: dict[str, Any] | None = None
-    """The resolved ``env`` and ``ppo`` settings it trained with (batch size explicit)."""
-    steps: int | None = None
-    """Env steps of each training run (the budget)."""
-    model_path: str | None = None
-    """Where its final model (SB3 zip) is saved, if models are kept."""
+    SWEEP = "sweep"
+    """One setting over listed values, several seeds each (``run study=...``)."""
+    CONFIRM = "confirm"
+    """Configurations retrained on fresh seeds (``confirm``): a sweep over their labels."""
+    SEARCH = "search"
+    """An Optuna search whose sampler draws settings from a space (``optuna``)."""
+    TRAIN = "train"
+    """Single training runs (``train``)."""
+    OPTUNA = "optuna"
+    """A study kraby-study did not make (no kind stored)."""
+
+    @classmethod
+    def of(cls, stored: str | None) -> StudyKind:
+        """The kind of a study from its stored attribute; OPTUNA for anything else."""
+        try:
+            return cls(stored) if stored is not None else cls.OPTUNA
+        except ValueError:
+            return cls.OPTUNA
+
+    @property
+    def swept(self) -> bool:
+        """Its trials sweep one parameter over listed values (a confirm study's values are its
+        configurations' labels): what it selects is a value, not a trial."""
+        return self in (StudyKind.SWEEP, StudyKind.CONFIRM)
+
+    @property
+    def seeded(self) -> bool:
+        """Its trials are seeds of values (sweeps, confirm studies, train runs): reported with
+        learning curves per value."""
+        return self in (StudyKind.SWEEP, StudyKind.CONFIRM, StudyKind.TRAIN)
+
+
+class SelectRule(StrEnum):
+    """How a finished sweep's value is selected (``study.select``); see
+    :mod:`kraby_study.selection` for each rule's statistics."""
+
+    FINAL_SCORE = "final_score"
+    """The highest mean final score."""
+    AUC = "auc"
+    """The highest mean AUC (sample efficiency)."""
+    FASTEST_TIED = "fastest_tied"
+    """The lowest mean training time among the values tied with the best final score."""
+
+    @classmethod
+    def of(cls, stored: str | None) -> SelectRule:
+        """The rule a study stored; the default (final_score) for none or an unknown one."""
+        try:
+            return cls(stored) if stored is not None else cls.FINAL_SCORE
+        except ValueError:
+            return cls.FINAL_SCORE
+
+    @classmethod
+    def check(cls, rule: str, where: str = "study.select") -> SelectRule:
+        """The rule named ``rule``; ConfigError naming the known ones."""
+        from_text = {r.value: r for r in cls}
+        if rule not in from_text:
+            raise ConfigError(f"{where} must be one of {', '.join(from_text)}, got {rule!r}")
+        return from_text[rule]
+
+
+@dataclass(frozen=True)
+class CurvePoint:
+    """Mean reward of the episodes that ended in one bin of environment steps."""
+
+    step: int
+    """Environment steps at the end of the bin."""
+    mean_reward: float
+    """Mean episode reward (sum over the episode's steps) of the bin's episodes."""
+    wall_time: float
+    """Seconds since training started, when the bin's last episode ended."""
+    episodes: int
+    """Episodes that ended in the bin."""
+
+
+@dataclass(kw_only=True)
+class TrialMeasures:
+    """What a trial measured, as it gives it back and as it is stored (every field optional)."""
+
     env_steps: int | None = None
     """Env steps it actually trained, over all its seeds (fewer when pruned or failed)."""
     wall_time: float | None = None
@@ -98,6 +169,40 @@ class TrialAttrs:
     """Why it failed or was given back: ``<Failure kind>: <detail>``."""
     pruned_at: int | None = None
     """Env steps at which the pruner stopped it."""
+
+    def measures(self) -> TrialMeasures:
+        """Only the measured fields (of a result or of stored attributes)."""
+        return TrialMeasures(**{f.name: getattr(self, f.name)
+                                for f in dataclasses.fields(TrialMeasures)})
+
+
+@dataclass(kw_only=True)
+class TrialResult(TrialMeasures):
+    """What a run gives back to the runner: how it ended, its curve, and what it measured."""
+
+    outcome: Outcome
+    """complete, failed or pruned."""
+    curve: list[CurvePoint] = field(default_factory=list)
+    """Its learning curve (the mean over its seeds, bin by bin)."""
+
+
+@dataclass(kw_only=True)
+class TrialAttrs(TrialMeasures):
+    """The user attributes kraby-study stores on a trial: what it is (below) and what it
+    measured (:class:`TrialMeasures`); every field optional on read."""
+
+    key: str | None = None
+    """Identity of the planned run within its study, stable across attempts (see the key
+    functions below): ``v<value index>-s<seed>`` in sweeps, ``s<seed>`` for ``train``,
+    ``t<trial number>`` in searches."""
+    seed: int | None = None
+    """Seed of the run's first training run (a search trial trains seed, seed + 1, ...)."""
+    settings: dict[str, Any] | None = None
+    """The resolved ``env`` and ``ppo`` settings it trained with (batch size explicit)."""
+    steps: int | None = None
+    """Env steps of each training run (the budget)."""
+    model_path: str | None = None
+    """Where its final model (SB3 zip) is saved, if models are kept."""
     retry_of: int | None = None
     """Number of the interrupted trial this attempt replaces."""
 
@@ -158,11 +263,6 @@ class StudyAttrs:
                       if stored in user_attrs})
 
 
-SWEPT_KINDS = ("sweep", "confirm")
-"""Study kinds whose trials sweep one parameter over listed values (a confirm study's values are
-its configurations' labels): their best is a value, not a trial."""
-
-
 # Keys -------------------------------------------------------------------------------------------
 
 SWEEP_KEY = re.compile(r"^v(\d+)-s(\d+)$")
@@ -194,11 +294,13 @@ def search_key(number: int) -> str:
 
 def outcome(trial: FrozenTrial) -> Outcome:
     """A trial's outcome; a failed attempt that was given back unfinished is pending."""
-    if trial.state == TrialState.COMPLETE:
+    # By name, so that this module loads no Optuna (optuna.trial.TrialState).
+    state = trial.state.name
+    if state == "COMPLETE":
         return Outcome.COMPLETE
-    if trial.state == TrialState.PRUNED:
+    if state == "PRUNED":
         return Outcome.PRUNED
-    if trial.state == TrialState.FAIL:
+    if state == "FAIL":
         reason = trial.user_attrs.get("failure")
         # A failed trial with no reason was given back by Optuna's heartbeat (a lost owner).
         if reason is None or failure_kind(reason) == Failure.INTERRUPTED:
@@ -209,7 +311,7 @@ def outcome(trial: FrozenTrial) -> Outcome:
 
 def is_interrupted(trial: FrozenTrial) -> bool:
     """A trial given back unfinished: its run is queued again, it is no result."""
-    return trial.state == TrialState.FAIL and outcome(trial) == Outcome.PENDING
+    return trial.state.name == "FAIL" and outcome(trial) == Outcome.PENDING
 
 
 def counted(trials: Iterable[FrozenTrial]) -> list[FrozenTrial]:
@@ -242,28 +344,59 @@ def latest_by_key(trials: Iterable[FrozenTrial]) -> dict[str, FrozenTrial]:
             if t.user_attrs.get("key") is not None}
 
 
-@dataclass(frozen=True)
+@dataclass
 class Tally:
-    """How many counted trials stand at each outcome."""
+    """How many counted trials stand at each outcome, and how many runs are planned.
+
+    Two tallies are equal when they count the same outcomes.
+    """
 
     complete: int = 0
     failed: int = 0
     pruned: int = 0
     pending: int = 0
+    running: int = field(default=0, compare=False)
+    """Of the pending ones, those running now (here or on another machine)."""
+    planned: int = field(default=0, compare=False)
+    """Runs planned (sweeps) or the trial total (searches); never fewer than the trials
+    counted."""
 
     @property
     def ended(self) -> int:
         """Trials that are results: complete, failed or pruned."""
         return self.complete + self.failed + self.pruned
 
+    @property
+    def finished(self) -> bool:
+        """No planned run is still to come."""
+        return self.ended >= self.planned
 
-def tally(trials: Iterable[FrozenTrial]) -> Tally:
-    """Outcome counts of the given (counted) trials."""
+    @property
+    def left(self) -> int:
+        """Runs still to come: pending trials and planned runs without a trial yet."""
+        return max(self.planned - self.ended, 0)
+
+    def counts(self) -> dict[str, int]:
+        """As a table shows them: planned, complete, failed, pruned, and pending (every run
+        still to come)."""
+        return {"planned": self.planned, Outcome.COMPLETE.value: self.complete,
+                Outcome.FAILED.value: self.failed, Outcome.PRUNED.value: self.pruned,
+                Outcome.PENDING.value: self.left}
+
+
+def tally(trials: Iterable[FrozenTrial], planned: int | None = None) -> Tally:
+    """Outcome counts of the given (counted) trials, against ``planned`` runs (None: as many
+    as there are trials)."""
     counts = {o: 0 for o in Outcome}
+    running = 0
+    total = 0
     for trial in trials:
         counts[outcome(trial)] += 1
+        running += trial.state.name == "RUNNING"
+        total += 1
     return Tally(complete=counts[Outcome.COMPLETE], failed=counts[Outcome.FAILED],
-                 pruned=counts[Outcome.PRUNED], pending=counts[Outcome.PENDING])
+                 pruned=counts[Outcome.PRUNED], pending=counts[Outcome.PENDING],
+                 running=running, planned=max(planned or 0, total))
 
 
 # Values and the best one --------------------------------------------------------------------------

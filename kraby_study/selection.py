@@ -23,9 +23,9 @@ from typing import Any, TypeVar
 import pandas as pd
 from optuna.trial import FrozenTrial
 
-from kraby_study.errors import ConfigError
 from kraby_study.records import (
     Outcome,
+    SelectRule,
     TrialAttrs,
     best_group,
     ordered_values,
@@ -36,23 +36,14 @@ from kraby_study.records import (
 )
 from kraby_study.stats import ALPHA, auc, holm_vs_best
 
-RULES = ("final_score", "auc", "fastest_tied")
-DEFAULT_RULE = "final_score"
 RULE_TEXT = {
-    "final_score": "highest mean final score",
-    "auc": "highest mean AUC (sample efficiency)",
-    "fastest_tied": (f"lowest mean training time among the values tied with the best final "
-                     f"score (Holm-corrected Welch p >= {ALPHA})"),
+    SelectRule.FINAL_SCORE: "highest mean final score",
+    SelectRule.AUC: "highest mean AUC (sample efficiency)",
+    SelectRule.FASTEST_TIED: (f"lowest mean training time among the values tied with the best "
+                              f"final score (Holm-corrected Welch p >= {ALPHA})"),
 }
 
 K = TypeVar("K", bound=Hashable)
-
-
-def check_rule(rule: str, where: str = "study.select") -> str:
-    """The rule, or ConfigError naming the known ones."""
-    if rule not in RULES:
-        raise ConfigError(f"{where} must be one of {', '.join(RULES)}, got {rule!r}")
-    return rule
 
 
 def _means(groups: Mapping[K, Sequence[float]]) -> dict[K, float]:
@@ -74,7 +65,7 @@ def select(rule: str, final: Mapping[K, Sequence[float]], aucs: Mapping[K, Seque
         aucs: AUC of each complete seed with a curve, by group.
         seconds: Training time of each complete seed, by group.
     """
-    check_rule(rule)
+    SelectRule.check(rule)
     scores = {g: [float(v) for v in vs if not math.isnan(float(v))] for g, vs in final.items()}
     if rule == "final_score":
         return best_group(scores)

@@ -17,7 +17,7 @@ import pytest
 import sqlalchemy as sa
 
 from kraby_study.cli import main
-from kraby_study.store.connection import study_exists
+from kraby_study.store.store import study_exists
 
 # Tiny nets and budgets: a trial takes about a second.
 TINY = ["budget=smoke", "budget.steps=512", "budget.curve_every=64", "ppo.n_envs=4",

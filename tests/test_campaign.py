@@ -30,12 +30,12 @@ from conftest import (
 )
 from optuna.trial import TrialState
 
-from kraby_study.best import selection_of
+from kraby_study.answers.selected import sweep_selection
 from kraby_study.config.compose import compose_config
 from kraby_study.plan.sweep import expand_study
 from kraby_study.records import StudyAttrs, TrialAttrs, counted
-from kraby_study.run.sweep_source import SweepSource
-from kraby_study.store.connection import opened
+from kraby_study.run.plan_source import PlanSource
+from kraby_study.store.store import opened
 
 SEEDS = "budget.seeds=2"
 STUDIES = {
@@ -99,7 +99,7 @@ def db(folder: Path) -> Path:
 
 def selected(folder: Path, name: str) -> object:
     with opened(sqlite_url(db(folder)), create=False, writer=False) as store:
-        chosen = selection_of(store.load(name))
+        chosen = sweep_selection(store.load(name))
     assert chosen is not None and chosen.finished
     return chosen.value
 
@@ -232,7 +232,7 @@ def test_a_winner_of_an_unfinished_study_says_how_far_it_is(
     with opened(url) as store:  # queued, never run: 0 of 4 complete
         ledger = store.define(plan.name, StudyAttrs(kind="sweep", definition=plan.definition,
                                                     fingerprint=plan.fingerprint))
-        SweepSource(ledger, plan).queue_missing()
+        PlanSource(ledger, plan).queue_missing()
     assert run_cli("run", "study=s_clip", *TINY, f"storage={url}",
                    "ppo.gamma=${winner:s_gamma}") == 2
     err = capsys.readouterr().err

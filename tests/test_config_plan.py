@@ -11,7 +11,8 @@ from conftest import write_study_file
 
 from kraby_study.config.compose import compose_config
 from kraby_study.errors import ConfigError
-from kraby_study.plan.sweep import expand_study, single_run
+from kraby_study.plan.sweep import expand_study
+from kraby_study.plan.train import train_plan
 from kraby_study.records import sweep_key, train_key
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -116,10 +117,10 @@ def test_observation_study_sweeps_the_environment() -> None:
 
 
 def test_train_plan_is_one_run_named_by_its_settings() -> None:
-    a = single_run(compose_config(["ppo=tuned", "seed=3"]))
-    b = single_run(compose_config(["ppo=tuned", "seed=4"]))
-    c = single_run(compose_config(["ppo=tuned", "ppo.gamma=0.5"]))
-    d = single_run(compose_config(["ppo=tuned", "seed=3", "budget.steps=8192"]))
+    a = train_plan(compose_config(["ppo=tuned", "seed=3"]))
+    b = train_plan(compose_config(["ppo=tuned", "seed=4"]))
+    c = train_plan(compose_config(["ppo=tuned", "ppo.gamma=0.5"]))
+    d = train_plan(compose_config(["ppo=tuned", "seed=3", "budget.steps=8192"]))
     assert len(a.specs) == 1
     (run,) = a.specs
     assert (run.seed, run.key, run.study) == (3, train_key(3), a.name)

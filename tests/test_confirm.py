@@ -11,8 +11,8 @@ from conftest import TINY, file_digest, load, run_cli, sqlite_url
 from optuna.trial import TrialState
 
 from kraby_study.config.compose import compose_config
+from kraby_study.plan.settings import resolved_settings
 from kraby_study.plan.space import fitted_params
-from kraby_study.plan.sweep import resolved_settings
 from kraby_study.records import counted
 
 SPACE = """\

@@ -6,8 +6,8 @@ expected value below is worked out by hand next to the episodes it comes from.
 
 from __future__ import annotations
 
+from kraby_study.records import CurvePoint
 from kraby_study.run.curve import bin_curve, final_score, mean_curve
-from kraby_study.run.result import CurvePoint
 
 
 def test_a_bin_holds_the_episodes_ending_after_its_start_and_up_to_its_end() -> None:

@@ -145,7 +145,7 @@ def test_a_sweep_on_postgresql_runs_and_lists(workdir: Path, pg_url: str,
 OPEN_STUDY = """\
 import sys
 from kraby_study.records import StudyAttrs
-from kraby_study.store.connection import Store
+from kraby_study.store.store import Store
 store = Store(sys.argv[1])
 store.define("shared", StudyAttrs(kind="sweep", definition={"values": [1, 2]},
                                   fingerprint="fingerprint-1"))

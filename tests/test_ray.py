@@ -26,7 +26,7 @@ from conftest import (
 )
 from optuna.trial import TrialState
 
-from kraby_study.store.connection import opened
+from kraby_study.store.store import opened
 
 pytest.importorskip("ray")
 

@@ -15,13 +15,13 @@ from conftest import sqlite_url
 from optuna.distributions import FloatDistribution
 from optuna.trial import TrialState, create_trial
 from scipy import stats
+from synthetic import Run, add_sweep, add_trials, learning_curve, write_curves
 
 from kraby_study.errors import ConfigError, StoreError
 from kraby_study.records import Outcome, StudyAttrs, TrialAttrs
 from kraby_study.report import ReportIndex, run_report, write_report
-from kraby_study.report.synthetic import Run, add_sweep, learning_curve, write_curves
 from kraby_study.stats import t_interval, welch_p
-from kraby_study.store.connection import Store
+from kraby_study.store.store import Store
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 SWEEP_FIGURES = ["learning_curves", "final_score", "wallclock", "training_time"]
@@ -76,8 +76,8 @@ def _add_train(store: Store) -> None:
     for seed, final in enumerate([-0.5, -0.6]):
         attrs = TrialAttrs(key=f"s{seed}", seed=seed, final_score=final, wall_time=4.0,
                            env_steps=4000)
-        ledger.add_trials([create_trial(state=TrialState.COMPLETE, value=final,
-                                        user_attrs=attrs.stored())])
+        add_trials(store, ledger.name, [create_trial(state=TrialState.COMPLETE, value=final,
+                                                     user_attrs=attrs.stored())])
     write_curves(ledger, {n: learning_curve(-0.5, 4000, 40, 4.0, rng) for n in (0, 1)})
 
 

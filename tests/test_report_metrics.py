@@ -14,12 +14,12 @@ from conftest import sqlite_url
 from optuna.distributions import CategoricalDistribution
 from optuna.trial import TrialState, create_trial
 from scipy import stats
+from synthetic import Run, add_sweep, add_trials, write_curves
 
 from kraby_study.records import Outcome, StudyAttrs, TrialAttrs
 from kraby_study.report import ReportIndex, write_report
-from kraby_study.report.synthetic import Run, add_sweep, write_curves
 from kraby_study.stats import BOOTSTRAP_SEED
-from kraby_study.store.connection import Store
+from kraby_study.store.store import Store
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 NEW_FIGURES = ["sample_efficiency", "time_to_threshold", "improvement"]
@@ -73,10 +73,9 @@ def _add_confirm(store: Store) -> None:
         for seed, final in enumerate(finals[label]):
             attrs = TrialAttrs(key=f"v{vi}-s{seed}", seed=100 + seed, final_score=final,
                                wall_time=4.0, env_steps=400)
-            ledger.add_trials([create_trial(state=TrialState.COMPLETE, value=final,
-                                            params={"config": label},
-                                            distributions={"config": distribution},
-                                            user_attrs=attrs.stored())])
+            add_trials(store, ledger.name, [create_trial(
+                state=TrialState.COMPLETE, value=final, params={"config": label},
+                distributions={"config": distribution}, user_attrs=attrs.stored())])
             curves[number] = [(s, final * (1 + 4 / s), s / 100) for s in STEPS]
             number += 1
     write_curves(ledger, curves)

@@ -14,11 +14,10 @@ from typing import Any
 import pytest
 
 from kraby_study.plan.spec import TrialSpec
-from kraby_study.records import Failure, Outcome, failure_kind
+from kraby_study.records import Failure, Outcome, TrialResult, failure_kind
 from kraby_study.run.pool import Event
 from kraby_study.run.progress import Progress
-from kraby_study.run.result import TrialResult
-from kraby_study.run.runner import MAX_WORKER_DEATHS, RunSummary, run_trials
+from kraby_study.run.runner import MAX_WORKER_DEATHS, CommandRun, run_trials
 
 STEPS = 1000
 
@@ -181,7 +180,7 @@ def pools() -> Pools:
     return Pools()
 
 
-def run(pools: Pools, source: FakeSource, workers: int) -> tuple[RunSummary, str]:
+def run(pools: Pools, source: FakeSource, workers: int) -> tuple[CommandRun, str]:
     """run_trials on the fake pool, a heartbeat on every turn of its loop; the summary and
     what the progress printed."""
     stream = io.StringIO()
@@ -203,7 +202,7 @@ def test_every_claimed_trial_is_recorded_once_with_its_result(pools: Pools) -> N
     assert source.results() == expected
     assert all(s == spec(n) for n, s, _ in source.recorded)
     assert [n for kind, n in source.log if kind == "claim"] == [0, 1, 2, 3, 4]
-    assert summary == RunSummary(complete=5)
+    assert summary == CommandRun(complete=5)
     assert source.requeued == []
     assert pools.only.closed  # the workers are stopped at the end
 
@@ -214,7 +213,7 @@ def test_the_summary_counts_complete_failed_and_pruned(pools: Pools) -> None:
     pools.script({n: runs(("result", result(o))) for n, o in enumerate(outcomes)})
     source = FakeSource(len(outcomes))
     summary, out = run(pools, source, workers=3)
-    assert summary == RunSummary(complete=3, failed=2, pruned=1, interrupted=False)
+    assert summary == CommandRun(complete=3, failed=2, pruned=1, interrupted=False)
     assert {n: r.outcome for n, r in source.results().items()} == dict(enumerate(outcomes))
     assert "[6/6]" in out
 
@@ -265,7 +264,7 @@ def test_a_trial_whose_worker_died_runs_again_under_its_number(pools: Pools) -> 
     assert [n for kind, n in source.log if kind == "claim"] == [0, 1, 2]  # not claimed again
     assert sorted(n for n, _, _ in source.recorded) == [0, 1, 2]
     assert source.results()[1] == result(score=4.0)
-    assert summary == RunSummary(complete=3)
+    assert summary == CommandRun(complete=3)
     assert "trial 1: interrupted (worker exit code -9), rerun" in out
 
 
@@ -281,7 +280,7 @@ def test_a_trial_whose_worker_dies_every_time_is_recorded_as_failed(
     assert failed.outcome == Outcome.FAILED
     assert failure_kind(failed.failure) == Failure.ERROR
     assert f"exit code {codes[-1]}" in str(failed.failure)
-    assert summary == RunSummary(complete=1, failed=1)
+    assert summary == CommandRun(complete=1, failed=1)
 
 
 def test_a_checkpoint_is_answered_with_what_the_source_said(pools: Pools) -> None:
@@ -294,7 +293,7 @@ def test_a_checkpoint_is_answered_with_what_the_source_said(pools: Pools) -> Non
     summary, _ = run(pools, source, workers=2)
     assert sorted(source.checkpoints) == [(0, 500, 1.5), (1, 500, -3.0)]
     assert sorted(pools.only.replies) == [(0, True), (1, False)]
-    assert summary == RunSummary(complete=1, pruned=1)
+    assert summary == CommandRun(complete=1, pruned=1)
 
 
 def test_ctrl_c_gives_the_running_trials_back_and_keeps_what_ended(
@@ -323,11 +322,11 @@ def test_it_waits_for_trials_that_other_commands_may_give_back(pools: Pools) -> 
     summary, _ = run(pools, source, workers=1)
     assert [n for kind, n in source.log if kind == "claim"] == [0, 5]
     assert sorted(n for n, _, _ in source.recorded) == [0, 5]
-    assert summary == RunSummary(complete=2)
+    assert summary == CommandRun(complete=2)
 
 
 def test_it_ends_when_nothing_is_left_here_or_elsewhere(pools: Pools) -> None:
     source = FakeSource(1, comes_back=[5])  # never claimed: nothing runs elsewhere
     summary, _ = run(pools, source, workers=1)
     assert [n for n, _, _ in source.recorded] == [0]
-    assert summary == RunSummary(complete=1)
+    assert summary == CommandRun(complete=1)

@@ -10,12 +10,12 @@ from conftest import TINY, load, run_cli
 from optuna.trial import TrialState
 
 from kraby_study.config.compose import compose_config
-from kraby_study.plan.space import make_pruner, validate_search
-from kraby_study.records import Outcome, StudyAttrs
-from kraby_study.run.result import TrialResult
+from kraby_study.plan.space import validate_search
+from kraby_study.records import Outcome, StudyAttrs, TrialResult
+from kraby_study.run.sampling import make_pruner
 from kraby_study.run.search_source import SearchSource
-from kraby_study.store.connection import opened
 from kraby_study.store.ledger import StudyLedger
+from kraby_study.store.store import opened
 
 TINY_SPACE = """\
 name: tiny
@@ -248,12 +248,12 @@ def test_evaluation_objective_scores_the_deterministic_policy(spaces: Path) -> N
     trial = load(spaces / "studies" / "kraby.db", "tiny").trials[0]
     assert trial.state == TrialState.COMPLETE
     # The evaluation is its own number: not the training reward of the last 10 %.
-    from kraby_study.run.evaluation import evaluation_targets
+    from kraby_envs.rollout import fixed_targets
     assert trial.value < 0 and trial.value == trial.user_attrs["final_score"]
     assert trial.user_attrs["train_reward"] < 0
     assert trial.value != trial.user_attrs["train_reward"]
-    assert evaluation_targets(3, 0.5).shape == (3, 3)
-    assert (evaluation_targets(3, 0.5) == evaluation_targets(3, 0.5)).all()
+    assert fixed_targets(3, 0.5).shape == (3, 3)
+    assert (fixed_targets(3, 0.5) == fixed_targets(3, 0.5)).all()
 
 
 def test_evaluation_is_deterministic_for_a_model(tmp_path: Path) -> None:
@@ -261,7 +261,7 @@ def test_evaluation_is_deterministic_for_a_model(tmp_path: Path) -> None:
     from stable_baselines3 import PPO
 
     import kraby_envs
-    from kraby_study.plan.sweep import resolved_settings
+    from kraby_study.plan.settings import resolved_settings
     from kraby_study.run.evaluation import evaluate
 
     settings = resolved_settings(compose_config(["ppo=tuned"]))

@@ -10,7 +10,8 @@ from optuna.distributions import FloatDistribution
 from optuna.trial import FrozenTrial, TrialState, create_trial
 
 from kraby_study.errors import ConfigError
-from kraby_study.selection import RULES, check_rule, samples, select
+from kraby_study.records import SelectRule
+from kraby_study.selection import samples, select
 from kraby_study.stats import holm_vs_best
 
 # Three values of n_epochs: 30 is best, 10 is statistically tied with it (its seeds overlap 30's),
@@ -45,7 +46,7 @@ def test_fastest_tied_ignores_a_value_with_too_few_seeds_to_test() -> None:
 
 
 def test_no_complete_run_selects_nothing_and_nan_never_wins() -> None:
-    for rule in RULES:
+    for rule in SelectRule:
         assert select(rule, {}, {}, {}) is None
     assert select("final_score", {0: [math.nan], 1: [-1.0]}, {}, {}) == 1
     assert select("auc", {0: [1.0], 1: [0.0]}, {0: [math.nan], 1: [-1.0]}, {}) == 1
@@ -54,7 +55,7 @@ def test_no_complete_run_selects_nothing_and_nan_never_wins() -> None:
 def test_an_unknown_rule_is_one_line() -> None:
     with pytest.raises(ConfigError, match="study.select must be one of final_score, auc, "
                                           "fastest_tied, got 'best'"):
-        check_rule("best")
+        SelectRule.check("best")
 
 
 def _trial(number: int, value: float, gamma: float, wall: float) -> FrozenTrial:

@@ -61,7 +61,7 @@ def test_smoke_study_end_to_end(store_url: str, capsys: pytest.CaptureFixture[st
     assert "clip_range: 8/8 complete, 0 failed" in out
     # The curves are queryable, binned every 64 steps: episodes of 32 steps x 4 legs end
     # every 128 steps, so every other bin holds the 4 episodes that ended in it.
-    from kraby_study.store.connection import opened
+    from kraby_study.store.store import opened
     with opened(db, create=False, writer=False) as store:
         points = store.load("clip_range").curves().to_dict("records")
     by_trial: dict[int, list[int]] = {}
@@ -181,7 +181,7 @@ def test_training_leaves_no_folder_per_run_in_the_temporary_folder(
 
 def test_same_seed_gives_the_same_curve_with_any_number_of_shards(
         workdir: Path) -> None:
-    from kraby_study.store.connection import opened
+    from kraby_study.store.store import opened
 
     curves, scores = [], []
     for name, processes in (("a.db", 1), ("b.db", 1), ("c.db", 3)):
@@ -199,7 +199,7 @@ def test_same_seed_gives_the_same_curve_with_any_number_of_shards(
 
 def test_a_second_command_on_a_busy_sqlite_store_is_refused(workdir: Path) -> None:
     from kraby_study.errors import StoreError
-    from kraby_study.store.connection import Store
+    from kraby_study.store.store import Store
 
     url = sqlite_url(workdir / "k.db")
     first = Store(url)

@@ -11,8 +11,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from kraby_study.config.schema import PPOConfig
 from kraby_study.errors import ConfigError
-from kraby_study.selection import check_rule
-from kraby_study.store.connection import check_url
+from kraby_study.records import SelectRule
+from kraby_study.store.url import check_url
 
 
 def rollout_size(ppo: PPOConfig | DictConfig) -> int:
@@ -122,11 +122,11 @@ def validate(cfg: DictConfig) -> None:
     if cfg.report.threshold is not None:
         _finite("report.threshold", float(cfg.report.threshold))
     if cfg.study is not None:
-        check_rule(str(cfg.study.select))
+        SelectRule.check(str(cfg.study.select))
     if cfg.campaign is not None:
         for stage in cfg.campaign.stages:
             if stage.select is not None:
-                check_rule(str(stage.select), f"campaign stage {stage.study}: select")
+                SelectRule.check(str(stage.select), f"campaign stage {stage.study}: select")
 
 
 EXECUTORS = ("local", "ray")

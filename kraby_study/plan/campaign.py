@@ -18,7 +18,7 @@ from kraby_study.config.compose import compose_config
 from kraby_study.config.validate import to_container
 from kraby_study.config.winner import Lookup, references, winners_from
 from kraby_study.errors import ConfigError
-from kraby_study.selection import check_rule
+from kraby_study.records import SelectRule
 
 
 @dataclass(frozen=True)
@@ -132,7 +132,7 @@ def campaign_of(cfg: DictConfig, overrides: Sequence[str]) -> Campaign:
     for number, entry in enumerate(spec.stages, start=1):
         stage_cfg = _stage_file(name, number, str(entry.study), overrides)
         rule = str(entry.select) if entry.select is not None else str(stage_cfg.study.select)
-        check_rule(rule, f"campaign {name}, stage {number} ({entry.study}): select")
+        SelectRule.check(rule, f"campaign {name}, stage {number} ({entry.study}): select")
         stages.append(Stage(number=number, study=str(entry.study),
                             name=f"{name}-{entry.study}",
                             parameter=str(stage_cfg.study.parameter), select=rule,

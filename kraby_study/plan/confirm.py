@@ -8,15 +8,16 @@ already read from the store.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from omegaconf import DictConfig
 
 from kraby_study.errors import ConfigError
-from kraby_study.plan.spec import TrialSpec
-from kraby_study.plan.sweep import StudyPlan, model_path
-from kraby_study.records import sweep_key
+from kraby_study.plan.settings import model_path, settings_with_ppo
+from kraby_study.plan.spec import StudyPlan, TrialSpec
+from kraby_study.records import StudyKind, sweep_key
 
 PARAMETER = "config"
 """The Optuna parameter of a confirm study's trials: the arm's label."""
@@ -38,8 +39,8 @@ class Arm:
 
 
 @dataclass(frozen=True)
-class Source:
-    """The study whose configurations are confirmed, as read from the store."""
+class ConfirmedStudy:
+    """The study whose top configurations are confirmed, as read from the store."""
 
     name: str
     arms: list[Arm]
@@ -50,6 +51,12 @@ class Source:
     curve_every: int
     env_keys: list[str]
     """Env settings it varied (written with the ppo settings by ``best``)."""
+
+
+def baseline_arm(name: str, overrides: Sequence[str]) -> Arm:
+    """A ppo config file as a confirm arm: the command's settings with ``ppo=NAME``."""
+    return Arm(label=f"ppo={name}", settings=settings_with_ppo(name, overrides),
+               origin=f"the config ppo={name}")
 
 
 def fresh_seeds(used: set[int], count: int, first: int = 0) -> list[int]:
@@ -68,7 +75,7 @@ def confirm_name(source: str | None, baselines: list[str]) -> str:
     return f"{source}-confirm" if source else "confirm-" + "+".join(baselines)
 
 
-def confirm_plan(cfg: DictConfig, source: Source | None, baselines: list[Arm]) -> StudyPlan:
+def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list[Arm]) -> StudyPlan:
     """One spec per (arm, fresh seed): the source's top arms first, then the baselines.
 
     Raises:
@@ -91,7 +98,7 @@ def confirm_plan(cfg: DictConfig, source: Source | None, baselines: list[Arm]) -
                        label=f"{arm.label} seed {seed}")
              for index, arm in enumerate(arms) for seed in seeds]
     definition = {
-        "kind": "confirm", "parameter": PARAMETER, "values": labels,
+        "kind": StudyKind.CONFIRM.value, "parameter": PARAMETER, "values": labels,
         "source": source.name if source else None,
         "source_winner": source.arms[0].label if source else None,
         "arms": [{"label": a.label, "origin": a.origin, "source_score": a.source_score,

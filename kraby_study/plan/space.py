@@ -1,24 +1,18 @@
-"""A search's plan: the declared space as Optuna distributions, its checks, sampler and pruner.
+"""A search's plan: the declared space, its checks, and how a trial's parameters set its config.
 
-Pure: no training and no database. The search's trials are asked for through the store.
+Pure: no training, no database and no Optuna (the space as Optuna distributions, the sampler
+and the pruner are :mod:`kraby_study.run.sampling`'s). The trials are asked for through the store.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-import optuna
 from omegaconf import DictConfig
-from optuna.distributions import (
-    BaseDistribution,
-    CategoricalDistribution,
-    FloatDistribution,
-    IntDistribution,
-)
 
 from kraby_study.config.validate import rollout_size, to_container, validate_env, validate_ppo
 from kraby_study.errors import ConfigError
-from kraby_study.plan.sweep import resolved_settings, with_value
+from kraby_study.plan.settings import resolved_settings, with_value
 from kraby_study.records import value_key
 
 SAMPLERS = ("tpe", "random")
@@ -115,19 +109,6 @@ def _validate_batches(cfg: DictConfig) -> None:
                           f"{n_steps} x {n_envs} = {rollout} into batches of at least 2")
 
 
-def distributions(cfg: DictConfig) -> dict[str, BaseDistribution]:
-    """The space as Optuna distributions, one per parameter, in the order of the space file."""
-    space: dict[str, BaseDistribution] = {}
-    for name, p in cfg.search.params.items():
-        if p.type == "float":
-            space[str(name)] = FloatDistribution(float(p.low), float(p.high), log=bool(p.log))
-        elif p.type == "int":
-            space[str(name)] = IntDistribution(int(p.low), int(p.high), log=bool(p.log))
-        else:
-            space[str(name)] = CategoricalDistribution(list(to_container(p.choices)))
-    return space
-
-
 def apply_params(cfg: DictConfig, params: dict[str, Any]) -> DictConfig:
     """The config of one trial: the sampled values set, the batch size made explicit."""
     trial_cfg = cfg
@@ -146,15 +127,6 @@ def apply_params(cfg: DictConfig, params: dict[str, Any]) -> DictConfig:
     return trial_cfg
 
 
-def make_sampler(cfg: DictConfig) -> optuna.samplers.BaseSampler:
-    """The seeded sampler of a search."""
-    seed = int(cfg.search.seed)
-    if cfg.search.sampler == "random":
-        return optuna.samplers.RandomSampler(seed=seed)
-    return optuna.samplers.TPESampler(seed=seed, n_startup_trials=int(cfg.search.startup_trials),
-                                      constant_liar=True)
-
-
 def checkpoint_every(cfg: DictConfig) -> int:
     """Env steps between two intermediate values (the same for every trial)."""
     return max(1, int(cfg.budget.steps) // int(cfg.search.checkpoints))
@@ -163,18 +135,6 @@ def checkpoint_every(cfg: DictConfig) -> int:
 def warmup_steps(cfg: DictConfig) -> int:
     """Env steps before the first checkpoint at which a pruner may stop a trial."""
     return max(checkpoint_every(cfg), int(float(cfg.search.warmup) * int(cfg.budget.steps)))
-
-
-def make_pruner(cfg: DictConfig) -> optuna.pruners.BasePruner:
-    """The pruner of a search; its steps are env steps."""
-    warmup = warmup_steps(cfg)
-    if cfg.search.pruner == "median":
-        return optuna.pruners.MedianPruner(n_startup_trials=int(cfg.search.pruner_startup_trials),
-                                           n_warmup_steps=warmup)
-    if cfg.search.pruner == "hyperband":
-        total = int(cfg.budget.steps) * int(cfg.budget.seeds)
-        return optuna.pruners.HyperbandPruner(min_resource=warmup, max_resource=total)
-    return optuna.pruners.NopPruner()
 
 
 def search_definition(cfg: DictConfig) -> dict[str, Any]:
@@ -195,7 +155,6 @@ def fitted_params(cfg: DictConfig, settings: dict[str, Any]) -> dict[str, Any]:
     it); ``nminibatches`` is read as the rollout over the batch size.
     """
     params: dict[str, Any] = {}
-    space = distributions(cfg)
     for name, p in cfg.search.params.items():
         root, leaf = str(p.path).split(".", 1)
         if str(p.path) == NMINIBATCHES:
@@ -208,15 +167,18 @@ def fitted_params(cfg: DictConfig, settings: dict[str, Any]) -> dict[str, Any]:
             value = settings[root][leaf]
         else:
             continue
-        distribution = space[str(name)]
-        if isinstance(distribution, CategoricalDistribution):
-            match = [c for c in distribution.choices if value_key(c) == value_key(value)]
+        if p.type == "categorical":
+            match = [c for c in to_container(p.choices) if value_key(c) == value_key(value)]
             if match:
                 params[str(name)] = match[0]
         elif isinstance(value, int | float) and not isinstance(value, bool) and (
-                distribution.low <= value <= distribution.high):
-            if isinstance(distribution, IntDistribution) and float(value) != int(value):
+                _bound(p, p.low) <= value <= _bound(p, p.high)):
+            if p.type == "int" and float(value) != int(value):
                 continue
-            params[str(name)] = int(value) if isinstance(distribution, IntDistribution) else (
-                float(value))
+            params[str(name)] = int(value) if p.type == "int" else float(value)
     return params
+
+
+def _bound(param: DictConfig, bound: Any) -> int | float:
+    """A range's bound as the sampler reads it (int ranges whole, float ranges as floats)."""
+    return int(bound) if param.type == "int" else float(bound)

@@ -1,9 +1,14 @@
-"""TrialSpec: what a worker process needs to run one trial, and nothing heavier to import."""
+"""The plan types: TrialSpec (what a worker needs to run one trial, and nothing heavier to
+import) and StudyPlan (a study laid out as specs, with its definition for the store)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import hashlib
+import json
+from dataclasses import dataclass, field
 from typing import Any
+
+from kraby_study.records import StudyAttrs
 
 
 @dataclass(frozen=True)
@@ -36,3 +41,37 @@ class TrialSpec:
     """Fixed targets of the evaluation objective."""
     label: str = ""
     """How progress lines name the run, e.g. 'clip_range=0.2 seed 1'."""
+
+
+@dataclass(frozen=True)
+class StudyPlan:
+    """A study laid out (a sweep, a confirm study or a train run): its definition for the store and
+    one spec per value and seed."""
+
+    name: str
+    parameter: str
+    values: list[Any]
+    specs: list[TrialSpec]
+    definition: dict[str, Any]
+    select: str | None = None
+    """A sweep's selection rule (stored beside the definition, not in it)."""
+    inputs: list[dict[str, Any]] = field(default_factory=list)
+    """Settings taken from earlier studies' selected values (``Input.stored()``)."""
+    campaign: dict[str, Any] | None = None
+    """A campaign stage's place in its campaign (``Campaign.record``)."""
+
+    def notes(self) -> StudyAttrs:
+        """What is stored beside the definition: rule, inputs, campaign."""
+        return StudyAttrs(select=self.select, inputs=self.inputs or None,
+                          campaign=self.campaign)
+
+    @property
+    def fingerprint(self) -> str:
+        """Hash of the definition: the same study name must always mean the same sweep."""
+        return fingerprint(self.definition)
+
+
+def fingerprint(definition: dict[str, Any]) -> str:
+    """A short stable hash of a JSON-able definition."""
+    text = json.dumps(definition, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

@@ -7,7 +7,7 @@ statistics) -> ``*_plots`` (matplotlib figures) -> ``*_output`` (files and index
 
 from kraby_study.report.build import run_report, write_report
 from kraby_study.report.load import check_format
-from kraby_study.report.results import ReportIndex, StudyReport
+from kraby_study.report.study_report import ReportIndex, StudyReport
 
 __all__ = ["ReportIndex", "StudyReport", "check_format", "run_report",
            "write_report"]

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from kraby_study.errors import ConfigError, first_line
+from kraby_study.records import StudyKind
 from kraby_study.report import search_output, sweep_output
 from kraby_study.report.campaign_output import campaigns, write_campaign
 from kraby_study.report.document import (
@@ -25,11 +26,12 @@ from kraby_study.report.document import (
     to_markdown,
 )
 from kraby_study.report.load import StudyData, check_format, load_study, select_studies
-from kraby_study.report.results import ReportIndex, StudyReport
 from kraby_study.report.search_tables import build_search
+from kraby_study.report.study_report import ReportIndex, StudyReport
 from kraby_study.report.sweep_tables import build_sweep, option
 from kraby_study.stats import BOOTSTRAP_REPETITIONS, HOLM_NAME, INTERVAL_NAME
-from kraby_study.store.connection import opened_for_reading, shown_url, sqlite_path
+from kraby_study.store.store import opened_for_reading
+from kraby_study.store.url import shown_url, sqlite_path
 
 TITLE = "kraby-study report"
 Candidates = list[tuple[str, dict[str, Any], str]]
@@ -89,15 +91,11 @@ def add_policy(report: StudyReport, candidates: Candidates, url: str, rel: str) 
     report.notes.append(f"saved model not found ({candidates[0][0]}): no policy animation")
 
 
-SWEEP_LIKE = ("sweep", "train", "confirm")
-"""Kinds reported as sweeps: values (or one value) with several seeds each."""
-
-
 def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
                  policy: bool, options: Any = None) -> StudyReport:
     """The files and index section of one study; ``options`` as in :func:`write_report`."""
     candidates: Candidates
-    if data.kind in SWEEP_LIKE:
+    if data.kind.seeded:
         sweep = build_sweep(data, options)
         report = sweep_output.write_sweep(sweep, folder, rel, fmt)
         report.sweep = sweep
@@ -114,7 +112,7 @@ def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
         search = build_search(data)
         report = search_output.write_search(search, folder, rel, fmt)
         candidates = search_output.policy_candidates(search)
-    if policy and (data.kind != "optuna" or candidates):
+    if policy and (data.kind != StudyKind.OPTUNA or candidates):
         add_policy(report, candidates, url, rel)
     if report.notes:
         report.blocks.insert(min(2, len(report.blocks)),
@@ -142,7 +140,7 @@ def index_blocks(url: str, reports: list[StudyReport],
              f"'\u2248 best': {HOLM_NAME} (p >= 0.05 after the correction). Figures use "
              "complete runs only; failed runs are listed."),
     ]
-    if any(report.kind in SWEEP_LIKE for report in reports):
+    if any(report.kind.seeded for report in reports):
         blocks.append(Text("Sweep tables. " + sweep_output.metric_notes(bootstrap)))
     blocks.append(_overview(reports))
     blocks += campaigns or []

@@ -13,11 +13,9 @@ import pandas as pd
 from optuna.trial import FrozenTrial
 
 from kraby_study.errors import ConfigError, StoreError
-from kraby_study.records import SWEPT_KINDS, counted
-from kraby_study.store.connection import Store
+from kraby_study.records import StudyKind, Tally, counted, tally
 from kraby_study.store.ledger import StudyLedger
-
-KINDS = ("sweep", "train", "search", "confirm")
+from kraby_study.store.store import Store
 
 
 @dataclass
@@ -39,13 +37,18 @@ class StudyData:
     """
 
     name: str
-    kind: str
+    kind: StudyKind
     ledger: StudyLedger
     definition: dict[str, Any]
     trials: list[FrozenTrial]
     curves: pd.DataFrame
     planned: int | None = None
     replaced: int = 0
+
+    @property
+    def tally(self) -> Tally:
+        """Outcomes of the counted trials against the runs planned."""
+        return tally(self.trials, self.planned)
 
 
 def select_studies(store: Store, name: str | None) -> list[str]:
@@ -67,9 +70,9 @@ def load_study(store: Store, name: str) -> StudyData:
     """A study, its counted trials and their curves."""
     ledger = store.load(name)
     attrs = ledger.attrs
-    kind = attrs.kind if attrs.kind in KINDS else "optuna"
-    if kind in SWEPT_KINDS and "parameter" not in attrs.definition:
-        kind = "optuna"
+    kind = StudyKind.of(attrs.kind)
+    if kind.swept and "parameter" not in attrs.definition:
+        kind = StudyKind.OPTUNA
     every = ledger.trials()
     trials = counted(every)
     curves = ledger.curves([t.number for t in trials])

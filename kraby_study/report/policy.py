@@ -26,19 +26,8 @@ PALETTE_COLOURS = 64
 STEPS_PER_TARGET = 32
 HOLD_MS = 700
 """How long the last frame of each target stays on screen."""
-TARGET_FRACTIONS = ((0.6, -0.9, 0.7), (-0.4, 0.9, 0.9), (0.9, 0.2, -0.6))
-"""The targets, as fractions of the half-extents of the run's own target box (delta-scaled)."""
-START_ANGLES = (0.0, 0.0, 0.0)
-"""Every target is approached from the same pose: the middle of the training start range."""
-
-
-def fixed_targets(delta: float) -> list[tuple[float, float, float]]:
-    """Three targets spread over the target box the policy was trained on."""
-    from kraby_envs.task import TARGET_CENTRE, TARGET_HALF_EXTENTS
-
-    half = TARGET_HALF_EXTENTS * min(max(delta, 0.0), 1.0)
-    return [tuple(float(v) for v in TARGET_CENTRE + half * np.array(f))
-            for f in TARGET_FRACTIONS]
+TARGETS = 3
+"""Episodes drawn: the first of the fixed targets a search's evaluation scores."""
 
 
 def _font(size: int) -> Any:
@@ -68,7 +57,8 @@ def _captioned(frame: np.ndarray, size: tuple[int, int], text: str, font: Any) -
 
 def render_policy(model_path: str, settings: dict[str, Any], path: Path,
                   steps: int = STEPS_PER_TARGET, size: tuple[int, int] = FRAME_SIZE) -> Path:
-    """Write an animated GIF of a saved policy reaching :func:`fixed_targets`.
+    """Write an animated GIF of a saved policy reaching the first :data:`TARGETS` fixed targets
+    (:func:`kraby_envs.rollout.fixed_targets`).
 
     Args:
         model_path: The SB3 PPO zip file.
@@ -85,10 +75,15 @@ def render_policy(model_path: str, settings: dict[str, Any], path: Path,
     from stable_baselines3 import PPO
 
     import kraby_envs  # noqa: F401 - registers KrabyOneLeg-v0
+    from kraby_envs.rollout import fixed_targets, rollout
 
     env_settings = {**asdict(EnvConfig()), **dict(settings.get("env") or {})}
     kwargs = env_kwargs(OmegaConf.create(env_settings))
     model = PPO.load(model_path, device="cpu")
+
+    def act(observation: Any) -> Any:
+        return model.predict(observation, deterministic=True)[0]
+
     render = (round(2 * size[0]), round(2 * size[1]))
     env = gym.make(kraby_envs.ENV_ID, render_mode="rgb_array", render_width=render[0],
                    render_height=render[1], max_episode_steps=steps, **kwargs)
@@ -96,22 +91,14 @@ def render_policy(model_path: str, settings: dict[str, Any], path: Path,
     frames, durations = [], []
     period_ms = int(round(1000 * kwargs["time_step"] * kwargs["frameskip"]))
     try:
-        targets = fixed_targets(kwargs["delta"])
+        targets = fixed_targets(TARGETS, float(kwargs["delta"]))
         for index, target in enumerate(targets):
-            observation, info = env.reset(
-                seed=index, options={"joint_angles": START_ANGLES, "target": target})
-            for step in range(steps + 1):
-                ended = step == steps
-                if step:
-                    action, _ = model.predict(observation, deterministic=True)
-                    observation, _, terminated, truncated, info = env.step(action)
-                    ended = ended or terminated or truncated
-                label = (f"target {index + 1}/{len(targets)}  t={step * period_ms / 1000:.2f} s"
-                         f"  {100 * info['distance']:.1f} cm")
+            for moment in rollout(env, act, target, seed=index):
+                label = (f"target {index + 1}/{len(targets)}  "
+                         f"t={moment.step * period_ms / 1000:.2f} s  "
+                         f"{100 * moment.info['distance']:.1f} cm")
                 frames.append(_captioned(env.render(), size, label, font))
-                durations.append(HOLD_MS if ended else max(period_ms, 20))
-                if ended:
-                    break
+                durations.append(HOLD_MS if moment.ended else max(period_ms, 20))
     finally:
         env.close()
     path.parent.mkdir(parents=True, exist_ok=True)

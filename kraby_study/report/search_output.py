@@ -8,12 +8,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kraby_study.records import Outcome
+from kraby_study.records import Outcome, StudyKind
 from kraby_study.report import search_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
-from kraby_study.report.results import StudyReport
 from kraby_study.report.search_tables import Search, format_param, top_trials
+from kraby_study.report.study_report import StudyReport
 from kraby_study.report.style import number, styled
 
 TITLES = {"history": "optimization history", "importances": "parameter importances",
@@ -112,7 +112,7 @@ def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyRepor
             report.files.append(path)
             images.append(Image(f"{rel}/{path.name}", TITLES[stem], CAPTIONS[stem]))
     tables = _tables(search, folder)
-    kind = "Optuna search" if search.data.kind == "search" else "Optuna study"
+    kind = "Optuna search" if search.data.kind == StudyKind.SEARCH else "Optuna study"
     direction = "maximised" if search.maximize else "minimised"
     section: list[Block] = [
         Heading(search.data.name, 2),

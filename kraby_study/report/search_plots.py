@@ -17,7 +17,7 @@ from matplotlib.colors import Normalize
 from matplotlib.lines import Line2D
 from optuna.distributions import BaseDistribution, CategoricalDistribution
 
-from kraby_study.records import Outcome
+from kraby_study.records import Outcome, StudyKind
 from kraby_study.report.search_tables import Search, is_log, numeric_array
 from kraby_study.report.style import (
     BEST_COLOUR,
@@ -34,7 +34,7 @@ PRUNED_COLOUR = "#e67e22"
 
 
 def _objective_label(search: Search) -> str:
-    if search.data.kind == "search":
+    if search.data.kind == StudyKind.SEARCH:
         return "objective (final score)"
     return "objective value"
 
@@ -165,7 +165,7 @@ def intermediate(search: Search, path: Path) -> Path:
         handles.append(Line2D([], [], color=BEST_COLOUR, linewidth=2.2,
                               label=f"best trial ({best.number})"))
     ax.autoscale_view()
-    if search.data.kind == "search":
+    if search.data.kind == StudyKind.SEARCH:
         ax.set_xlabel("environment steps")
         ax.xaxis.set_major_formatter(STEPS_FORMATTER)
         ax.set_ylabel("mean episode reward at checkpoint")

@@ -64,13 +64,7 @@ class Search:
 
     def counts(self) -> dict[str, int]:
         """Trials complete, pruned, failed and pending (planned trials not started are pending)."""
-        outcomes = self.trials["outcome"].value_counts()
-        counts = {name: int(outcomes.get(name, 0))
-                  for name in (Outcome.COMPLETE, Outcome.PRUNED, Outcome.FAILED, Outcome.PENDING)}
-        planned = max(self.data.planned or 0, len(self.trials))
-        counts["pending"] += planned - len(self.trials)
-        counts["planned"] = planned
-        return counts
+        return self.data.tally.counts()
 
     @property
     def finished(self) -> bool:

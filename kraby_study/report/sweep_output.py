@@ -12,11 +12,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kraby_study.records import Outcome, value_label
+from kraby_study.records import Outcome, StudyKind, value_label
 from kraby_study.report import sweep_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
-from kraby_study.report.results import StudyReport
+from kraby_study.report.study_report import StudyReport
 from kraby_study.report.style import number, styled
 from kraby_study.report.sweep_tables import Sweep, arms_frame
 from kraby_study.selection import RULE_TEXT
@@ -193,7 +193,7 @@ def verdict(sweep: Sweep) -> str:
         first += (f"; tied: {', '.join(_label(sweep, vi) for vi in result.tied)}, "
                   f"Holm-corrected Welch p >= {ALPHA}")
     elif len(sweep.values) > 1 and summary["p_holm"].notna().any():
-        noun = "configuration" if sweep.kind == "confirm" else "value"
+        noun = "configuration" if sweep.kind == StudyKind.CONFIRM else "value"
         first += f"; every other {noun} tested is worse, Holm-corrected Welch p < {ALPHA}"
     parts.append(first + ")")
     if result.most_sample_efficient is not None:
@@ -209,7 +209,7 @@ def verdict(sweep: Sweep) -> str:
         row = summary.iloc[result.most_repeatable]
         parts.append(f"{_label(sweep, result.most_repeatable)} most repeatable (final IQR "
                      f"{number(row['final_iqr'], 3)}, n={row['complete']})")
-    prefix = "Confirmed verdict" if sweep.kind == "confirm" else sweep.name
+    prefix = "Confirmed verdict" if sweep.kind == StudyKind.CONFIRM else sweep.name
     text = f"{prefix}: " + "; ".join(parts) + "."
     untested = summary.loc[(summary["mark"] == "") & summary["p_holm"].isna()
                            & (summary["complete"] > 0), "value"].tolist()
@@ -261,7 +261,7 @@ def winner_text(sweep: Sweep) -> str | None:
 def confirm_blocks(sweep: Sweep) -> tuple[list[Block], list[Block]]:
     """A confirm study's blocks: its configuration table (before the verdict) and the sentence
     on the source's winner (after it); empty for other kinds."""
-    if sweep.kind != "confirm":
+    if sweep.kind != StudyKind.CONFIRM:
         return [], []
     winner = winner_text(sweep)
     return ([Text("Configurations retrained on fresh seeds:"), arms_table(sweep)],
@@ -297,7 +297,7 @@ def describe_sweep(sweep: Sweep) -> str:
     seeds = int(sweep.trials["seed"].nunique()) if len(sweep.trials) else 0
     steps = definition.get("steps")
     budget = f", {steps:,} environment steps per run" if isinstance(steps, int) else ""
-    if sweep.kind == "confirm":
+    if sweep.kind == StudyKind.CONFIRM:
         source = definition.get("source")
         origin = f" from {source}" if source else ""
         return (f"Confirmation of {len(sweep.values)} configurations{origin} on {seeds} fresh "

@@ -16,8 +16,9 @@ import numpy as np
 import pandas as pd
 
 from kraby_study.records import (
-    SWEPT_KINDS,
     Outcome,
+    SelectRule,
+    StudyKind,
     outcome,
     swept_value,
     value_key,
@@ -25,7 +26,7 @@ from kraby_study.records import (
 )
 from kraby_study.report.load import StudyData
 from kraby_study.report.style import value_colours
-from kraby_study.selection import DEFAULT_RULE, RULES, selected_index, swept_values
+from kraby_study.selection import selected_index, swept_values
 from kraby_study.stats import (
     ALPHA,
     BOOTSTRAP_REPETITIONS,
@@ -95,12 +96,12 @@ class Sweep:
     untrained: float = math.nan
     bootstrap: int = BOOTSTRAP_REPETITIONS
     verdict: Verdict = field(default_factory=lambda: Verdict(None, [], None, None, None))
-    rule: str = DEFAULT_RULE
+    rule: str = SelectRule.FINAL_SCORE
     """The study's selection rule; the summary's ``selected`` column marks the value it
     selects once no run is pending."""
 
     @property
-    def kind(self) -> str:
+    def kind(self) -> StudyKind:
         """The study's kind: sweep, confirm or train."""
         return self.data.kind
 
@@ -108,11 +109,7 @@ class Sweep:
     def counts(self) -> dict[str, int]:
         """Runs complete, failed, pruned and pending (planned runs without a trial are
         pending)."""
-        outcomes = self.trials["outcome"]
-        counts = {o.value: int((outcomes == o).sum())
-                  for o in (Outcome.COMPLETE, Outcome.FAILED, Outcome.PRUNED)}
-        planned = max(self.data.planned or 0, len(self.trials))
-        return {"planned": planned, **counts, "pending": planned - sum(counts.values())}
+        return self.data.tally.counts()
 
     @property
     def finished(self) -> bool:
@@ -356,7 +353,7 @@ def arms_frame(sweep: Sweep) -> pd.DataFrame:
 def study_rule(data: StudyData) -> str:
     """The stored selection rule of a study (final_score when none or unknown)."""
     rule = data.ledger.attrs.select
-    return rule if rule in RULES else DEFAULT_RULE
+    return SelectRule.of(rule)
 
 
 def option(options: Any, name: str, default: Any) -> Any:
@@ -378,7 +375,7 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     bootstrap = int(option(options, "bootstrap", BOOTSTRAP_REPETITIONS))
     chosen = option(options, "threshold", None)
     definition = data.definition
-    if data.kind in SWEPT_KINDS:
+    if data.kind.swept:
         parameter = str(definition["parameter"])
         name, values = swept_values(data.kind, definition, data.trials)
         labels = [value_label(v) for v in values]
@@ -394,7 +391,7 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     threshold, is_default, untrained = study_threshold(curves, summary, chosen)
     seeds = seed_metrics(trials, curves, threshold)
     summary = add_curve_metrics(summary, seeds)
-    colours = value_colours(labels if data.kind == "confirm" else values)
+    colours = value_colours(labels if data.kind == StudyKind.CONFIRM else values)
     sweep = Sweep(data=data, parameter=parameter, name=name or SINGLE_LABEL, values=values,
                  rule=study_rule(data),
                  labels=labels, colours=colours, trials=trials, curves=curves,

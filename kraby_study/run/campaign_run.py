@@ -15,21 +15,18 @@ from typing import TextIO
 
 from omegaconf import DictConfig
 
-from kraby_study.best import selection_of
+from kraby_study.answers.selected import sweep_selection
+from kraby_study.answers.winners import StoreWinners, Unfinished
 from kraby_study.errors import StoreError
 from kraby_study.plan.campaign import Campaign, Stage, stage_config
-from kraby_study.plan.sweep import StudyPlan, expand_study
+from kraby_study.plan.spec import StudyPlan
+from kraby_study.plan.sweep import expand_study
 from kraby_study.records import StudyAttrs, Tally, param_name, value_label
-from kraby_study.run.runner import RunSummary
-from kraby_study.store.connection import (
-    check_same_definition,
-    opened,
-    shown_url,
-    study_exists,
-)
-from kraby_study.winners import StoreWinners, Unfinished
+from kraby_study.run.runner import CommandRun
+from kraby_study.store.store import check_same_definition, opened, study_exists
+from kraby_study.store.url import shown_url
 
-RunStage = Callable[[DictConfig, StudyPlan], tuple[RunSummary, Tally]]
+RunStage = Callable[[DictConfig, StudyPlan], tuple[CommandRun, Tally]]
 """Runs one stage's plan with the command's workers and store; returns (summary, outcomes)."""
 
 
@@ -80,7 +77,7 @@ def check_stored(campaign: Campaign) -> None:
 def selected_text(cfg: DictConfig, stage: Stage) -> str:
     """``n_epochs=10 (fastest_tied; documented 30)`` from the stored stage."""
     with opened(str(cfg.storage), create=False, writer=False) as store:
-        chosen = selection_of(store.load(stage.name))
+        chosen = sweep_selection(store.load(stage.name))
     if chosen is None:
         return "no selectable value"
     documented = ("" if stage.documented is None

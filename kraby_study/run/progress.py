@@ -18,8 +18,7 @@ from typing import TextIO
 
 from tqdm import tqdm
 
-from kraby_study.records import Outcome
-from kraby_study.run.result import TrialResult
+from kraby_study.records import Outcome, TrialResult
 
 REDRAW_SECONDS = 0.5
 """The live bar is redrawn at most this often on steps (starts and ends redraw it at once)."""
@@ -48,7 +47,7 @@ def describe(result: TrialResult) -> str:
     """How a trial ended, in a few words: ``complete, score -0.0123 (12 s)`` and the like."""
     if result.outcome == Outcome.COMPLETE:
         score = "" if result.final_score is None else f", score {result.final_score:.4g}"
-        return f"complete{score} ({result.wall_time:.0f} s)"
+        return f"complete{score} ({result.wall_time or 0:.0f} s)"
     if result.outcome == Outcome.PRUNED:
         where = "" if result.pruned_at is None else f" at {result.pruned_at:,} env steps"
         return f"pruned{where}"
@@ -133,7 +132,7 @@ class Progress:
     def finish(self, label: str, result: TrialResult) -> None:
         """A trial ended: complete, failed or pruned."""
         so_far, _ = self.running.pop(label, (0, 0))
-        trained = max(result.env_steps, so_far)
+        trained = max(result.env_steps or 0, so_far)
         self.ended_steps += trained
         self.ended += 1
         self.done += 1

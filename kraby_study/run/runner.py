@@ -17,12 +17,11 @@ from typing import Any, Protocol, TextIO
 
 from kraby_study.errors import ClusterLost, DatabaseLost, first_line
 from kraby_study.plan.spec import TrialSpec
-from kraby_study.records import Failure, Outcome, failure
+from kraby_study.records import Failure, Outcome, Tally, TrialResult, failure
 from kraby_study.run.executor import Executor
 from kraby_study.run.pool import Event, Pool
 from kraby_study.run.progress import Progress
-from kraby_study.run.result import TrialResult
-from kraby_study.store.connection import LOST_DATABASE
+from kraby_study.store.store import LOST_DATABASE
 
 MAX_WORKER_DEATHS = 3
 """A trial whose worker dies this many times is recorded as failed instead of run again."""
@@ -51,22 +50,15 @@ class TrialSource(Protocol):
 
 
 @dataclass
-class RunSummary:
-    """What one command did."""
+class CommandRun(Tally):
+    """What one command ran: the trials it ended, by outcome, and whether it was stopped."""
 
-    complete: int = 0
-    failed: int = 0
-    pruned: int = 0
     interrupted: bool = False
 
-    def count(self, outcome: Outcome) -> None:
+    def count(self, ended: Outcome) -> None:
         """Count one trial that ended."""
-        if outcome == Outcome.COMPLETE:
-            self.complete += 1
-        elif outcome == Outcome.PRUNED:
-            self.pruned += 1
-        else:
-            self.failed += 1
+        name = ended.value
+        setattr(self, name, getattr(self, name) + 1)
 
 
 class Retrying:
@@ -139,7 +131,7 @@ class _Run:
     source: TrialSource
     pool: Pool
     progress: Progress
-    summary: RunSummary = field(default_factory=RunSummary)
+    summary: CommandRun = field(default_factory=CommandRun)
     deaths: dict[int, int] = field(default_factory=dict)
 
     def submit(self, number: int, spec: TrialSpec) -> None:
@@ -170,8 +162,9 @@ class _Run:
         self.deaths[event.number] = self.deaths.get(event.number, 0) + 1
         if self.deaths[event.number] >= MAX_WORKER_DEATHS:
             reason = f"its worker died {MAX_WORKER_DEATHS} times (last {why})"
-            self.finish(event.number, spec, TrialResult(outcome=Outcome.FAILED,
-                                                        failure=failure(Failure.ERROR, reason)))
+            self.finish(event.number, spec, TrialResult(
+                outcome=Outcome.FAILED, env_steps=0, wall_time=0.0,
+                failure=failure(Failure.ERROR, reason)))
         else:
             # Same trial, new worker: the trial stays claimed, so nothing is lost.
             self.progress.interrupt(spec.label, f"worker {why}, rerun")
@@ -194,7 +187,7 @@ class _Run:
 
 
 def run_trials(source: TrialSource, workers: int, progress: Progress, executor: Executor,
-               heartbeat_seconds: float = 5.0, poll_seconds: float = 2.0) -> RunSummary:
+               heartbeat_seconds: float = 5.0, poll_seconds: float = 2.0) -> CommandRun:
     """Run every trial the source hands out, ``workers`` at once on the executor's pool.
 
     When nothing is left to claim but other commands still run trials of the study (several

@@ -9,17 +9,14 @@ from omegaconf import DictConfig
 from optuna.trial import TrialState
 
 from kraby_study.errors import ConfigError
+from kraby_study.plan.settings import model_path, resolved_settings
 from kraby_study.plan.space import (
     apply_params,
     checkpoint_every,
-    distributions,
     fitted_params,
-    make_pruner,
-    make_sampler,
     search_definition,
 )
-from kraby_study.plan.spec import TrialSpec
-from kraby_study.plan.sweep import fingerprint, model_path, resolved_settings
+from kraby_study.plan.spec import TrialSpec, fingerprint
 from kraby_study.records import (
     Failure,
     StudyAttrs,
@@ -30,10 +27,11 @@ from kraby_study.records import (
 )
 from kraby_study.run.executor import Executor
 from kraby_study.run.progress import Progress
-from kraby_study.run.runner import Retrying, RunSummary, run_trials
+from kraby_study.run.runner import CommandRun, Retrying, run_trials
+from kraby_study.run.sampling import distributions, make_pruner, make_sampler
 from kraby_study.run.source import StudySource, requeue_orphans
-from kraby_study.store.connection import Store
 from kraby_study.store.ledger import StudyLedger
+from kraby_study.store.store import Store
 
 SHORT_NAMES = {"learning_rate": "lr", "nminibatches": "nmb", "n_steps": "n_steps",
                "n_epochs": "epochs", "gae_lambda": "lambda", "clip_range": "clip",
@@ -118,7 +116,7 @@ def warm_start(ledger: StudyLedger, cfg: DictConfig,
 
 def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, stream: TextIO,
                live: bool | None = None, starts: Sequence[tuple[str, dict[str, Any]]] = (),
-               ) -> tuple[RunSummary, StudyLedger]:
+               ) -> tuple[CommandRun, StudyLedger]:
     """Run a search until its study holds ``search.trials`` trials; a new search evaluates the
     ``starts`` configurations (name, resolved settings) first."""
     definition = search_definition(cfg)

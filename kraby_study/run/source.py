@@ -7,8 +7,7 @@ from typing import TextIO
 from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.plan.spec import TrialSpec
-from kraby_study.records import counted
-from kraby_study.run.result import TrialResult
+from kraby_study.records import TrialResult, counted
 from kraby_study.store.ledger import StudyLedger
 
 UNFINISHED = (TrialState.RUNNING, TrialState.WAITING)
@@ -38,7 +37,7 @@ class StudySource:
 
     def running_elsewhere(self) -> bool:
         """Whether other commands still run trials that could come back (PostgreSQL)."""
-        if self.ledger.store.exclusive:
+        if self.ledger.exclusive:
             return False
         self.ledger.requeue_orphans()
         return any(t.state in UNFINISHED for t in self.counted())

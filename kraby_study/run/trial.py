@@ -16,9 +16,8 @@ import numpy as np
 
 from kraby_study.errors import first_line
 from kraby_study.plan.spec import TrialSpec
-from kraby_study.records import Failure, Outcome, failure
+from kraby_study.records import Failure, Outcome, TrialResult, failure
 from kraby_study.run.curve import Episode, bin_curve, final_score, mean_curve
-from kraby_study.run.result import TrialResult
 
 if TYPE_CHECKING:
     from kraby_study.run.callback import CheckpointHook, EpisodeRecorder, ProgressHook

@@ -17,16 +17,15 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from kraby_study.plan.spec import TrialSpec
+    from kraby_study.records import TrialResult
     from kraby_study.run.callback import CheckpointHook, ProgressHook
-    from kraby_study.run.result import TrialResult
 
 
 def attempt(spec: TrialSpec, shards: int, checkpoint: CheckpointHook | None,
             progress: ProgressHook) -> TrialResult:
     """Run one trial; an exception (a bug, a bad environment) comes back as a failed result,
     so it never kills the worker or the study."""
-    from kraby_study.records import Failure, Outcome, failure
-    from kraby_study.run.result import TrialResult
+    from kraby_study.records import Failure, Outcome, TrialResult, failure
     from kraby_study.run.trial import run_trial
 
     try:
@@ -34,7 +33,8 @@ def attempt(spec: TrialSpec, shards: int, checkpoint: CheckpointHook | None,
                          shards=shards)
     except Exception as err:
         last = traceback.format_exception_only(type(err), err)[-1].strip()
-        return TrialResult(outcome=Outcome.FAILED, failure=failure(Failure.ERROR, last))
+        return TrialResult(outcome=Outcome.FAILED, env_steps=0, wall_time=0.0,
+                           failure=failure(Failure.ERROR, last))
 
 
 def serve(conn: Connection, shards: int) -> None:

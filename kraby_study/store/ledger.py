@@ -1,48 +1,43 @@
-"""One study's ledger: define, queue, claim, record, heartbeat, requeue, and the curves.
+"""One study's ledger: queue, claim, ask, record, heartbeat, requeue, and the curves.
 
-The only code besides :mod:`kraby_study.store.connection` that touches the database. Outside
-the store a trial is named by its number in its study; Optuna's internal ids stay in here.
+With :mod:`kraby_study.store.store` the only code that touches the database. Outside the store
+a trial is named by its number in its study; Optuna's internal ids stay in here.
 """
 
 from __future__ import annotations
 
 from collections.abc import Collection, Iterable, Mapping, Sequence
 from contextlib import AbstractContextManager
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import optuna
 import pandas as pd
 import sqlalchemy as sa
 from optuna.distributions import BaseDistribution
+from optuna.storages import RDBStorage
 from optuna.trial import FrozenTrial, TrialState
 
-from kraby_study.records import Failure, Outcome, StudyAttrs, TrialAttrs, failure
-from kraby_study.run.result import CurvePoint, TrialResult
-
-if TYPE_CHECKING:
-    from kraby_study.store.connection import Store
-
-CURVE_COLUMNS = ["number", "step", "mean_reward", "wall_time", "episodes"]
-
-
-def requeue_stale(study: optuna.Study, trial: FrozenTrial) -> None:
-    """Queue a fresh attempt of an interrupted trial; the later attempt supersedes it.
-
-    Also Optuna's heartbeat callback, for trials whose owner stopped sending heartbeats.
-    """
-    old = TrialAttrs.of(trial)
-    attrs = TrialAttrs(key=old.key, seed=old.seed, retry_of=trial.number)
-    params = trial.params or trial.system_attrs.get("fixed_params", {})
-    study.enqueue_trial(params=dict(params), user_attrs=attrs.stored())
+from kraby_study.records import (
+    CurvePoint,
+    Failure,
+    Outcome,
+    StudyAttrs,
+    TrialAttrs,
+    TrialResult,
+    failure,
+)
+from kraby_study.store.attempts import requeue_stale
+from kraby_study.store.backend import LOCK_BASE, Backend
+from kraby_study.store.tables import CURVE_COLUMNS, curve_points
 
 
 class StudyLedger:
     """The trials of one stored study, read and written through the store."""
 
-    def __init__(self, store: Store, study: optuna.Study) -> None:
-        self.store = store
+    def __init__(self, study: optuna.Study, storage: RDBStorage, backend: Backend) -> None:
         self._study = study
-        self._storage = store.storage
+        self._storage = storage
+        self._backend = backend
         self._study_id = self._storage.get_study_id_from_name(study.study_name)
         self._ids: dict[int, int] = {}
 
@@ -73,12 +68,16 @@ class StudyLedger:
         for key, value in attrs.stored().items():
             self._study.set_user_attr(key, value)
 
+    @property
+    def exclusive(self) -> bool:
+        """True when this command is the store's only writer (a locked SQLite file): every
+        running trial is then its own."""
+        return self._backend.exclusive
+
     def plan_lock(self) -> AbstractContextManager[None]:
         """Serialise queueing this study's trials across machines (a locked SQLite file
         already is)."""
-        from kraby_study.store.connection import LOCK_BASE
-
-        return self.store.server_lock(LOCK_BASE + self._study_id)
+        return self._backend.server_lock(self._storage.engine, LOCK_BASE + self._study_id)
 
     # reading ---------------------------------------------------------------------------------
 
@@ -92,8 +91,6 @@ class StudyLedger:
     def curves(self, numbers: Collection[int] | None = None) -> pd.DataFrame:
         """Learning-curve points (columns ``CURVE_COLUMNS``) of the given trials, or all, in one
         query, sorted by trial and step; empty for a plain Optuna store."""
-        from kraby_study.store.connection import curve_points
-
         if numbers is None or any(n not in self._ids for n in numbers):
             self.trials()  # the ids of every trial, in one query
         ids = {trial_id: number for number, trial_id in self._ids.items()}
@@ -101,7 +98,7 @@ class StudyLedger:
                            curve_points.c.mean_reward, curve_points.c.wall_time,
                            curve_points.c.episodes)
                  .where(curve_points.c.study_id == self._study_id))
-        with self.store.engine.connect() as connection:
+        with self._storage.engine.connect() as connection:
             if not sa.inspect(connection).has_table(curve_points.name):
                 return pd.DataFrame(columns=CURVE_COLUMNS)
             frame = pd.read_sql(query, connection)
@@ -168,10 +165,7 @@ class StudyLedger:
     def record(self, number: int, result: TrialResult) -> None:
         """Store a finished trial: its curve, its attributes, then its final state."""
         self.write_curves({number: result.curve})
-        self.set_attrs(number, TrialAttrs(
-            env_steps=result.env_steps, wall_time=result.wall_time, started=result.started,
-            ended=result.ended, final_score=result.final_score, train_reward=result.train_reward,
-            failure=result.failure, pruned_at=result.pruned_at))
+        self.set_attrs(number, TrialAttrs(**vars(result.measures())))
         if result.outcome == Outcome.COMPLETE:
             self._study.tell(number, result.final_score)
         elif result.outcome == Outcome.PRUNED:
@@ -196,7 +190,7 @@ class StudyLedger:
         With a locked SQLite file every running trial is an orphan; on a server, those whose
         heartbeat went stale.
         """
-        if self.store.exclusive:
+        if self.exclusive:
             orphans = self.trials(TrialState.RUNNING)
             for trial in orphans:
                 self.requeue(trial.number, failure(Failure.INTERRUPTED, "its command stopped"))
@@ -207,25 +201,19 @@ class StudyLedger:
 
     def heartbeat(self, numbers: Iterable[int]) -> None:
         """Tell other machines these trials' owner is alive (PostgreSQL only)."""
-        if not self.store.exclusive:
+        if not self.exclusive:
             for number in numbers:
                 self._storage.record_heartbeat(self._id(number))
 
     def write_curves(self, curves: Mapping[int, Sequence[CurvePoint]]) -> None:
         """Replace the learning curves of trials (by number) in one transaction."""
-        from kraby_study.store.connection import curve_points
-
         if any(number not in self._ids for number in curves):
             self.trials()  # one query for every id
         ids = [self._id(number) for number in curves]
         rows = [{"study_id": self._study_id, "trial_id": trial_id, "step": p.step,
                  "mean_reward": p.mean_reward, "wall_time": p.wall_time, "episodes": p.episodes}
                 for trial_id, points in zip(ids, curves.values(), strict=True) for p in points]
-        with self.store.engine.begin() as conn:
+        with self._storage.engine.begin() as conn:
             conn.execute(curve_points.delete().where(curve_points.c.trial_id.in_(ids)))
             if rows:
                 conn.execute(curve_points.insert(), rows)
-
-    def add_trials(self, trials: Sequence[FrozenTrial]) -> None:
-        """Add finished trials as they are (for synthetic stores)."""
-        self._study.add_trials(list(trials))

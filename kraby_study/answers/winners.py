@@ -1,5 +1,6 @@
 """Where ``${winner:STUDY}`` values come from: the selected values of finished studies in the
-command's store (:func:`kraby_study.best.selection_of`), with a record of each one taken.
+command's store (:func:`kraby_study.answers.selected.sweep_selection`), with a record of each
+one taken.
 
 A standalone study names stored studies directly; a campaign stage names earlier stages by their
 study, stored as ``<campaign>-<study>``.
@@ -8,14 +9,15 @@ study, stored as ``<campaign>-<study>``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from omegaconf import DictConfig
 
-from kraby_study.best import Selected, selection_of
 from kraby_study.errors import ConfigError, StoreError
-from kraby_study.records import SWEPT_KINDS, counted, tally, value_label
-from kraby_study.store.connection import opened, study_exists
+from kraby_study.records import StudyKind, counted, tally, value_label
+
+if TYPE_CHECKING:
+    from kraby_study.answers.selected import SweepSelection
 
 
 class Unfinished(StoreError):
@@ -41,7 +43,7 @@ class Input:
         return f"{self.setting} = {value_label(self.value)}, selected in {self.study}"
 
 
-def carried(selected: Selected, parameter: str, definition: dict[str, Any]) -> Any:
+def carried(selected: SweepSelection, parameter: str, definition: dict[str, Any]) -> Any:
     """The value a selection carries into later settings.
 
     A ppo.batch_size equal to its study's whole rollout carries as null (one minibatch of the
@@ -67,7 +69,7 @@ class StoreWinners:
 
     names: dict[str, str] | None = None
     inputs: list[Input] = field(default_factory=list)
-    _cache: dict[str, tuple[Selected, str, dict[str, Any]]] = field(default_factory=dict)
+    _cache: dict[str, tuple[SweepSelection, str, dict[str, Any]]] = field(default_factory=dict)
 
     def stored_name(self, study: str, setting: str, root: DictConfig) -> str:
         """The stored study a reference names; ConfigError for one it may not name."""
@@ -91,27 +93,31 @@ class StoreWinners:
         return value
 
 
-def _read(url: str, name: str, where: str) -> tuple[Selected, str, dict[str, Any]]:
+def _read(url: str, name: str, where: str) -> tuple[SweepSelection, str, dict[str, Any]]:
     """The selection of a finished stored sweep, its parameter and definition.
 
     Raises:
         Unfinished: The study is not stored, or has runs still to come.
         StoreError: It is not a sweep, or none of its runs is complete.
     """
+    # Loaded here, when a config names a winner: every ``run`` installs this lookup, and most
+    # configs name none, so composing them needs no database or statistics code.
+    from kraby_study.answers.selected import sweep_selection
+    from kraby_study.store.store import opened, study_exists
+
     if not study_exists(url, name):
         raise Unfinished(f"{where}: no study {name!r} in the store yet; run it first")
     with opened(url, create=False, writer=False) as store:
         ledger = store.load(name)
         attrs = ledger.attrs
-        if attrs.kind not in SWEPT_KINDS or "parameter" not in attrs.definition:
+        if not StudyKind.of(attrs.kind).swept or "parameter" not in attrs.definition:
             raise StoreError(f"{where}: study {name!r} is not a sweep, so it selects no value")
-        trials = counted(ledger.trials())
-        counts = tally(trials)
-        planned = max(attrs.planned or 0, len(trials))
-        if counts.ended < planned:
+        counts = tally(counted(ledger.trials()), attrs.planned)
+        planned = counts.planned
+        if not counts.finished:
             raise Unfinished(f"{where}: study {name!r} is incomplete ({counts.complete}/{planned}"
                              " complete); finish it first")
-        selected = selection_of(ledger)
+        selected = sweep_selection(ledger)
     if selected is None:
         raise StoreError(f"{where}: study {name!r} has no selectable value (0/{planned} complete,"
                          f" {counts.failed} failed, {counts.pruned} pruned)")

@@ -1,4 +1,5 @@
-"""Run a planned sweep (or a single training run): queue its trials in the store, run, record."""
+"""Run a study plan (a sweep, a confirm study or a train run): queue its trials in the store,
+run them, record their results."""
 
 from __future__ import annotations
 
@@ -6,35 +7,36 @@ from typing import TextIO
 
 from optuna.trial import FrozenTrial
 
-from kraby_study.plan.spec import TrialSpec
-from kraby_study.plan.sweep import StudyPlan
+from kraby_study.plan.spec import StudyPlan, TrialSpec
 from kraby_study.records import (
-    SWEPT_KINDS,
+    Outcome,
     StudyAttrs,
+    StudyKind,
     Tally,
     TrialAttrs,
     is_interrupted,
     latest_by_key,
+    outcome,
     param_name,
     tally,
 )
 from kraby_study.run.executor import Executor
 from kraby_study.run.progress import Progress
-from kraby_study.run.runner import Retrying, RunSummary, run_trials
+from kraby_study.run.runner import CommandRun, Retrying, run_trials
 from kraby_study.run.source import StudySource, requeue_orphans
-from kraby_study.store.connection import Store
 from kraby_study.store.ledger import StudyLedger
+from kraby_study.store.store import Store
 
 
 def swept_name(plan: StudyPlan) -> str | None:
     """The Optuna parameter name of a sweep's value (a confirm study's configuration); None for
     a single training run."""
-    swept = plan.definition.get("kind") in SWEPT_KINDS
+    swept = StudyKind.of(plan.definition.get("kind")).swept
     return param_name(plan.parameter) if swept else None
 
 
-class SweepSource(StudySource):
-    """Queues a sweep's planned runs, hands them out, and records their results."""
+class PlanSource(StudySource):
+    """Queues a plan's runs, hands them out, and records their results."""
 
     def __init__(self, ledger: StudyLedger, plan: StudyPlan) -> None:
         super().__init__(ledger)
@@ -78,7 +80,7 @@ class SweepSource(StudySource):
 
 def run_plan(store: Store, plan: StudyPlan, executor: Executor, workers: int, stream: TextIO,
              live: bool | None = None, heartbeat_seconds: float = 5.0,
-             retry_seconds: float = 60.0) -> tuple[RunSummary, Tally]:
+             retry_seconds: float = 60.0) -> tuple[CommandRun, Tally]:
     """Queue, run and record a plan's trials, ``workers`` at once on the executor; returns
     this command's summary and the outcomes of the plan's runs."""
     kind = str(plan.definition.get("kind"))
@@ -86,7 +88,7 @@ def run_plan(store: Store, plan: StudyPlan, executor: Executor, workers: int, st
                                                 fingerprint=plan.fingerprint))
     ledger.update(plan.notes())
     requeue_orphans(ledger, stream)
-    source = SweepSource(ledger, plan)
+    source = PlanSource(ledger, plan)
     source.queue_missing()
     before = tally(source.counted())
     pending = len(plan.specs) - before.ended
@@ -98,3 +100,32 @@ def run_plan(store: Store, plan: StudyPlan, executor: Executor, workers: int, st
     summary = run_trials(Retrying(source, retry_seconds, stream), slots, progress, executor,
                          heartbeat_seconds=heartbeat_seconds)
     return summary, tally(source.counted())
+
+
+def closing_line(noun: str, plan: StudyPlan, counts: Tally) -> str:
+    """The line a command ends with: ``study NAME: 7/10 complete, 1 failed, 2 left (rerun ...)``."""
+    total = len(plan.specs)
+    return (f"{noun} {plan.name}: {counts.complete}/{total} complete, {counts.failed} failed"
+            + (f", {total - counts.ended} left (rerun the same command to continue)"
+               if counts.ended < total else ""))
+
+
+def train_outcome(store: Store, plan: StudyPlan, summary: CommandRun, seed: int,
+                  stream: TextIO) -> int:
+    """Print how a ``train`` run ended (score, model) and return the command's exit code: 0
+    complete, 1 failed or not run, 130 interrupted."""
+    trial = latest_by_key(store.load(plan.name).trials()).get(plan.specs[0].key)
+    if trial is None:
+        return 130 if summary.interrupted else 1
+    attrs = TrialAttrs.of(trial)
+    line = f"train {plan.name} seed {seed}: {outcome(trial)}"
+    if trial.value is not None:
+        line += f", final score {trial.value:.4g} over {attrs.env_steps} steps"
+    if attrs.failure:
+        line += f" ({attrs.failure})"
+    print(line, file=stream)
+    if attrs.model_path and trial.value is not None:
+        print(f"model: {attrs.model_path}", file=stream)
+    if summary.interrupted:
+        return 130
+    return 0 if outcome(trial) == Outcome.COMPLETE else 1

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from kraby_study.records import StudyKind
 from kraby_study.report.document import Block
 
 
@@ -26,7 +27,7 @@ class StudyReport:
     """
 
     name: str
-    kind: str
+    kind: StudyKind
     folder: Path
     status: str
     finished: bool

@@ -1,7 +1,8 @@
-"""Synthetic stores shaped like real ones, for the report's tests, benchmark and previews.
+"""Synthetic stores shaped like real ones, for the report's tests and benchmark (a fixture,
+not part of the package).
 
-Trials are written through the store (finished trials added whole) with the attributes a real
-run leaves, and their curves in one bulk insert, so a store of hundreds of runs takes seconds.
+Finished trials are added whole through Optuna with the attributes a real run leaves, and their
+curves through the store in one bulk insert, so a store of hundreds of runs takes seconds.
 """
 
 from __future__ import annotations
@@ -16,11 +17,18 @@ import optuna
 from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
 from optuna.trial import TrialState, create_trial
 
-from kraby_study.plan.sweep import fingerprint
-from kraby_study.records import Failure, Outcome, StudyAttrs, TrialAttrs, failure, sweep_key
-from kraby_study.run.result import CurvePoint
-from kraby_study.store.connection import Store
+from kraby_study.plan.spec import fingerprint
+from kraby_study.records import (
+    CurvePoint,
+    Failure,
+    Outcome,
+    StudyAttrs,
+    TrialAttrs,
+    failure,
+    sweep_key,
+)
 from kraby_study.store.ledger import StudyLedger
+from kraby_study.store.store import Store
 
 SETTINGS: dict[str, Any] = {
     "env": {"observation": "default", "delta": 0.5, "time_step": 0.05 / 12, "frameskip": 12,
@@ -85,6 +93,7 @@ def add_sweep(store: Store, name: str, parameter: str, values: Sequence[Any],
     definition = {"kind": "sweep", "parameter": parameter, "values": list(values),
                   "settings": SETTINGS, "steps": steps, "curve_every": curve_every}
     ledger = define(store, name, "sweep", definition, len(runs))
+    study = optuna.load_study(study_name=name, storage=store.storage)
     short = parameter.split(".")[-1]
     distribution = CategoricalDistribution(list(values))
     curves: dict[int, list[tuple[int, float, float]]] = {}
@@ -105,9 +114,9 @@ def add_sweep(store: Store, name: str, parameter: str, values: Sequence[Any],
         else:
             attrs.failure = run.failure or DIVERGED
             state, value = TrialState.FAIL, None
-        ledger.add_trials([create_trial(state=state, value=value, params={short: run.value},
-                                        distributions={short: distribution},
-                                        user_attrs=attrs.stored())])
+        study.add_trials([create_trial(state=state, value=value, params={short: run.value},
+                                       distributions={short: distribution},
+                                       user_attrs=attrs.stored())])
         curves[number] = run.curve
     write_curves(ledger, curves)
     return ledger
@@ -144,6 +153,7 @@ def add_search(store: Store, name: str, trials: int, rng: np.random.Generator,
                steps: int = 250_000, checkpoints: int = 10, points: int = 250) -> StudyLedger:
     """A search study: TPE-free random parameters, intermediate values, pruned and failed trials."""
     ledger = define(store, name, "search", {"kind": "search", "steps": steps}, trials)
+    study = optuna.load_study(study_name=name, storage=store.storage)
     distributions = {
         "learning_rate": FloatDistribution(1e-4, 1.0, log=True),
         "gamma": FloatDistribution(0.2, 0.9999),
@@ -177,9 +187,15 @@ def add_search(store: Store, name: str, trials: int, rng: np.random.Generator,
         elif number % 23 == 22:
             state, value, marks, curve = TrialState.FAIL, None, {}, curve[:20]
             attrs.failure = DIVERGED
-        ledger.add_trials([create_trial(state=state, value=value, params=params,
-                                        distributions=distributions, user_attrs=attrs.stored(),
-                                        intermediate_values=marks)])
+        study.add_trials([create_trial(state=state, value=value, params=params,
+                                       distributions=distributions, user_attrs=attrs.stored(),
+                                       intermediate_values=marks)])
         curves[number] = curve
     write_curves(ledger, curves)
     return ledger
+
+
+def add_trials(store: Store, name: str, trials: Sequence[optuna.trial.FrozenTrial]) -> None:
+    """Add finished trials to a stored study as they are (Optuna's own API: the package's store
+    has no door for trials that did not run)."""
+    optuna.load_study(study_name=name, storage=store.storage).add_trials(list(trials))

@@ -1,0 +1,92 @@
+"""The configurations ``confirm`` retrains, read from a stored search or sweep."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from kraby_study.answers.selected import searched_env_keys
+from kraby_study.errors import StoreError
+from kraby_study.plan.confirm import Arm, ConfirmedStudy
+from kraby_study.records import (
+    Outcome,
+    StudyKind,
+    counted,
+    outcome,
+    param_name,
+    search_key,
+    swept_value,
+    value_key,
+    value_label,
+)
+from kraby_study.store.ledger import StudyLedger
+
+
+def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
+    """The ``top`` best configurations of a search (distinct complete trials, best first) or
+    of a sweep (values by mean final score), with the seeds its trials used.
+
+    Raises:
+        StoreError: The study is neither a search nor a sweep, or has fewer than ``top``
+            complete configurations (the message says how many it has).
+    """
+    attrs = ledger.attrs
+    definition = attrs.definition
+    trials = counted(ledger.trials())
+    done = [t for t in trials if outcome(t) == Outcome.COMPLETE and t.value is not None
+            and t.user_attrs.get("settings")]
+    if attrs.kind == StudyKind.SEARCH:
+        arms = _search_arms(ledger.name, done)
+        per_trial = int(definition.get("seeds", 1))
+        used = {int(t.user_attrs["seed"]) + i for t in trials if "seed" in t.user_attrs
+                for i in range(per_trial)}
+        env_keys = searched_env_keys(definition)
+    elif attrs.kind == StudyKind.SWEEP:
+        arms = _sweep_arms(ledger.name, str(definition["parameter"]),
+                           list(definition.get("values", [])), done)
+        used = {int(t.user_attrs["seed"]) for t in trials if "seed" in t.user_attrs}
+        parameter = str(definition["parameter"])
+        env_keys = [parameter.split(".", 1)[1]] if parameter.startswith("env.") else []
+    else:
+        raise StoreError(f"confirm retrains a search or a sweep; study {ledger.name!r} is "
+                         f"{'a ' + attrs.kind if attrs.kind else 'not made by kraby-study'}")
+    if len(arms) < top:
+        raise StoreError(f"study {ledger.name!r} has {len(arms)} complete configuration(s), "
+                         f"fewer than --top {top}")
+    return ConfirmedStudy(name=ledger.name, arms=arms[:top], used_seeds=used,
+                  steps=int(definition["steps"]), curve_every=int(definition["curve_every"]),
+                  env_keys=env_keys)
+
+
+def _search_arms(name: str, done: list[Any]) -> list[Arm]:
+    """Complete search trials, best first, one per distinct configuration."""
+    arms: list[Arm] = []
+    seen: set[Any] = set()
+    for trial in sorted(done, key=lambda t: -float(t.value)):
+        settings = trial.user_attrs["settings"]
+        if value_key(settings) in seen:
+            continue
+        seen.add(value_key(settings))
+        arms.append(Arm(label=str(trial.user_attrs.get("key", search_key(trial.number))),
+                        settings=settings, origin=f"trial {trial.number} of search {name!r}",
+                        source_score=float(trial.value)))
+    return arms
+
+
+def _sweep_arms(name: str, parameter: str, planned: list[Any], done: list[Any]) -> list[Arm]:
+    """A sweep's values with complete seeds, best mean final score first."""
+    short = param_name(parameter)
+    groups: dict[Any, list[Any]] = {}
+    values: dict[Any, Any] = {}
+    for trial in done:
+        value = swept_value(trial, short, planned)
+        groups.setdefault(value_key(value), []).append(trial)
+        values.setdefault(value_key(value), value)
+    means = {k: sum(float(t.value) for t in g) / len(g) for k, g in groups.items()}
+    order = sorted(groups, key=lambda k: -means[k])
+    return [Arm(label=f"{short}={value_label(values[k])}",
+                settings=groups[k][0].user_attrs["settings"],
+                origin=f"{parameter} = {value_label(values[k])} in sweep {name!r} (mean final "
+                       f"score over {len(groups[k])} seed(s))",
+                source_score=means[k]) for k in order]
+
+

@@ -1,0 +1,121 @@
+"""The data flows one way: every module imports only from its own layer or the layers below.
+
+The layer order is written here and in docs/architecture.md ("Layers"); keep the two alike.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = {"kraby_study": ROOT / "kraby_study", "kraby_envs": ROOT / "envs"}
+
+LAYERS: list[tuple[str, tuple[str, ...]]] = [
+    ("envs", ("kraby_envs",)),
+    ("records", ("kraby_study.errors", "kraby_study.records", "kraby_study.store.url")),
+    ("config", ("kraby_study.config",)),
+    ("plan", ("kraby_study.plan",)),
+    ("store", ("kraby_study.store",)),
+    ("stats", ("kraby_study.stats", "kraby_study.selection")),
+    ("answers", ("kraby_study.answers",)),
+    ("run", ("kraby_study.run",)),
+    ("report", ("kraby_study.report",)),
+    ("cli", ("kraby_study.cli",)),
+]
+"""Bottom to top. A module belongs to the layer of its longest matching prefix; the package's
+own ``__init__`` to the top."""
+
+
+def layer_of(module: str) -> int:
+    """Index in LAYERS of a module's layer."""
+    if module == "kraby_study":
+        return len(LAYERS) - 1
+    best, length = -1, -1
+    for index, (_, prefixes) in enumerate(LAYERS):
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > length:
+                best, length = index, len(prefix)
+    assert best >= 0, f"{module} is in no layer: add it to LAYERS and docs/architecture.md"
+    return best
+
+
+def modules() -> dict[str, Path]:
+    """Every module of the two packages, by dotted name."""
+    found = {}
+    for package, folder in PACKAGES.items():
+        for path in folder.rglob("*.py"):
+            parts = path.relative_to(folder).with_suffix("").parts
+            name = ".".join((package, *parts))
+            found[name.removesuffix(".__init__")] = path
+    return found
+
+
+def imports(path: Path, module: str) -> list[tuple[str, int, bool]]:
+    """(imported module, line, at module level) for each import of our packages in a file,
+    wherever it stands (inside functions and TYPE_CHECKING blocks too)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    top = {id(node) for node in tree.body}
+    package = module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+    found = []
+    for node in ast.walk(tree):
+        names: list[str] = []
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parent = package.split(".")
+                base = ".".join(parent[: len(parent) - node.level + 1] + ([base] if base else []))
+            names = [base]
+        for name in names:
+            if name.split(".")[0] in PACKAGES:
+                found.append((name, node.lineno, id(node) in top))
+    return found
+
+
+def test_every_module_imports_only_its_own_layer_or_below() -> None:
+    upward = []
+    for module, path in sorted(modules().items()):
+        own = layer_of(module)
+        for imported, line, _ in imports(path, module):
+            if layer_of(imported) > own:
+                upward.append(f"{path.relative_to(ROOT)}:{line} ({LAYERS[own][0]}) imports "
+                              f"{imported} ({LAYERS[layer_of(imported)][0]})")
+    assert not upward, "imports that run upward:\n" + "\n".join(upward)
+
+
+def test_the_store_imports_at_module_level_only() -> None:
+    """A function-level import inside store/ would hide a cycle between its modules."""
+    hidden = [f"{path.relative_to(ROOT)}:{line} imports {name}"
+              for module, path in modules().items() if module.startswith("kraby_study.store")
+              for name, line, at_top in imports(path, module) if not at_top]
+    assert not hidden, "\n".join(hidden)
+
+
+def test_the_layer_test_catches_an_upward_import(tmp_path: Path) -> None:
+    module = tmp_path / "ledger.py"
+    module.write_text("def f():\n    from kraby_study.run.runner import CommandRun\n")
+    found = imports(module, "kraby_study.store.ledger")
+    assert found == [("kraby_study.run.runner", 2, False)]
+    assert layer_of("kraby_study.run.runner") > layer_of("kraby_study.store.ledger")
+    assert layer_of("kraby_study.store.url") < layer_of("kraby_study.config.validate")
+
+
+PURE = ["kraby_study.config.compose", "kraby_study.config.validate", "kraby_study.config.winner",
+        "kraby_study.plan.sweep", "kraby_study.plan.space", "kraby_study.plan.confirm",
+        "kraby_study.plan.campaign", "kraby_study.plan.train", "kraby_study.cli"]
+HEAVY = ["optuna", "sqlalchemy", "scipy", "pandas", "torch", "stable_baselines3", "matplotlib"]
+
+
+@pytest.mark.parametrize("module", PURE)
+def test_composing_and_planning_load_no_database_optuna_or_statistics(module: str) -> None:
+    code = (f"import sys, {module}; "
+            f"print(','.join(m for m in {HEAVY!r} if m in sys.modules))")
+    loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            check=True).stdout.strip()
+    assert loaded == "", f"importing {module} loads {loaded}"
