@@ -178,7 +178,7 @@ def _final_text(row: pd.Series) -> str:
         text += f", 95 % CI {_interval(row['final_low'], row['final_high'])}"
     text += f", n={row['complete']}; IQM {number(row['iqm'])}"
     if np.isfinite(row["iqm_low"]):
-        text += f", 95 % bootstrap CI {_interval(row['iqm_low'], row['iqm_high'])}"
+        text += f", 95 % trimmed-t CI {_interval(row['iqm_low'], row['iqm_high'])}"
     return text
 
 
@@ -249,7 +249,7 @@ def arms_table(sweep: Sweep) -> Table:
              _bootstrap_interval(r["iqm_low"], r["iqm_high"]), str(r["n"])]
             for _, r in arms.iterrows()]
     return Table(["configuration", "origin", "source's score", "confirmed mean final score",
-                  "95 % CI", "confirmed IQM", "95 % bootstrap CI", "n"], rows,
+                  "95 % CI", "confirmed IQM", "95 % trimmed-t CI", "n"], rows,
                  marks=list(arms["mark"]))
 
 
