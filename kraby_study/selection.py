@@ -2,15 +2,17 @@
 
 One implementation serves the report's ``selected`` column, ``${winner:...}`` and ``best``. The
 rules read the same per-seed numbers the report shows, and the ties are the report's ties
-(:func:`kraby_study.stats.holm_vs_best`):
+(:func:`kraby_study.comparison.compare_with_best`, closed Holm-Welch step-down, alpha 0.05):
 
 - ``final_score``: the highest mean final score (the report's "best").
 - ``auc``: the highest mean AUC over the seeds with a curve (the most sample-efficient).
-- ``fastest_tied``: among the best value and the values tied with it (Holm-corrected Welch
-  p >= 0.05), the lowest mean training time in seconds: the documented "good compromise" when
-  a slower value is not measurably better.
+- ``fastest_tied``: among the best value and the values tied with it (not worse than the best
+  under the closed Holm-Welch step-down, alpha 0.05), the lowest mean training time in
+  seconds: the documented "good compromise" when a slower value is not measurably better.
 
-Ties inside a rule go to the first group in order; NaN never wins.
+Every rule considers only values with at least ``min_seeds`` complete seeds (default 2, the
+report's ``report.min_seeds`` default), so one lucky seed is never selected. Ties inside a rule
+go to the first group in order; NaN never wins.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from typing import Any, TypeVar
 import pandas as pd
 from optuna.trial import FrozenTrial
 
+from kraby_study.comparison import ALPHA, MIN_SEEDS, compare_with_best, procedure_name
 from kraby_study.records import (
     Outcome,
     SelectRule,
@@ -34,13 +37,13 @@ from kraby_study.records import (
     swept_value,
     value_key,
 )
-from kraby_study.stats import ALPHA, auc, holm_vs_best
+from kraby_study.stats import auc
 
 RULE_TEXT = {
     SelectRule.FINAL_SCORE: "highest mean final score",
     SelectRule.AUC: "highest mean AUC (sample efficiency)",
-    SelectRule.FASTEST_TIED: (f"lowest mean training time among the values tied with the best "
-                              f"final score (Holm-corrected Welch p >= {ALPHA})"),
+    SelectRule.FASTEST_TIED: ("lowest mean training time among the values tied with the best "
+                              f"final score (not worse under the {procedure_name(ALPHA)})"),
 }
 
 K = TypeVar("K", bound=Hashable)
@@ -56,7 +59,7 @@ def _means(groups: Mapping[K, Sequence[float]]) -> dict[K, float]:
 
 
 def select(rule: str, final: Mapping[K, Sequence[float]], aucs: Mapping[K, Sequence[float]],
-           seconds: Mapping[K, Sequence[float]]) -> K | None:
+           seconds: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS) -> K | None:
     """The selected group under ``rule``; None when no group can be selected.
 
     Args:
@@ -64,17 +67,20 @@ def select(rule: str, final: Mapping[K, Sequence[float]], aucs: Mapping[K, Seque
         final: Final scores of the complete seeds, by group, in the study's order.
         aucs: AUC of each complete seed with a curve, by group.
         seconds: Training time of each complete seed, by group.
+        min_seeds: Fewest complete seeds a group needs to be selected (at least 2).
     """
     SelectRule.check(rule)
     scores = {g: [float(v) for v in vs if not math.isnan(float(v))] for g, vs in final.items()}
+    comparison = compare_with_best(scores, min_seeds=min_seeds)
     if rule == "final_score":
-        return best_group(scores)
+        return comparison.best
     if rule == "auc":
-        return best_group({g: [m] for g, m in _means(aucs).items()})
-    best, p_holm = holm_vs_best(scores)
+        return best_group({g: [m] for g, m in _means(aucs).items()
+                           if len(scores.get(g, [])) >= comparison.min_seeds})
+    best = comparison.best
     if best is None:
         return None
-    tied = [best] + [g for g in scores if g != best and p_holm.get(g, math.nan) >= ALPHA]
+    tied = [best, *comparison.tied]
     times = _means(seconds)
     timed = {g: [-times[g]] for g in tied if g in times}
     return best_group(timed) if timed else best
@@ -130,8 +136,8 @@ def swept_values(kind: str, definition: Mapping[str, Any],
 
 
 def selected_index(trials: Sequence[FrozenTrial], curves: pd.DataFrame, name: str,
-                   values: Sequence[Any], rule: str) -> int | None:
+                   values: Sequence[Any], rule: str, min_seeds: int = MIN_SEEDS) -> int | None:
     """Index in ``values`` of the value ``rule`` selects among the complete runs; None when
-    none is complete."""
+    no value has ``min_seeds`` complete seeds."""
     found = samples(trials, curves, name, values)
-    return select(rule, found.final, found.aucs, found.seconds)
+    return select(rule, found.final, found.aucs, found.seconds, min_seeds)

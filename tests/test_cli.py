@@ -17,7 +17,7 @@ from kraby_study.config.compose import compose_config
 def one_study(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A store elsewhere than the default place, holding a finished one-seed sweep."""
     db = tmp_path_factory.mktemp("elsewhere") / "k.db"
-    assert run_cli("run", "study=clip_range", "study.values=[0.1,0.2]", "budget.seeds=1",
+    assert run_cli("run", "study=clip_range", "study.values=[0.1,0.2]", "budget.seeds=2",
                    "workers=1", f"--storage={sqlite_url(db)}", *TINY) == 0
     return db
 

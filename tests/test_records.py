@@ -150,8 +150,10 @@ def test_selection_groups_one_and_one_point_zero_as_one_value() -> None:
         trial(0, COMPLETE, 3.0, params={"n_epochs": 1}),
         trial(1, COMPLETE, 1.0, params={"n_epochs": 1.0}),
         trial(2, COMPLETE, 2.5, params={"n_epochs": 2}),
+        trial(3, COMPLETE, 2.5, params={"n_epochs": 2}),
     ]
     # One group {1, 1.0}: mean (3 + 1) / 2 = 2 < 2.5, so 2 wins (apart, 1 would win with 3).
+    # (Every value has the 2 complete seeds a selection needs: report.min_seeds.)
     assert chosen(trials, "n_epochs", [1, 2]) == (2, 2.5)
     assert chosen(trials[:2], "n_epochs", [1, 2]) == (1, 2.0)
 
@@ -164,15 +166,21 @@ def test_selection_takes_the_highest_mean_over_complete_trials_only() -> None:
         trial(3, FAIL, params={"gamma": 0.9}, failure="diverged: NaN"),  # ... a failure is no 0
         trial(4, PRUNED, 9.0, params={"gamma": 0.99}),  # its last intermediate value: no score
         trial(5, RUNNING, params={"gamma": 0.99}),
+        trial(6, COMPLETE, -1.0, params={"gamma": 0.9}),
     ]
     assert chosen(trials, "gamma", [0.5, 0.9, 0.99]) == (0.9, -1.0)
-    assert chosen(trials[3:], "gamma", [0.5, 0.9, 0.99]) is None
+    assert chosen(trials[3:6], "gamma", [0.5, 0.9, 0.99]) is None
+    # One complete seed is too little evidence to be selected (report.min_seeds, default 2).
+    assert chosen(trials[2:], "gamma", [0.5, 0.9, 0.99]) == (0.9, -1.0)
+    assert chosen(trials[2:6], "gamma", [0.5, 0.9, 0.99]) is None
 
 
 @pytest.mark.parametrize("values", [[0.2, 0.1], [0.1, 0.2]])
 def test_a_tie_goes_to_the_first_value_in_the_study_order(values: list[float]) -> None:
     trials = [trial(0, COMPLETE, 1.0, params={"clip_range": 0.1}),
-              trial(1, COMPLETE, 1.0, params={"clip_range": 0.2})]
+              trial(1, COMPLETE, 1.0, params={"clip_range": 0.2}),
+              trial(2, COMPLETE, 1.0, params={"clip_range": 0.1}),
+              trial(3, COMPLETE, 1.0, params={"clip_range": 0.2})]
     assert chosen(trials, "clip_range", values) == (values[0], 1.0)
 
 
@@ -189,7 +197,8 @@ def test_the_swept_value_comes_from_the_params_the_queued_params_or_the_key() ->
 
 
 def test_selection_reads_the_value_of_a_trial_without_params_from_its_key() -> None:
-    trials = [trial(0, COMPLETE, 1.0, key="v0-s0"), trial(1, COMPLETE, 5.0, key="v1-s0")]
+    trials = [trial(0, COMPLETE, 1.0, key="v0-s0"), trial(1, COMPLETE, 5.0, key="v1-s0"),
+              trial(2, COMPLETE, 1.0, key="v0-s1"), trial(3, COMPLETE, 5.0, key="v1-s1")]
     assert chosen(trials, "gamma", [0.8, 0.9]) == (0.9, 5.0)
 
 

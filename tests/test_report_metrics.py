@@ -114,24 +114,15 @@ def _summary(out: Path, study: str = "learning_rate") -> pd.DataFrame:
                        na_values=[""]).set_index("value")
 
 
-def _iqm_bootstrap(values: list[float], repetitions: int) -> tuple[float, float]:
-    """The percentile bootstrap of the interquartile mean, straight from SciPy."""
-    result = stats.bootstrap((np.asarray(values),),
-                             lambda x, axis: stats.trim_mean(x, 0.25, axis=axis),
-                             n_resamples=repetitions, vectorized=True, method="percentile",
-                             rng=np.random.default_rng(BOOTSTRAP_SEED))
-    return float(result.confidence_interval.low), float(result.confidence_interval.high)
-
-
 def _improvement_bootstrap(x: list[float], y: list[float],
                            repetitions: int) -> tuple[float, float]:
-    """The percentile bootstrap of P(X > Y) + 0.5 P(X = Y), each sample resampled apart."""
+    """The BCa bootstrap of P(X > Y) + 0.5 P(X = Y), each sample resampled apart."""
     def statistic(a: np.ndarray, b: np.ndarray, axis: int) -> np.ndarray:
         wins = (a[..., :, None] > b[..., None, :]) + 0.5 * (a[..., :, None] == b[..., None, :])
         return wins.mean(axis=(-2, -1))
 
     result = stats.bootstrap((np.asarray(x), np.asarray(y)), statistic, n_resamples=repetitions,
-                             vectorized=True, paired=False, method="percentile",
+                             vectorized=True, paired=False, method="BCa",
                              rng=np.random.default_rng(BOOTSTRAP_SEED))
     return float(result.confidence_interval.low), float(result.confidence_interval.high)
 
@@ -147,8 +138,10 @@ def test_iqm_iqr_and_the_failed_run(report: ReportIndex) -> None:
     low = summary.loc[0.001]
     assert (low["complete"], low["failed"]) == (4, 1)
     assert low["iqm"] == pytest.approx(2.5)  # middle half of 1, 2, 3, 10
-    assert (low["iqm_low"], low["iqm_high"]) == pytest.approx(
-        _iqm_bootstrap(FINALS[0.001], BOOTSTRAP), rel=1e-5)
+    # Tukey-McLaughlin: g = 1, winsorised [2, 2, 3, 3] (sd sqrt(1/3)), se = sd / (0.5 * 2),
+    # t(0.975, 4 - 2 - 1 = 1) = 12.706.
+    half = stats.t.ppf(0.975, 1) * math.sqrt(1 / 3) / (0.5 * 2)
+    assert (low["iqm_low"], low["iqm_high"]) == pytest.approx((2.5 - half, 2.5 + half))
     assert low["iqm_low"] <= 2.5 <= low["iqm_high"]
     assert low["final_iqr"] == pytest.approx(4.75 - 1.75)  # linear quartiles
     best = summary.loc[0.01]
@@ -176,22 +169,25 @@ def test_default_threshold_reached_and_never_reached(report: ReportIndex) -> Non
     # Untrained: every complete seed's first point is 0 (the failed run's 50 does not count);
     # 90 % of the way to the best mean final score 5.5.
     threshold = 0.0 + 0.9 * 5.5
-    expected = {}
+    expected, censored = {}, {}
     for value, finals in FINALS.items():
-        hits = []
+        hits, times = [], []
         for final in finals:
             curve = _curve(value, final)
             first = next(((s, t) for s, r, t in curve if r >= threshold), None)
             if first:
                 hits.append(first)
-        expected[value] = hits
+            # A seed that never reached the threshold counts at its curve's last point.
+            times.append(first or (curve[-1][0], curve[-1][2]))
+        expected[value], censored[value] = hits, times
     assert [len(expected[v]) for v in FINALS] == [1, 3, 0, 3]
     for value, hits in expected.items():
         row = summary.loc[value]
         assert row["reached"] == len(hits)
         if hits:
-            assert row["steps_to_threshold"] == pytest.approx(np.mean([s for s, _ in hits]))
-            assert row["seconds_to_threshold"] == pytest.approx(np.mean([t for _, t in hits]))
+            times = censored[value]
+            assert row["steps_to_threshold"] == pytest.approx(np.mean([s for s, _ in times]))
+            assert row["seconds_to_threshold"] == pytest.approx(np.mean([t for _, t in times]))
         else:
             assert math.isnan(row["steps_to_threshold"])
             assert math.isnan(row["seconds_to_threshold"])
@@ -215,13 +211,22 @@ def test_holm_ties_and_probability_of_improvement(report: ReportIndex) -> None:
     summary = _summary(report.out)
     best = FINALS[0.01]
     raw = {v: stats.ttest_ind(best, FINALS[v], equal_var=False).pvalue for v in (0.001, 0.3)}
-    order = sorted(raw, key=raw.get)
-    holm = {order[0]: min(1.0, 2 * raw[order[0]])}
-    holm[order[1]] = max(holm[order[0]], min(1.0, raw[order[1]]))
+    family = {v: np.asarray(FINALS[v]) for v in (0.001, 0.01, 0.3)}  # 0.1 has one seed
+
+    def beats(j: float, g: float) -> float:  # one-sided Welch, min(n) - 1 df
+        x, y = family[j], family[g]
+        se = math.sqrt(x.var(ddof=1) / len(x) + y.var(ddof=1) / len(y))
+        return stats.t.sf((x.mean() - y.mean()) / se, min(len(x), len(y)) - 1)
+
+    pi = {g: min(1.0, 2 * min(beats(j, g) for j in family if j != g)) for g in family}
+    # Holm over the three "is a best" hypotheses: 0.3 first (x3), then 0.001 (x2), capped.
+    assert pi[0.3] < pi[0.001] < pi[0.01]
+    holm = {0.3: min(1.0, 3 * pi[0.3])}
+    holm[0.001] = max(holm[0.3], min(1.0, 2 * pi[0.001]))
     for value in (0.001, 0.3):
         assert summary.loc[value, "p_vs_best"] == pytest.approx(raw[value], rel=1e-4)
         assert summary.loc[value, "p_holm"] == pytest.approx(holm[value], rel=1e-4)
-    # 0.3 differs from the best on the raw test, but not after Holm's correction: a tie.
+    # 0.3 differs from the best on the raw test, but not under the step-down: a tie.
     assert summary.loc[0.3, "p_vs_best"] < 0.05 <= summary.loc[0.3, "p_holm"]
     assert list(summary["mark"].fillna("")) == ["tie", "best", "", "tie"]
     assert math.isnan(summary.loc[0.01, "p_holm"])
@@ -230,25 +235,31 @@ def test_holm_ties_and_probability_of_improvement(report: ReportIndex) -> None:
         row = summary.loc[value]
         assert row["p_improvement"] == pytest.approx(np.mean(pairs))
         assert row["p_improvement_low"] <= row["p_improvement"] <= row["p_improvement_high"]
-        assert (row["p_improvement_low"], row["p_improvement_high"]) == pytest.approx(
-            _improvement_bootstrap(best, FINALS[value], BOOTSTRAP))
+    assert (summary.loc[0.001, "p_improvement_low"],
+            summary.loc[0.001, "p_improvement_high"]) == pytest.approx(
+        _improvement_bootstrap(best, FINALS[0.001], BOOTSTRAP))
+    # Every seed of the best beats every seed of 0.3 in every resample: a one-point interval.
+    assert (summary.loc[0.3, "p_improvement_low"],
+            summary.loc[0.3, "p_improvement_high"]) == (1.0, 1.0)
     assert summary.loc[0.001, "p_improvement"] == pytest.approx(0.75)
     assert summary.loc[0.3, "p_improvement"] == pytest.approx(1.0)
     assert math.isnan(summary.loc[0.01, "p_improvement"])
     text = (report.out / "learning_rate" / "summary.md").read_text()
-    assert "Holm-corrected" in text and "P(best > value)" in text
-    assert text.count("(1,000 resamples") == 2  # the IQM's and P(best > value)'s, as asked
+    assert "closed Holm-Welch step-down, alpha 0.05" in text and "P(best > value)" in text
+    assert text.count("(1,000 resamples") == 1  # P(best > value)'s, as asked
     assert "no correction for multiple comparisons" not in report.markdown.read_text()
 
 
 def test_verdict_sentence(report: ReportIndex) -> None:
     expected = ("learning_rate: 0.01 best final score (mean 5.5, 95 % CI [",
-                "n=4; IQM 5.5, 95 % bootstrap CI [",
-                "tied: 0.001, 0.3, Holm-corrected Welch p >= 0.05)",
+                "n=4; IQM 5.5, 95 % trimmed-t CI [",
+                "tied (not significantly worse, closed Holm-Welch step-down, alpha 0.05): "
+                "0.001, 0.3)",
                 "; 0.3 most sample-efficient (AUC 3.75, 95 % CI [",
-                "; 0.001 fastest to threshold (2 s, 200 env steps, mean over the 1/4 seeds",
-                "; 0.3 most repeatable (final IQR 0.2, n=3).",
-                " Too few seeds to test: 0.1.")
+                "fastest to threshold (",
+                "; 0.3 most repeatable (rescaled final IQR ",
+                " Left out of the best, the ties and the verdict: 0.1 (1 complete seed, fewer "
+                "than report.min_seeds = 2).")
     summary_md = (report.out / "learning_rate" / "summary.md").read_text()
     verdict = summary_md.split("\n\n")[1]  # the first paragraph under the title
     index = report.markdown.read_text()

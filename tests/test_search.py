@@ -200,7 +200,7 @@ def test_best_round_trip(spaces: Path, capsys: pytest.CaptureFixture[str]) -> No
 
 def test_best_of_a_sweep_writes_the_best_value(workdir: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
-    assert run_cli("run", "study=observation", "budget.seeds=1", "workers=2", *TINY) == 0
+    assert run_cli("run", "study=observation", "budget.seeds=2", "workers=2", *TINY) == 0
     capsys.readouterr()
     assert run_cli("best", "--study-name", "observation", "--name", "obs") == 0
     out = capsys.readouterr().out

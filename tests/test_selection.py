@@ -48,8 +48,8 @@ def test_fastest_tied_ignores_a_value_with_too_few_seeds_to_test() -> None:
 def test_no_complete_run_selects_nothing_and_nan_never_wins() -> None:
     for rule in SelectRule:
         assert select(rule, {}, {}, {}) is None
-    assert select("final_score", {0: [math.nan], 1: [-1.0]}, {}, {}) == 1
-    assert select("auc", {0: [1.0], 1: [0.0]}, {0: [math.nan], 1: [-1.0]}, {}) == 1
+    assert select("final_score", {0: [math.nan] * 2, 1: [-1.0, -2.0]}, {}, {}) == 1
+    assert select("auc", {0: [1.0, 1.0], 1: [0.0, 0.0]}, {0: [math.nan], 1: [-1.0]}, {}) == 1
 
 
 def test_an_unknown_rule_is_one_line() -> None:

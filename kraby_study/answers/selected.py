@@ -13,6 +13,7 @@ from typing import Any
 import pandas as pd
 from optuna.trial import FrozenTrial
 
+from kraby_study.comparison import MIN_SEEDS
 from kraby_study.errors import StoreError
 from kraby_study.records import (
     Outcome,
@@ -130,6 +131,11 @@ def require_selection(ledger: StudyLedger) -> Selection:
     """The selection of a study that must have one; StoreError otherwise."""
     best = selection_of(ledger)
     if best is None:
+        done = tally(counted(ledger.trials())).complete
+        if done and StudyKind.of(ledger.attrs.kind).swept:
+            raise StoreError(f"study {ledger.name!r} selects nothing yet: no value has the "
+                             f"{MIN_SEEDS} complete seeds a selection needs ({done} complete "
+                             "trial(s) in all)")
         raise StoreError(f"study {ledger.name!r} has no complete trial yet")
     if not best.settings:
         raise StoreError(f"study {ledger.name!r} stores no settings for its best trial (not "

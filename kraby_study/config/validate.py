@@ -116,6 +116,9 @@ def validate(cfg: DictConfig) -> None:
     _require(int(cfg.seed) >= 0, f"seed must be >= 0, got {cfg.seed}")
     _require(int(cfg.report.bootstrap) >= 100,
              f"report.bootstrap must be at least 100 resamples, got {cfg.report.bootstrap}")
+    _require(int(cfg.report.min_seeds) >= 2,
+             f"report.min_seeds must be at least 2 (a test needs two seeds), got "
+             f"{cfg.report.min_seeds}")
     _require(int(cfg.confirm.top) >= 1, f"confirm.top must be at least 1, got {cfg.confirm.top}")
     _require(int(cfg.confirm.seeds) >= 2,
              f"confirm.seeds must be at least 2 (an interval needs two), got {cfg.confirm.seeds}")

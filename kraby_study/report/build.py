@@ -128,7 +128,7 @@ def _overview(reports: list[StudyReport]) -> Table:
 
 def index_blocks(url: str, reports: list[StudyReport],
                  bootstrap: int = BOOTSTRAP_REPETITIONS,
-                 campaigns: list[Block] | None = None) -> list[Block]:
+                 campaigns: list[Block] | None = None, min_seeds: int = 2) -> list[Block]:
     """The index page: what the numbers mean, an overview, then every study's section."""
     blocks: list[Block] = [
         Heading(TITLE, 1),
@@ -137,11 +137,11 @@ def index_blocks(url: str, reports: list[StudyReport],
         Text("Final score: mean episode reward over the last 10 % of a run's training "
              "(reward = minus the squared tip-target distance in m^2, summed over the episode). "
              f"Intervals and bands: {INTERVAL_NAME}, unless named otherwise. Values marked "
-             f"'\u2248 best': {HOLM_NAME} (p >= 0.05 after the correction). Figures use "
+             f"'\u2248 best': {HOLM_NAME}. Figures use "
              "complete runs only; failed runs are listed."),
     ]
     if any(report.kind.seeded for report in reports):
-        blocks.append(Text("Sweep tables. " + sweep_output.metric_notes(bootstrap)))
+        blocks.append(Text("Sweep tables. " + sweep_output.metric_notes(bootstrap, min_seeds)))
     blocks.append(_overview(reports))
     blocks += campaigns or []
     for report in reports:
@@ -215,7 +215,8 @@ def write_report(url: str, out: Path | str, study: str | None = None, fmt: str =
         chains += blocks
         chain_files += files
     blocks = index_blocks(url, reports, int(option(options, "bootstrap",
-                                                   BOOTSTRAP_REPETITIONS)), chains)
+                                                   BOOTSTRAP_REPETITIONS)), chains,
+                          max(2, int(option(options, "min_seeds", 2))))
     markdown, html = out / "index.md", out / "index.html"
     markdown.write_text(to_markdown(blocks), encoding="utf-8")
     html.write_text(to_html(blocks, TITLE), encoding="utf-8")

@@ -16,8 +16,10 @@ from kraby_study.records import Outcome, value_key, value_label
 from kraby_study.report.document import Block, Heading, Links, Table, Text, write_csvs
 from kraby_study.report.sweep_tables import Sweep
 from kraby_study.selection import RULE_TEXT
+from kraby_study.stats import PROCEDURE_NAME
 
-COLUMNS = ["stage", "study", "parameter", "rule", "selected", "documented", "agree", "status"]
+COLUMNS = ["stage", "study", "parameter", "rule", "selected", "documented", "agree", "status",
+           "notes"]
 
 
 def campaigns(sweeps: dict[str, Sweep]) -> dict[str, dict[str, Any]]:
@@ -50,6 +52,21 @@ def _settings(sweep: Sweep, vi: int) -> dict[str, Any]:
     return {}
 
 
+def stage_notes(sweep: Sweep | None) -> str:
+    """How a stage's selection was decided: the procedure behind its best and ties, and the
+    values it left out for too few seeds."""
+    if sweep is None:
+        return ""
+    text = (f"best and ties: {PROCEDURE_NAME}; only values with at least {sweep.min_seeds} "
+            "complete seeds can be selected")
+    rows = sweep.summary[sweep.summary["note"].astype(bool)] if "note" in sweep.summary else []
+    if len(rows):
+        text += "; left out: " + ", ".join(
+            f"{r['value']} ({r['complete']} seed{'s' if r['complete'] != 1 else ''})"
+            for _, r in rows.iterrows())
+    return text
+
+
 def campaign_table(record: dict[str, Any], sweeps: dict[str, Sweep]) -> pd.DataFrame:
     """One row per stage (columns ``COLUMNS``); ``selected`` is empty until a stage is
     finished, ``agree`` empty where there is no documented value to compare."""
@@ -67,7 +84,8 @@ def campaign_table(record: dict[str, Any], sweeps: dict[str, Sweep]) -> pd.DataF
                      "selected": value_label(selected) if vi is not None else "",
                      "documented": value_label(documented) if documented is not None else "",
                      "agree": agree,
-                     "status": sweep.status() if sweep is not None else "not run yet"})
+                     "status": sweep.status() if sweep is not None else "not run yet",
+                     "notes": stage_notes(sweep)})
     return pd.DataFrame(rows, columns=COLUMNS)
 
 
@@ -133,7 +151,7 @@ def write_campaign(name: str, record: dict[str, Any], sweeps: dict[str, Sweep], 
               [[str(r.stage), r.study, r.parameter, r.rule, r.selected or "-",
                 r.documented or "-", {True: "yes", False: "no"}.get(r.agree, "-"), r.status]
                for r in table.itertuples(index=False)]),
-        Text(f"Selection rules: {rules}."),
+        Text(f"Selection rules: {rules}. Best and ties: {PROCEDURE_NAME}."),
     ]
     if last:
         blocks += [Text(f"Settings the campaign ends with (after stage {last}/{total}"

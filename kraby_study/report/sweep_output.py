@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from kraby_study.coverage import FEW_SEEDS, coverage_note
 from kraby_study.records import Outcome, StudyKind, value_label
 from kraby_study.report import sweep_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
@@ -21,10 +22,10 @@ from kraby_study.report.style import number, styled
 from kraby_study.report.sweep_tables import Sweep, arms_frame
 from kraby_study.selection import RULE_TEXT
 from kraby_study.stats import (
-    ALPHA,
     AUC_NAME,
     HOLM_NAME,
     INTERVAL_NAME,
+    PROCEDURE_NAME,
     TEST_NAME,
     iqm_interval_name,
     p_improvement_name,
@@ -36,8 +37,7 @@ CAPTIONS = {
                        "95 % t-interval; (b) zooms on the last quarter of training.",
     "final_score": "Final score (mean episode reward over the last 10 % of training) of every "
                    "seed; mean and 95 % t-interval beside them. Shaded: the best mean, and the "
-                   "values not significantly worse than it (Welch's t-test, Holm-corrected over "
-                   "the study's comparisons, p >= 0.05).",
+                   f"values not significantly worse than it ({PROCEDURE_NAME}).",
     "wallclock": "Mean episode reward against wall-clock time since the start of training.",
     "training_time": "Training time of every run, with mean and 95 % t-interval.",
     "sample_efficiency": "Sample efficiency (AUC: the mean of a seed's binned mean episode "
@@ -51,7 +51,7 @@ CAPTIONS = {
     "improvement": "Probability of improvement P(best > value) of the best value over each "
                    "other value: the share of pairs of seeds (one of each) where the best "
                    "value's final score is higher, ties counted half, with its 95 % "
-                   "percentile-bootstrap interval. Dashed: 0.5, neither better.",
+                   "BCa bootstrap interval. Dashed: 0.5, neither better.",
 }
 NEW_FIGURES = ("sample_efficiency", "time_to_threshold", "improvement")
 """Figures that compare values, drawn when a study has more than one."""
@@ -93,9 +93,10 @@ def _steps(value: float) -> str:
 def summary_table(sweep: Sweep) -> Table:
     """The summary as a table of formatted cells, best and tied rows marked."""
     header = [sweep.name, "complete", "failed", "pruned", "pending", "final score", "95 % CI", "sd",
-              "IQM [95 % bootstrap CI]", "final IQR", "AUC [95 % CI]", "env steps to threshold",
-              "seconds to threshold", "reached", "training time (s)", "Welch p vs best",
-              "Holm p", "P(best > value) [95 % bootstrap CI]", ""]
+              "IQM [95 % trimmed-t CI]", "final IQR", "final IQR (rescaled)", "AUC [95 % CI]",
+              "env steps to threshold", "seconds to threshold", "reached", "training time (s)",
+              "Welch p vs best", "adjusted p (step-down)", "P(best > value) [95 % BCa CI]", "",
+              "note"]
     rows = []
     for _, row in sweep.summary.iterrows():
         rows.append([
@@ -104,7 +105,7 @@ def summary_table(sweep: Sweep) -> Table:
             number(row["final_mean"]), _interval(row["final_low"], row["final_high"]),
             number(row["final_sd"], 3),
             _with_interval(row["iqm"], row["iqm_low"], row["iqm_high"]),
-            number(row["final_iqr"], 3),
+            number(row["final_iqr"], 3), number(row["final_iqr_unbiased"], 3),
             _with_interval(row["auc_mean"], row["auc_low"], row["auc_high"]),
             _steps(row["steps_to_threshold"]), number(row["seconds_to_threshold"], 3),
             _reached(row),
@@ -113,7 +114,7 @@ def summary_table(sweep: Sweep) -> Table:
             "-" if row["mark"] == "best" else
             _with_interval(row["p_improvement"], row["p_improvement_low"],
                            row["p_improvement_high"]),
-            MARK_TEXT[row["mark"]]])
+            MARK_TEXT[row["mark"]], str(row["note"] or "")])
     return Table(header, rows, marks=list(sweep.summary["mark"]))
 
 
@@ -133,17 +134,38 @@ def threshold_text(sweep: Sweep) -> str:
             f"seeds) to the best value's mean final score ({number(final)}).")
 
 
-def metric_notes(bootstrap: int) -> str:
+def metric_notes(bootstrap: int, min_seeds: int = 2) -> str:
     """What every interval and test of a sweep's summary is, each named once, for bootstraps
-    of ``bootstrap`` resamples."""
+    of ``bootstrap`` resamples and values needing ``min_seeds`` complete seeds."""
     return (f"Final score, training time and AUC intervals: {INTERVAL_NAME}. IQM: "
-            f"{iqm_interval_name(bootstrap)}. {AUC_NAME[0].upper()}{AUC_NAME[1:]}. Steps and "
-            "seconds to threshold: mean over the seeds that reached it; reached: those seeds "
-            "of the complete seeds. Final IQR: interquartile range of the complete seeds' final "
-            "scores "
-            f"(needs 2 seeds). Welch p vs best: {TEST_NAME}, uncorrected. Holm p and the "
-            f"'\u2248 best' marks: {HOLM_NAME}. P(best > value): "
-            f"{p_improvement_name(bootstrap)}.")
+            f"{iqm_interval_name()}. {AUC_NAME[0].upper()}{AUC_NAME[1:]}. Steps and "
+            "seconds to threshold: restricted mean over the seeds with a curve, a seed that "
+            "never reached the threshold counted at its curve's last point (a lower bound of "
+            "the mean time when reached is below n); reached: seeds that reached it of the "
+            "complete seeds. Final IQR: interquartile range of the complete seeds' final scores "
+            "(needs 2 seeds); rescaled: the IQR divided by its expected share of the true IQR "
+            "at n for normal data, comparable across n, which decides the most repeatable. "
+            f"Welch p vs best: {TEST_NAME}. Adjusted p and the '\u2248 best' marks: "
+            f"{HOLM_NAME}. Best, ties, most sample-efficient, fastest and most repeatable count "
+            f"only values with at least report.min_seeds = {min_seeds} complete seeds. "
+            f"P(best > value): {p_improvement_name(bootstrap)}.")
+
+
+def few_seeds_note(sweep: Sweep) -> str | None:
+    """The measured coverage of the intervals drawn from fewer than 5 seeds in this sweep
+    (:func:`kraby_study.coverage.coverage_note`); None when every interval has 5 or more."""
+    ns = [int(n) for n in sweep.summary["complete"] if 2 <= int(n) < FEW_SEEDS]
+    return coverage_note(ns)
+
+
+def left_out_text(sweep: Sweep) -> str | None:
+    """The values left out of every comparison and answer, and why; None when none is."""
+    rows = sweep.summary[sweep.summary["note"].astype(bool)]
+    if rows.empty:
+        return None
+    return ("Left out of the best, the ties and the verdict: "
+            + "; ".join(f"{r['value']} ({r['note'].removeprefix('left out: ')})"
+                        for _, r in rows.iterrows()) + ".")
 
 
 def _label(sweep: Sweep, vi: int) -> str:
@@ -156,7 +178,7 @@ def _final_text(row: pd.Series) -> str:
         text += f", 95 % CI {_interval(row['final_low'], row['final_high'])}"
     text += f", n={row['complete']}; IQM {number(row['iqm'])}"
     if np.isfinite(row["iqm_low"]):
-        text += f", 95 % bootstrap CI {_interval(row['iqm_low'], row['iqm_high'])}"
+        text += f", 95 % trimmed-t CI {_interval(row['iqm_low'], row['iqm_high'])}"
     return text
 
 
@@ -169,8 +191,8 @@ def _auc_text(row: pd.Series) -> str:
 
 def _reach_text(row: pd.Series) -> str:
     return (f"{number(row['seconds_to_threshold'], 3)} s, "
-            f"{_steps(row['steps_to_threshold'])} env steps, mean over the "
-            f"{row['reached']}/{row['complete']} seeds that reached it")
+            f"{_steps(row['steps_to_threshold'])} env steps, restricted mean over the seeds, "
+            f"{row['reached']}/{row['complete']} reached it")
 
 
 def verdict(sweep: Sweep) -> str:
@@ -190,11 +212,11 @@ def verdict(sweep: Sweep) -> str:
     parts = []
     first = f"{_label(sweep, result.best)} best final score ({_final_text(best)}"
     if result.tied:
-        first += (f"; tied: {', '.join(_label(sweep, vi) for vi in result.tied)}, "
-                  f"Holm-corrected Welch p >= {ALPHA}")
+        first += (f"; tied (not significantly worse, {PROCEDURE_NAME}): "
+                  f"{', '.join(_label(sweep, vi) for vi in result.tied)}")
     elif len(sweep.values) > 1 and summary["p_holm"].notna().any():
         noun = "configuration" if sweep.kind == StudyKind.CONFIRM else "value"
-        first += f"; every other {noun} tested is worse, Holm-corrected Welch p < {ALPHA}"
+        first += f"; every other {noun} tested is worse ({PROCEDURE_NAME})"
     parts.append(first + ")")
     if result.most_sample_efficient is not None:
         row = summary.iloc[result.most_sample_efficient]
@@ -202,19 +224,20 @@ def verdict(sweep: Sweep) -> str:
                      f"({_auc_text(row)})")
     if result.fastest is not None:
         row = summary.iloc[result.fastest]
-        parts.append(f"{_label(sweep, result.fastest)} fastest to threshold ({_reach_text(row)})")
+        parts.append(f"{_label(sweep, result.fastest)} fastest to threshold ({_reach_text(row)}, "
+                     "lowest restricted mean)")
     elif np.isfinite(sweep.threshold):
         parts.append(f"no value reached the threshold {number(sweep.threshold)}")
     if result.most_repeatable is not None:
         row = summary.iloc[result.most_repeatable]
-        parts.append(f"{_label(sweep, result.most_repeatable)} most repeatable (final IQR "
+        parts.append(f"{_label(sweep, result.most_repeatable)} most repeatable (rescaled final "
+                     f"IQR {number(row['final_iqr_unbiased'], 3)}, raw "
                      f"{number(row['final_iqr'], 3)}, n={row['complete']})")
     prefix = "Confirmed verdict" if sweep.kind == StudyKind.CONFIRM else sweep.name
     text = f"{prefix}: " + "; ".join(parts) + "."
-    untested = summary.loc[(summary["mark"] == "") & summary["p_holm"].isna()
-                           & (summary["complete"] > 0), "value"].tolist()
-    if untested:
-        text += f" Too few seeds to test: {', '.join(map(str, untested))}."
+    left_out = left_out_text(sweep)
+    if left_out:
+        text += f" {left_out}"
     return text
 
 
@@ -226,7 +249,7 @@ def arms_table(sweep: Sweep) -> Table:
              _bootstrap_interval(r["iqm_low"], r["iqm_high"]), str(r["n"])]
             for _, r in arms.iterrows()]
     return Table(["configuration", "origin", "source's score", "confirmed mean final score",
-                  "95 % CI", "confirmed IQM", "95 % bootstrap CI", "n"], rows,
+                  "95 % CI", "confirmed IQM", "95 % trimmed-t CI", "n"], rows,
                  marks=list(arms["mark"]))
 
 
@@ -253,7 +276,7 @@ def winner_text(sweep: Sweep) -> str | None:
         return text + f" {winner} was not retrained here."
     mark = sweep.summary.iloc[sweep.labels.index(winner)]["mark"]
     if mark == "tie":
-        text += (f" The two cannot be told apart (Holm-corrected Welch p >= {ALPHA}), so {winner} "
+        text += (f" The two cannot be told apart ({PROCEDURE_NAME}), so {winner} "
                  "may still be as good.")
     return text
 
@@ -376,9 +399,11 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
     section: list[Block] = [Heading(f"{sweep.data.name}", 2), described, *arms, said, *winner,
                             *details]
     summary_md = folder / "summary.md"
+    coverage = few_seeds_note(sweep)
     summary_md.write_text(blocks_to_markdown(
         [Heading(f"{sweep.data.name}: summary", 1), said, *winner, described, *arms, *details,
-         Text(metric_notes(sweep.bootstrap))]), encoding="utf-8")
+         Text(metric_notes(sweep.bootstrap, sweep.min_seeds)),
+         *([Text(coverage)] if coverage else [])]), encoding="utf-8")
     report.files += tables + [summary_md]
     report.blocks = section + images
     report.blocks.append(Links("Tables", [(p.name, f"{rel}/{p.name}") for p in

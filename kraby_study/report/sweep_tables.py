@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from kraby_study.comparison import MIN_SEEDS, compare_with_best
 from kraby_study.records import (
     Outcome,
     SelectRule,
@@ -28,7 +29,6 @@ from kraby_study.report.load import StudyData
 from kraby_study.report.style import value_colours
 from kraby_study.selection import selected_index, swept_values
 from kraby_study.stats import (
-    ALPHA,
     BOOTSTRAP_REPETITIONS,
     Verdict,
     auc,
@@ -36,10 +36,10 @@ from kraby_study.stats import (
     default_threshold,
     describe,
     first_reach,
-    holm_vs_best,
     iqm,
     iqm_interval,
     iqr,
+    iqr_unbiased,
     mean_interval,
     p_improvement,
     p_improvement_interval,
@@ -51,7 +51,7 @@ SINGLE_LABEL = "all seeds"
 TRIAL_COLUMNS = ["number", "key", "seed", "vi", "value", "outcome", "final_score",
                  "wall_time", "env_steps", "failure", "model_path"]
 SEED_COLUMNS = ["vi", "seed", "number", "final_score", "first_reward", "auc",
-                "steps_to_threshold", "seconds_to_threshold"]
+                "steps_to_threshold", "seconds_to_threshold", "end_step", "end_seconds"]
 
 
 @dataclass
@@ -70,7 +70,8 @@ class Sweep:
         bands: Per value and step: n, mean, sd, low, high of the reward; mean wall time.
         summary: One row per value (see :func:`summarise` and :func:`add_curve_metrics`).
         seeds: One row per complete run (columns ``SEED_COLUMNS``): its final score, its
-            first curve point's reward, its AUC and when it first reached the threshold.
+            first curve point's reward, its AUC, when it first reached the threshold and its
+            curve's last point (env steps and seconds).
         threshold: The reward a curve must reach (NaN when there is no curve to set it).
         threshold_default: True when the threshold is the default (see
             :func:`study_threshold`), False when the report's options set it.
@@ -96,6 +97,8 @@ class Sweep:
     untrained: float = math.nan
     bootstrap: int = BOOTSTRAP_REPETITIONS
     verdict: Verdict = field(default_factory=lambda: Verdict(None, [], None, None, None))
+    min_seeds: int = MIN_SEEDS
+    """Fewest complete seeds a value needs to be best, tied or any answer of the verdict."""
     rule: str = SelectRule.FINAL_SCORE
     """The study's selection rule; the summary's ``selected`` column marks the value it
     selects once no run is pending."""
@@ -174,35 +177,44 @@ def _finals(done: pd.DataFrame) -> dict[int, list[float]]:
     return {int(vi): group["final_score"].tolist() for vi, group in done.groupby("vi")}
 
 
+def left_out_note(n: int, min_seeds: int) -> str:
+    """Why a value with ``n`` complete seeds is in no comparison and no answer of the verdict."""
+    return (f"left out: {n} complete seed{'s' if n != 1 else ''}, fewer than report.min_seeds "
+            f"= {min_seeds}")
+
+
 def summarise(trials: pd.DataFrame, labels: list[str],
-              bootstrap: int = BOOTSTRAP_REPETITIONS) -> pd.DataFrame:
+              bootstrap: int = BOOTSTRAP_REPETITIONS, min_seeds: int = MIN_SEEDS) -> pd.DataFrame:
     """One row per value: run counts; the complete seeds' final score (mean, sd, t-interval;
-    IQM with its bootstrap interval; IQR) and training time; the Welch p-value against the best
-    value, raw (``p_vs_best``) and Holm-corrected over the study's comparisons (``p_holm``); the
-    probability that the best value beats this one, with its bootstrap interval; and a mark:
-    ``best``, ``tie`` (Holm-corrected p >= 0.05: not significantly worse than the best) or
-    empty. The curve metrics are added by :func:`add_curve_metrics`.
+    IQM with its trimmed-t interval; IQR raw and rescaled to be comparable across n) and
+    training time; the raw two-sided Welch p-value against the best value (``p_vs_best``) and
+    the adjusted p of the closed Holm-Welch step-down (``p_holm``,
+    :func:`kraby_study.comparison.compare_with_best`); the probability that the best value
+    beats this one, with its BCa bootstrap interval; a mark: ``best``, ``tie`` (adjusted
+    p >= 0.05: not significantly worse than the best) or empty; and a note naming why a value
+    with fewer than ``min_seeds`` complete seeds is left out. The curve metrics are added by
+    :func:`add_curve_metrics`.
     """
     done = trials[trials["outcome"] == Outcome.COMPLETE]
     score = describe(done, "vi", "final_score")
     time = describe(done, "vi", "wall_time")
     counts = pd.crosstab(trials["vi"], trials["outcome"])
     scores = _finals(done)
-    _, pvalues = compare_to_best(scores)
-    best, corrected = holm_vs_best(scores)
+    comparison = compare_with_best(scores, min_seeds=min_seeds)
+    best = comparison.best
+    _, pvalues = compare_to_best(scores, min_seeds=min_seeds)
     raw = [pvalues.get(vi, np.nan) for vi in range(len(labels))]
-    adjusted = [corrected.get(vi, np.nan) for vi in range(len(labels))]
+    adjusted = [comparison.p_adjusted.get(vi, np.nan) for vi in range(len(labels))]
     rows = []
     for vi, label in enumerate(labels):
         count = counts.loc[vi] if vi in counts.index else pd.Series(dtype=int)
         finals = scores.get(vi, [])
         p_holm = adjusted[vi]
-        mark = "best" if vi == best else ("tie" if np.isfinite(p_holm) and p_holm >= ALPHA
-                                          else "")
+        mark = "best" if vi == best else ("tie" if vi in comparison.tied else "")
         s = score.loc[vi] if vi in score.index else None
         t = time.loc[vi] if vi in time.index else None
         steps = done.loc[done["vi"] == vi, "env_steps"]
-        iqm_low, iqm_high = iqm_interval(finals, repetitions=bootstrap)
+        iqm_low, iqm_high = iqm_interval(finals)
         if best is None or vi == best or not finals:
             improvement, improvement_low, improvement_high = np.nan, np.nan, np.nan
         else:
@@ -224,6 +236,7 @@ def summarise(trials: pd.DataFrame, labels: list[str],
             "iqm_high": iqm_high,
             # A spread needs two seeds: one seed's IQR of 0 would read as perfectly repeatable.
             "final_iqr": iqr(finals) if len(finals) >= 2 else np.nan,
+            "final_iqr_unbiased": iqr_unbiased(finals),
             "time_mean": t["mean"] if t is not None else np.nan,
             "time_low": t["low"] if t is not None else np.nan,
             "time_high": t["high"] if t is not None else np.nan,
@@ -234,6 +247,8 @@ def summarise(trials: pd.DataFrame, labels: list[str],
             "p_improvement_low": improvement_low,
             "p_improvement_high": improvement_high,
             "mark": mark,
+            "note": (left_out_note(len(finals), comparison.min_seeds)
+                     if vi in comparison.left_out else ""),
         })
     return pd.DataFrame(rows)
 
@@ -273,16 +288,20 @@ def study_threshold(curves: pd.DataFrame, summary: pd.DataFrame,
 
 def seed_metrics(trials: pd.DataFrame, curves: pd.DataFrame, threshold: float) -> pd.DataFrame:
     """One row per complete run: its final score, its curve's first reward, its AUC
-    (:func:`kraby_study.stats.auc` of the curve in step order) and the env steps and seconds at
-    which the curve first reached ``threshold`` (NaN if never, or without a curve)."""
+    (:func:`kraby_study.stats.auc` of the curve in step order), the env steps and seconds at
+    which the curve first reached ``threshold`` (NaN if never, or without a curve) and the env
+    steps and seconds of its curve's last point (where a seed that never reached it is
+    censored)."""
     done = trials[trials["outcome"] == Outcome.COMPLETE]
-    per_trial: dict[int, tuple[float, float, float, float]] = {}
+    per_trial: dict[int, tuple[float, ...]] = {}
     for number, group in first_points(curves).groupby("number", sort=False):
         rewards = group["mean_reward"].to_numpy(dtype=float)
-        steps, seconds = first_reach(group["step"].to_numpy(dtype=float), rewards,
-                                     group["wall_time"].to_numpy(dtype=float), threshold)
-        per_trial[int(number)] = (float(rewards[0]), auc(rewards), steps, seconds)
-    missing = (math.nan,) * 4
+        step_points = group["step"].to_numpy(dtype=float)
+        wall = group["wall_time"].to_numpy(dtype=float)
+        steps, seconds = first_reach(step_points, rewards, wall, threshold)
+        per_trial[int(number)] = (float(rewards[0]), auc(rewards), steps, seconds,
+                                  float(step_points[-1]), float(wall[-1]))
+    missing = (math.nan,) * 6
     rows = []
     for row in done.itertuples(index=False):
         metrics = per_trial.get(int(row.number), missing)
@@ -295,8 +314,14 @@ def seed_metrics(trials: pd.DataFrame, curves: pd.DataFrame, threshold: float) -
 
 def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame) -> pd.DataFrame:
     """The summary with the curve metrics of each value's complete seeds: AUC (mean and
-    t-interval over the seeds with a curve), env steps and seconds to the threshold (mean over
-    the seeds that reached it) and how many seeds reached it."""
+    t-interval over the seeds with a curve), env steps and seconds to the threshold and how
+    many seeds reached it.
+
+    Steps and seconds to the threshold are restricted means over the seeds with a curve: a seed
+    that never reached the threshold counts at its curve's last point, so the mean is a lower
+    bound of the true mean time when ``reached`` is below the seeds with a curve. NaN when no
+    seed reached it.
+    """
     columns: dict[str, list[float]] = {name: [] for name in (
         "auc_mean", "auc_low", "auc_high", "steps_to_threshold", "seconds_to_threshold",
         "reached")}
@@ -306,29 +331,34 @@ def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame) -> pd.DataFram
         aucs = group["auc"].dropna().to_numpy()
         mean, low, high = mean_interval(aucs)
         reached = group[group["steps_to_threshold"].notna()]
+        curved = group[group["end_step"].notna()]
         columns["auc_mean"].append(mean)
         columns["auc_low"].append(low)
         columns["auc_high"].append(high)
-        columns["steps_to_threshold"].append(
-            float(reached["steps_to_threshold"].mean()) if len(reached) else math.nan)
-        columns["seconds_to_threshold"].append(
-            float(reached["seconds_to_threshold"].mean()) if len(reached) else math.nan)
+        for name, end in (("steps_to_threshold", "end_step"),
+                          ("seconds_to_threshold", "end_seconds")):
+            censored = curved[name].fillna(curved[end])
+            columns[name].append(float(censored.mean()) if len(reached) else math.nan)
         columns["reached"].append(len(reached))
     out = summary.copy()
-    at = list(out.columns).index("final_iqr") + 1
+    at = list(out.columns).index("final_iqr_unbiased") + 1
     for offset, (name, values) in enumerate(columns.items()):
         out.insert(at + offset, name, values)
     out["reached"] = out["reached"].astype(int)
     return out
 
 
-def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame) -> Verdict:
+def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
+                  min_seeds: int = MIN_SEEDS) -> Verdict:
     """The verdict of :func:`kraby_study.stats.verdict` from the summary rows and the seeds'
-    final scores."""
+    final scores. The fastest is by the restricted mean seconds (a seed that never reached the
+    threshold counts at its run's end); the rescaled IQR (``final_iqr_unbiased``) decides the
+    most repeatable."""
     final = {int(vi): group["final_score"].tolist() for vi, group in seeds.groupby("vi")}
     return verdict(final, auc_means=summary["auc_mean"].to_dict(),
                    seconds=summary["seconds_to_threshold"].to_dict(),
-                   iqrs=summary["final_iqr"].to_dict(), p_holm=summary["p_holm"].to_dict())
+                   iqrs=summary["final_iqr_unbiased"].to_dict(),
+                   p_holm=summary["p_holm"].to_dict(), min_seeds=min_seeds)
 
 
 def arms_frame(sweep: Sweep) -> pd.DataFrame:
@@ -370,9 +400,11 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     Args:
         data: The stored study.
         options: The report's options (``bootstrap``: resamples, ``threshold``: reward to reach
-            or None for the default); None for the defaults.
+            or None for the default, ``min_seeds``: fewest complete seeds of a value in any
+            comparison); None for the defaults.
     """
     bootstrap = int(option(options, "bootstrap", BOOTSTRAP_REPETITIONS))
+    min_seeds = max(2, int(option(options, "min_seeds", MIN_SEEDS)))
     chosen = option(options, "threshold", None)
     definition = data.definition
     if data.kind.swept:
@@ -387,7 +419,7 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
         trials.loc[trials["vi"] < 0, "vi"] = len(values) - 1
     complete = trials[trials["outcome"] == Outcome.COMPLETE][["vi", "seed", "number"]]
     curves = data.curves.merge(complete, on="number", how="inner")
-    summary = summarise(trials, labels, bootstrap)
+    summary = summarise(trials, labels, bootstrap, min_seeds)
     threshold, is_default, untrained = study_threshold(curves, summary, chosen)
     seeds = seed_metrics(trials, curves, threshold)
     summary = add_curve_metrics(summary, seeds)
@@ -397,8 +429,8 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
                  labels=labels, colours=colours, trials=trials, curves=curves,
                  bands=curve_bands(curves), summary=summary, seeds=seeds, threshold=threshold,
                  threshold_default=is_default, untrained=untrained, bootstrap=bootstrap,
-                 verdict=study_verdict(summary, seeds))
-    chosen = (selected_index(data.trials, data.curves, name, values, sweep.rule)
+                 verdict=study_verdict(summary, seeds, min_seeds), min_seeds=min_seeds)
+    chosen = (selected_index(data.trials, data.curves, name, values, sweep.rule, min_seeds)
               if name and sweep.finished else None)
     sweep.summary["selected"] = [vi == chosen for vi in sweep.summary.index]
     return sweep

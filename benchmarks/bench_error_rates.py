@@ -1,0 +1,232 @@
+"""Error rates of a report's comparisons and intervals, by simulation (a measurement, not a test).
+
+- Family-wise error under the global null (every value drawn from one distribution, so any
+  "worse than the best" is false) over a grid of shapes, values x seeds, with unequal n and
+  unequal variances: the closed Holm-Welch step-down (``comparison.compare_with_best``) and the
+  rule it replaced (Holm over each value's two-sided Welch test against the best).
+- Power against one truly better value (1 sd above the others): the share of the truly worse
+  values called worse, by both rules.
+- Coverage of every interval a report prints, at n = 2, 3, 4, 5, 10, on normal, left-skewed
+  (skew-normal, shape -4) and right-skewed (lognormal, sigma 0.5) data. The final score, AUC
+  and training-time intervals are one method (``stats.mean_interval``) and share one row.
+- The most-repeatable and fastest rules under equal truths, at unequal n.
+
+``--write-coverage`` stores the coverage table as ``kraby_study/coverage.csv``, from which
+reports print the measured coverage of intervals drawn from few seeds. The last line is
+``max family-wise error X.XXX over N shapes (alpha 0.05); min coverage at n>=5 Y.YY``.
+Usage::
+
+    python benchmarks/bench_error_rates.py [--simulations 2000] [--write-coverage]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+import warnings
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+import pandas as pd
+from scipy import stats as sps
+
+from kraby_study import stats
+from kraby_study.comparison import ALPHA, compare_with_best
+from kraby_study.coverage import COVERAGE_PATH
+
+SEED = 20240522
+SHAPES: list[tuple[str, list[int], list[float]]] = [
+    # (name, seeds per value, sd per value)
+    ("2 x 2", [2] * 2, [1.0] * 2),
+    ("3 x 3", [3] * 3, [1.0] * 3),
+    ("5 x 5", [5] * 5, [1.0] * 5),
+    ("8 x 5", [5] * 8, [1.0] * 8),
+    ("8 x 10", [10] * 8, [1.0] * 8),
+    ("12 x 3", [3] * 12, [1.0] * 12),
+    ("12 x 20", [20] * 12, [1.0] * 12),
+    ("4, n 2/5/10/20", [2, 5, 10, 20], [1.0] * 4),
+    ("6, n 3-10, sd 1-3", [3, 3, 5, 5, 10, 10], [1.0, 3.0, 1.0, 3.0, 1.0, 3.0]),
+    ("12, n 2-20, sd 0.5-2", [2, 3, 4, 5, 6, 8, 10, 12, 14, 16, 18, 20],
+     [0.5, 2.0] * 6),
+]
+POWER_SHAPES = [(3, 3), (3, 5), (5, 5), (5, 10), (8, 5), (8, 10), (12, 10)]
+NS = (2, 3, 4, 5, 10)
+DISTRIBUTIONS = {"normal": sps.norm(), "skew-normal -4": sps.skewnorm(-4),
+                 "lognormal 0.5": sps.lognorm(0.5)}
+
+
+def old_rule(scores: dict[int, np.ndarray]) -> list[int]:
+    """The replaced rule: Holm over each value's two-sided Welch p against the best."""
+    best = max(scores, key=lambda g: float(np.mean(scores[g])))
+    others = [g for g in scores if g != best]
+    adjusted = stats.holm([stats.welch_p(scores[best], scores[g]) for g in others])
+    return [g for g, p in zip(others, adjusted, strict=True) if p < ALPHA]
+
+
+def draw(rng: np.random.Generator, ns: list[int], sds: list[float],
+         means: list[float] | None = None) -> dict[int, np.ndarray]:
+    means = means or [0.0] * len(ns)
+    return {g: rng.normal(m, s, n) for g, (n, s, m) in enumerate(zip(ns, sds, means, strict=True))}
+
+
+def family_wise(job: tuple[str, list[int], list[float], int, int]) -> tuple[str, float, float]:
+    """P(some value called worse) under the global null, new rule and old rule."""
+    name, ns, sds, simulations, seed = job
+    rng = np.random.default_rng(seed)
+    new = old = 0
+    for _ in range(simulations):
+        scores = draw(rng, ns, sds)
+        new += bool(compare_with_best(scores).worse)
+        old += bool(old_rule(scores))
+    return name, new / simulations, old / simulations
+
+
+def power(job: tuple[int, int, int, int]) -> tuple[str, float, float]:
+    """Share of the truly worse values called worse, one value 1 sd better, new and old."""
+    k, n, simulations, seed = job
+    rng = np.random.default_rng(seed)
+    new = old = 0
+    for _ in range(simulations):
+        scores = draw(rng, [n] * k, [1.0] * k, [1.0] + [0.0] * (k - 1))
+        new += len(set(compare_with_best(scores).worse) - {0})
+        old += len(set(old_rule(scores)) - {0})
+    return f"{k} x {n}", new / (simulations * (k - 1)), old / (simulations * (k - 1))
+
+
+def true_iqm(dist: object) -> float:
+    q = np.linspace(0.25, 0.75, 200_001)
+    return float(np.mean(dist.ppf(q)))  # type: ignore[attr-defined]
+
+
+def coverage(job: tuple[str, int, int, int, int]) -> list[dict[str, object]]:
+    """Coverage of each interval for one distribution and n."""
+    name, n, simulations, bootstrap_simulations, seed = job
+    dist = DISTRIBUTIONS[name]
+    rng = np.random.default_rng(seed)
+    mu, sd = float(dist.mean()), float(dist.std())
+    iqm_truth = true_iqm(dist)
+    big = dist.rvs(size=(2, 400_000), random_state=rng)
+    improvement_truth = float(np.mean(big[0] + sd > big[1]))
+    mean_hits = iqm_hits = 0
+    for _ in range(simulations):
+        x = dist.rvs(size=n, random_state=rng)
+        _, low, high = stats.mean_interval(x)
+        mean_hits += low <= mu <= high
+        low, high = stats.iqm_interval(x)
+        iqm_hits += low <= iqm_truth <= high
+    improvement_hits = 0
+    for _ in range(bootstrap_simulations):
+        better = dist.rvs(size=n, random_state=rng) + sd
+        other = dist.rvs(size=n, random_state=rng)
+        low, high = stats.p_improvement_interval(better, other,
+                                                 seed=int(rng.integers(2**31)))
+        improvement_hits += low <= improvement_truth <= high
+    return [
+        {"interval": "mean t-interval (final score, AUC, training time)", "distribution": name,
+         "n": n, "coverage": mean_hits / simulations, "simulations": simulations},
+        {"interval": "IQM trimmed-t interval", "distribution": name, "n": n,
+         "coverage": iqm_hits / simulations, "simulations": simulations},
+        {"interval": "P(improvement) BCa interval", "distribution": name, "n": n,
+         "coverage": improvement_hits / bootstrap_simulations,
+         "simulations": bootstrap_simulations},
+    ]
+
+
+def repeatable(simulations: int, seed: int) -> dict[str, float]:
+    """P(the n = 2 value is the most repeatable) against an n = 10 value, one distribution."""
+    rng = np.random.default_rng(seed)
+    raw = fair = 0
+    for _ in range(simulations):
+        a, b = rng.normal(size=2), rng.normal(size=10)
+        raw += stats.iqr(a) < stats.iqr(b)
+        fair += stats.iqr_unbiased(a) < stats.iqr_unbiased(b)
+    return {"raw IQR": raw / simulations, "rescaled IQR": fair / simulations}
+
+
+def fastest(simulations: int, seed: int) -> dict[str, float]:
+    """P(the value that lost seeds is fastest): 3 against 10 complete seeds, one distribution of
+    seconds to the threshold (lognormal, median 55 s); runs end at 80 s, so about 10 % of seeds
+    never reach it."""
+    rng = np.random.default_rng(seed)
+    old = new = decided = 0
+    end = 80.0
+    for _ in range(simulations):
+        times = [rng.lognormal(4.0, 0.3, n) for n in (3, 10)]
+        reached = [t[t < end] for t in times]
+        means = [float(np.mean(r)) if len(r) else math.nan for r in reached]
+        old += means[0] < means[1] or (np.isnan(means[1]) and not np.isnan(means[0]))
+        restricted = {g: (float(np.mean(np.minimum(t, end))) if len(r) else math.nan)
+                      for g, (t, r) in enumerate(zip(times, reached, strict=True))}
+        result = stats.verdict({0: [0.0] * 3, 1: [0.0] * 10}, {}, restricted, {}, {})
+        new += result.fastest == 0
+        decided += result.fastest is not None
+    return {"old (mean over seeds that reached)": old / simulations,
+            "restricted mean (non-reaching at the run's end)": new / max(decided, 1)}
+
+
+def table(frame: pd.DataFrame) -> str:
+    columns = list(frame.columns)
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for row in frame.itertuples(index=False):
+        lines.append("| " + " | ".join(f"{v:.3f}" if isinstance(v, float) else str(v)
+                                       for v in row) + " |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    """Run the simulations, print the tables and the summary line."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--simulations", type=int, default=2000)
+    parser.add_argument("--bootstrap-simulations", type=int, default=400,
+                        help="simulations of the bootstrap interval (each one bootstraps)")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--write-coverage", action="store_true",
+                        help=f"store the coverage table as {COVERAGE_PATH}")
+    args = parser.parse_args()
+    warnings.simplefilter("ignore")
+    start = time.perf_counter()
+    sims = args.simulations
+    with ProcessPoolExecutor(args.workers) as pool:
+        fwer = list(pool.map(family_wise, [(name, ns, sds, sims, SEED + i)
+                                           for i, (name, ns, sds) in enumerate(SHAPES)]))
+        powers = list(pool.map(power, [(k, n, sims // 2, SEED + 100 + i)
+                                       for i, (k, n) in enumerate(POWER_SHAPES)]))
+        jobs = [(name, n, sims, args.bootstrap_simulations, SEED + 200 + 10 * i + j)
+                for i, name in enumerate(DISTRIBUTIONS) for j, n in enumerate(NS)]
+        covered = [row for rows in pool.map(coverage, jobs) for row in rows]
+    se = math.sqrt(ALPHA * (1 - ALPHA) / sims)
+    fwer_frame = pd.DataFrame(fwer, columns=["values x seeds", "FWER step-down",
+                                             "FWER old rule"])
+    print(f"Family-wise error under the global null ({sims:,} simulations each, "
+          f"Monte-Carlo SE {se:.3f} at 0.05):")
+    print(table(fwer_frame))
+    print(f"\nPower: share of truly worse values called worse, one value 1 sd better "
+          f"({sims // 2:,} simulations each):")
+    print(table(pd.DataFrame(powers, columns=["values x seeds", "step-down", "old rule"])))
+    cover = pd.DataFrame(covered)
+    wide = cover.pivot_table(index=["interval", "distribution"], columns="n",
+                             values="coverage").reset_index()
+    wide.columns = [c if isinstance(c, str) else f"n={c}" for c in wide.columns]
+    print(f"\nCoverage of the 95 % intervals ({sims:,} simulations; P(improvement): "
+          f"{args.bootstrap_simulations:,}, each bootstrapped {stats.BOOTSTRAP_REPETITIONS:,} "
+          "times):")
+    print(table(wide))
+    print("\nRules under equal truths:")
+    for what, shares in (("most repeatable: P(n=2 value beats an n=10 value)",
+                          repeatable(sims, SEED + 300)),
+                         ("fastest: P(3-seed value beats a 10-seed value | a value is fastest)",
+                          fastest(sims, SEED + 400))):
+        print(f"- {what}: " + ", ".join(f"{k} {v:.3f}" for k, v in shares.items()))
+    if args.write_coverage:
+        cover.to_csv(COVERAGE_PATH, index=False, float_format="%.4f")
+        print(f"\ncoverage table written to {COVERAGE_PATH}")
+    print(f"\n{time.perf_counter() - start:.0f} s on {args.workers} worker(s)")
+    worst = float(fwer_frame["FWER step-down"].max())
+    least = float(cover.loc[cover["n"] >= 5, "coverage"].min())
+    print(f"max family-wise error {worst:.3f} over {len(SHAPES)} shapes (alpha {ALPHA:g}); "
+          f"min coverage at n>=5 {least:.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,197 @@
+"""Which values are worse than the best: one procedure for the table's ties, the selection
+rules, campaigns, the verdict and ``best``, callable after every round of seeds.
+
+The best value is chosen from the same data that is then tested against it, so testing each
+value against the best and correcting over those k - 1 tests (Holm) does not hold its
+family-wise error: under the global null its error grows with k and n (0.096 at 8 values x 10
+seeds). Hsu's multiple comparisons with the best (Hsu 1996, ch. 4) hold their level for the
+claim "this value is not the strict best", which is true under ties; a report claims "worse
+than the best", which is false for every value under the global null, and MCB's one-sided
+Dunnett critical value is then too small.
+
+The procedure here is a closed test (Marcus, Peritz and Gabriel 1976) of the hypotheses
+H_g: "value g has the highest true mean" (g is *a* best). The local test of an intersection
+H_S (every value in S is a best) rejects when some g in S is beaten by some other value j in a
+one-sided Welch t-test at level alpha / (|S| (k - 1)): under H_S no j has a higher true mean
+than any g in S, so the Bonferroni inequality over those |S| (k - 1) tests holds its level.
+With Bonferroni local tests the closure is Holm's (1979) step-down on the k p-values
+pi_g = min(1, (k - 1) min_j p(j > g)). The adjusted p of g is Holm's; g is "worse than the
+best" when it is < alpha. Under the global null every claim is false, and the family-wise
+error is at most alpha whatever value the data make the best; under any configuration of
+means, a value with the highest true mean is called worse with probability at most alpha.
+Welch's t-test (unequal variances) makes this hold for unequal n and variances, as far as the
+Welch approximation holds (measured in ``benchmarks/bench_error_rates.py``).
+
+Values with fewer than ``min_seeds`` complete seeds are left out of the family: they are
+never best, tied or worse.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Hashable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Generic, TypeVar
+
+import numpy as np
+from scipy import stats
+
+from kraby_study.records import best_group
+
+ALPHA = 0.05
+MIN_SEEDS = 2
+"""Fewest complete seeds a value needs to be best, tied, or to win any verdict (at least 2)."""
+CONSTANT_RTOL = 1e-9
+"""A sample whose range is at most this times the scale of the scores compared (their largest
+absolute value) has no spread: float noise such as 0.7 against 0.7 + 1e-15 is not a
+difference."""
+PROCEDURE = ("closed Holm step-down over one-sided Welch t-tests with min(n) - 1 degrees of "
+             "freedom (each value as a best)")
+PROCEDURE_SHORT = "closed Holm-Welch step-down"
+
+K = TypeVar("K", bound=Hashable)
+
+
+def procedure_name(alpha: float = ALPHA) -> str:
+    """How reports name the procedure, e.g. 'closed Holm-Welch step-down, alpha 0.05'."""
+    return f"{PROCEDURE_SHORT}, alpha {alpha:g}"
+
+
+def _clean(values: Sequence[float]) -> np.ndarray:
+    x = np.asarray(values, dtype=float).ravel()
+    return x[~np.isnan(x)]
+
+
+def no_spread(x: np.ndarray, scale: float) -> bool:
+    """True when a sample's range is negligible against ``scale`` (:data:`CONSTANT_RTOL`)."""
+    return bool(np.ptp(x) <= CONSTANT_RTOL * scale) if len(x) else True
+
+
+def _scale(x: np.ndarray, y: np.ndarray) -> float:
+    return float(max(np.max(np.abs(x)), np.max(np.abs(y))))
+
+
+def welch_greater_p(a: Sequence[float], b: Sequence[float]) -> float:
+    """One-sided Welch t-test p-value of "mean of a > mean of b", with the conservative
+    min(n_a, n_b) - 1 degrees of freedom (:func:`welch_greater_matrix`); NaN with fewer than 2
+    values on either side.
+
+    Two samples without spread (:func:`no_spread`) are compared by their means within the same
+    tolerance: p = 0 when a's mean is higher by more than it, else p = 1.
+    """
+    x, y = _clean(a), _clean(b)
+    if len(x) < 2 or len(y) < 2:
+        return math.nan
+    return float(welch_greater_matrix([x, y])[0, 1])
+
+
+def welch_two_sided_p(a: Sequence[float], b: Sequence[float]) -> float:
+    """Two-sided Welch's t-test p-value; NaN with fewer than 2 values on either side.
+
+    Two samples without spread (:func:`no_spread`) are identical (p = 1) when their means differ
+    by at most the tolerance, else certainly different (p = 0).
+    """
+    x, y = _clean(a), _clean(b)
+    if len(x) < 2 or len(y) < 2:
+        return math.nan
+    scale = _scale(x, y)
+    if no_spread(x, scale) and no_spread(y, scale):
+        return 1.0 if abs(float(np.mean(x) - np.mean(y))) <= CONSTANT_RTOL * scale else 0.0
+    return float(stats.ttest_ind(x, y, equal_var=False).pvalue)
+
+
+def welch_greater_matrix(samples: Sequence[np.ndarray]) -> np.ndarray:
+    """One-sided Welch p-values of every ordered pair at once: entry [j, g] is
+    :func:`welch_greater_p` of sample j against sample g (each sample at least 2 values).
+
+    Vectorised (one ``scipy.stats.t.sf`` call) so the procedure stays cheap inside the
+    simulations of ``benchmarks/bench_error_rates.py``; the diagonal is meaningless.
+    """
+    n = np.array([len(x) for x in samples], dtype=float)
+    mean = np.array([np.mean(x) for x in samples])
+    var = np.array([np.var(x, ddof=1) for x in samples])
+    top = np.array([np.max(np.abs(x)) for x in samples])
+    flat = np.array([np.ptp(x) for x in samples]) <= CONSTANT_RTOL * top
+    scale = np.maximum.outer(top, top)
+    spread = var / n
+    se2 = np.add.outer(spread, spread)
+    diff = np.subtract.outer(mean, mean)
+    # Degrees of freedom min(n_i, n_j) - 1, not Welch-Satterthwaite's: with n = 2 against
+    # n = 20 the estimated df grows exactly when the small sample's variance is small by chance,
+    # and the step-down's family-wise error reached 0.106 (bench_error_rates.py). The smaller
+    # df is conservative for the Behrens-Fisher problem whatever the variances (Hsu 1938;
+    # Mickey and Brown 1966).
+    df = np.minimum.outer(n, n) - 1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = stats.t.sf(diff / np.sqrt(se2), df)
+    # Neither sample spreads (within the tolerance): a difference of means is certain or none.
+    both_flat = np.logical_and.outer(flat, flat)
+    certain = np.where(diff > CONSTANT_RTOL * scale, 0.0, 1.0)
+    both_flat = both_flat | (np.logical_or.outer(flat, flat) & ~(se2 > 0))
+    return np.where(both_flat, certain, p)
+
+
+def _holm(pvalues: list[float]) -> list[float]:
+    """Holm (1979) adjusted p-values (:func:`kraby_study.stats.holm`, without NaN)."""
+    p = np.asarray(pvalues, dtype=float)
+    order = np.argsort(p, kind="stable")
+    m = len(p)
+    scaled = np.minimum(1.0, (m - np.arange(m)) * p[order])
+    adjusted = np.empty(m)
+    adjusted[order] = np.maximum.accumulate(scaled)
+    return [float(v) for v in adjusted]
+
+
+@dataclass(frozen=True)
+class Comparison(Generic[K]):
+    """The result of :func:`compare_with_best` on the current samples."""
+
+    best: K | None
+    """The value with the highest mean among those with enough seeds; None if none has."""
+    p_adjusted: dict[K, float]
+    """Holm-adjusted p of "this value is a best" for every value in the family, NaN for the
+    best itself; a value is worse than the best when it is < alpha."""
+    worse: list[K]
+    """Values significantly worse than the best (adjusted p < alpha), in the given order."""
+    tied: list[K]
+    """Values in the family other than the best that are not worse, in the given order."""
+    left_out: dict[K, int] = field(default_factory=dict)
+    """Values with some but fewer than ``min_seeds`` complete seeds: their count of seeds."""
+    alpha: float = ALPHA
+    min_seeds: int = MIN_SEEDS
+
+
+def compare_with_best(scores: Mapping[K, Sequence[float]], alpha: float = ALPHA,
+                      min_seeds: int = MIN_SEEDS) -> Comparison[K]:
+    """Which values are worse than the best, with family-wise error at most ``alpha``.
+
+    A function of the current per-value samples only, so it can be applied after each round of
+    seeds (the adjusted p-values are those of this look; repeated looks are not corrected for).
+
+    Args:
+        scores: Final scores of the complete seeds by value, in the study's order (NaN ignored).
+        alpha: Family-wise error rate.
+        min_seeds: Fewest complete seeds a value needs to be in the family (at least 2: a
+            Welch test needs two).
+
+    Returns:
+        The :class:`Comparison`.
+    """
+    need = max(2, int(min_seeds))
+    clean = {g: _clean(v) for g, v in scores.items()}
+    family = {g: x for g, x in clean.items() if len(x) >= need}
+    left_out = {g: len(x) for g, x in clean.items() if 0 < len(x) < need}
+    best = best_group({g: list(x) for g, x in family.items()})
+    if best is None:
+        return Comparison(None, {}, [], [], left_out, alpha, need)
+    groups = list(family)
+    k = len(groups)
+    # pi_g: Bonferroni over the k - 1 one-sided tests "some j beats g" (the local test of H_g).
+    beaten = np.where(np.eye(k, dtype=bool), np.nan, welch_greater_matrix(
+        [family[g] for g in groups]))
+    pi = (np.minimum(1.0, (k - 1) * np.nanmin(beaten, axis=0)) if k > 1 else np.ones(1))
+    adjusted = dict(zip(groups, _holm(list(pi)), strict=True))
+    adjusted[best] = math.nan
+    worse = [g for g in groups if g != best and adjusted[g] < alpha]
+    tied = [g for g in groups if g != best and not adjusted[g] < alpha]
+    return Comparison(best, adjusted, worse, tied, left_out, alpha, need)

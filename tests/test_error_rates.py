@@ -1,0 +1,100 @@
+"""Issue 22's rules on constructed data with answers worked out by hand, and (slow tier) the
+family-wise error of the step-down by simulation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from kraby_study.comparison import compare_with_best, welch_greater_p, welch_two_sided_p
+from kraby_study.config.compose import compose_config
+from kraby_study.errors import ConfigError
+from kraby_study.selection import select
+from kraby_study.stats import expected_normal_iqr, iqr_unbiased, verdict, welch_p
+
+FIVE_SEEDS = [150.0, 160.0, 140.0, 165.0, 154.5]  # mean 153.9
+
+
+def test_one_lucky_seed_is_never_best() -> None:
+    # 1 seed at 170 (its 4 other seeds failed) against 5 seeds at mean 153.9.
+    final = {0: [170.0], 1: FIVE_SEEDS}
+    result = compare_with_best(final)
+    assert result.best == 1 and result.left_out == {0: 1} and result.tied == []
+    for rule in ("final_score", "auc", "fastest_tied"):
+        assert select(rule, final, {0: [99.0], 1: [1.0] * 5}, {0: [1.0], 1: [9.0] * 5}) == 1
+    answer = verdict(final, {0: 99.0, 1: 1.0}, {0: 1.0, 1: 9.0}, {0: 0.0, 1: 5.0},
+                     {0: math.nan, 1: math.nan})
+    assert (answer.best, answer.most_sample_efficient, answer.fastest,
+            answer.most_repeatable) == (1, 1, 1, 1)
+
+
+def test_one_of_five_seeds_reaching_early_is_not_fastest() -> None:
+    # Value 0: 1 of 5 seeds reached at 60 s, the other 4 ran to their end at 200 s without
+    # reaching: restricted mean (60 + 4 * 200) / 5 = 172 s. Value 1: 5 of 5 at 100 s.
+    restricted = {0: (60 + 4 * 200) / 5, 1: 100.0}
+    final = {0: [1.0] * 5, 1: [1.0] * 5}
+    assert verdict(final, {}, restricted, {}, {}).fastest == 1
+
+
+def test_two_seeds_are_not_most_repeatable_by_shrinkage() -> None:
+    # E[sample IQR] of n standard normals: 0.5 E|X1 - X2| = 1 / sqrt(pi) at n = 2.
+    assert expected_normal_iqr(2) == pytest.approx(1 / math.sqrt(math.pi), rel=1e-6)
+    # n = 2 at [0, 1]: raw IQR 0.5, rescaled 0.5 * 1.349 / 0.5642 = 1.1955. n = 10 with raw
+    # IQR 0.8 rescaled by its own (smaller) shrinkage stays below it, so it is the more
+    # repeatable, although its raw IQR is larger.
+    ten = list(np.linspace(-0.5, 0.5, 10) * 1.6)  # linear quartiles at -0.4, 0.4
+    assert stats.iqr(ten) == pytest.approx(0.8)
+    two = [0.0, 1.0]
+    assert iqr_unbiased(two) == pytest.approx(0.5 * 1.3489795 * math.sqrt(math.pi), rel=1e-5)
+    answer = verdict({0: two, 1: ten}, {}, {}, {0: iqr_unbiased(two), 1: iqr_unbiased(ten)},
+                     {})
+    assert stats.iqr(two) < stats.iqr(ten) and answer.most_repeatable == 1
+
+
+def test_float_noise_is_not_a_difference() -> None:
+    a, b = [0.7] * 3, [0.7 + 1e-15] * 3
+    assert welch_p(a, b) == welch_two_sided_p(a, b) == 1.0
+    assert welch_greater_p(b, a) == 1.0
+    assert compare_with_best({0: a, 1: b}).worse == []
+    assert welch_p([1.0, 1.0], [2.0, 2.0]) == 0.0
+
+
+def test_step_down_on_a_hand_worked_case() -> None:
+    # Three values of 3 seeds, each with sd 1: means -3, 4, 4.5. One-sided Welch t of j over g:
+    # (m_j - m_g) / sqrt(2 / 3), df min(3, 3) - 1 = 2.
+    final = {0: [-4.0, -3.0, -2.0], 1: [3.0, 4.0, 5.0], 2: [3.5, 4.5, 5.5]}
+    se = math.sqrt(2 / 3)
+    pi0 = 2 * stats.t.sf(7.5 / se, 2)  # beaten hardest by 2: (k - 1) * p
+    pi1 = 2 * stats.t.sf(0.5 / se, 2)
+    pi2 = 2 * stats.t.sf(-0.5 / se, 2)  # 1 against 2: below the mean, p > 0.5
+    assert pi0 < pi1 < min(1.0, pi2)
+    adjusted0 = 3 * pi0  # Holm, smallest first: x3
+    adjusted1 = max(adjusted0, 2 * pi1)
+    result = compare_with_best(final)
+    assert result.best == 2
+    assert result.p_adjusted[0] == pytest.approx(adjusted0)
+    assert result.p_adjusted[1] == pytest.approx(min(1.0, adjusted1))
+    assert math.isnan(result.p_adjusted[2])
+    assert adjusted0 < 0.05 and result.worse == [0] and result.tied == [1]
+    # The same samples each round give the same answer: a function of the samples only.
+    assert compare_with_best(final) == result
+
+
+def test_min_seeds_is_validated() -> None:
+    with pytest.raises(ConfigError, match="report.min_seeds must be at least 2"):
+        compose_config(["report.min_seeds=1"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("ns", [[3] * 3, [5] * 8, [10] * 8, [2, 5, 10, 20]])
+def test_family_wise_error_under_the_global_null(ns: list[int]) -> None:
+    simulations = 2000
+    rng = np.random.default_rng(22)
+    false_calls = sum(bool(compare_with_best({g: rng.normal(0, 1 + g % 2, n)
+                                              for g, n in enumerate(ns)}).worse)
+                      for _ in range(simulations))
+    se = math.sqrt(0.05 * 0.95 / simulations)
+    assert false_calls / simulations <= 0.05 + 3 * se
