@@ -34,8 +34,10 @@ from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
 import numpy as np
-from scipy import stats
+import scipy
 
+# scipy loads its submodules on first use: scipy.stats costs half a second to import, and
+# commands that test nothing (list, most of best) never pay it.
 from kraby_study.records import best_group
 
 ALPHA = 0.05
@@ -97,7 +99,7 @@ def welch_two_sided_p(a: Sequence[float], b: Sequence[float]) -> float:
     scale = _scale(x, y)
     if no_spread(x, scale) and no_spread(y, scale):
         return 1.0 if abs(float(np.mean(x) - np.mean(y))) <= CONSTANT_RTOL * scale else 0.0
-    return float(stats.ttest_ind(x, y, equal_var=False).pvalue)
+    return float(scipy.stats.ttest_ind(x, y, equal_var=False).pvalue)
 
 
 def welch_greater_matrix(samples: Sequence[np.ndarray]) -> np.ndarray:
@@ -123,7 +125,7 @@ def welch_greater_matrix(samples: Sequence[np.ndarray]) -> np.ndarray:
     # Mickey and Brown 1966).
     df = np.minimum.outer(n, n) - 1
     with np.errstate(divide="ignore", invalid="ignore"):
-        p = stats.t.sf(diff / np.sqrt(se2), df)
+        p = scipy.stats.t.sf(diff / np.sqrt(se2), df)
     # Neither sample spreads (within the tolerance): a difference of means is certain or none.
     both_flat = np.logical_and.outer(flat, flat)
     certain = np.where(diff > CONSTANT_RTOL * scale, 0.0, 1.0)
@@ -161,6 +163,25 @@ class Comparison(Generic[K]):
     min_seeds: int = MIN_SEEDS
 
 
+def evidence(scores: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS
+             ) -> tuple[int, dict[K, np.ndarray], dict[K, int]]:
+    """The seeds a value needs (``min_seeds``, at least 2), the values that have them (the
+    family, NaN dropped), and the others that have some: their count of seeds."""
+    need = max(2, int(min_seeds))
+    clean = {g: _clean(v) for g, v in scores.items()}
+    family = {g: x for g, x in clean.items() if len(x) >= need}
+    left_out = {g: len(x) for g, x in clean.items() if 0 < len(x) < need}
+    return need, family, left_out
+
+
+def best_with_evidence(scores: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS
+                       ) -> K | None:
+    """The value with the highest mean among those with ``min_seeds`` complete seeds (the
+    best of :func:`compare_with_best`, without its tests); None if none has them."""
+    _, family, _ = evidence(scores, min_seeds)
+    return best_group({g: list(x) for g, x in family.items()})
+
+
 def compare_with_best(scores: Mapping[K, Sequence[float]], alpha: float = ALPHA,
                       min_seeds: int = MIN_SEEDS) -> Comparison[K]:
     """Which values are worse than the best, with family-wise error at most ``alpha``.
@@ -177,10 +198,7 @@ def compare_with_best(scores: Mapping[K, Sequence[float]], alpha: float = ALPHA,
     Returns:
         The :class:`Comparison`.
     """
-    need = max(2, int(min_seeds))
-    clean = {g: _clean(v) for g, v in scores.items()}
-    family = {g: x for g, x in clean.items() if len(x) >= need}
-    left_out = {g: len(x) for g, x in clean.items() if 0 < len(x) < need}
+    need, family, left_out = evidence(scores, min_seeds)
     best = best_group({g: list(x) for g, x in family.items()})
     if best is None:
         return Comparison(None, {}, [], [], left_out, alpha, need)

@@ -20,12 +20,16 @@ from __future__ import annotations
 import math
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
-import pandas as pd
-from optuna.trial import FrozenTrial
-
-from kraby_study.comparison import ALPHA, MIN_SEEDS, compare_with_best, procedure_name
+from kraby_study.comparison import (
+    ALPHA,
+    MIN_SEEDS,
+    best_with_evidence,
+    compare_with_best,
+    evidence,
+    procedure_name,
+)
 from kraby_study.records import (
     Outcome,
     SelectRule,
@@ -38,6 +42,10 @@ from kraby_study.records import (
     value_key,
 )
 from kraby_study.stats import auc
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from optuna.trial import FrozenTrial
 
 RULE_TEXT = {
     SelectRule.FINAL_SCORE: "highest mean final score",
@@ -71,12 +79,13 @@ def select(rule: str, final: Mapping[K, Sequence[float]], aucs: Mapping[K, Seque
     """
     SelectRule.check(rule)
     scores = {g: [float(v) for v in vs if not math.isnan(float(v))] for g, vs in final.items()}
-    comparison = compare_with_best(scores, min_seeds=min_seeds)
-    if rule == "final_score":
-        return comparison.best
-    if rule == "auc":
+    if rule == SelectRule.FINAL_SCORE:
+        return best_with_evidence(scores, min_seeds)
+    if rule == SelectRule.AUC:
+        need, _, _ = evidence(scores, min_seeds)
         return best_group({g: [m] for g, m in _means(aucs).items()
-                           if len(scores.get(g, [])) >= comparison.min_seeds})
+                           if len(scores.get(g, [])) >= need})
+    comparison = compare_with_best(scores, min_seeds=min_seeds)
     best = comparison.best
     if best is None:
         return None
@@ -96,17 +105,20 @@ class Samples:
     seconds: dict[int, list[float]]
 
 
-def samples(trials: Sequence[FrozenTrial], curves: pd.DataFrame, name: str,
+def samples(trials: Sequence[FrozenTrial], curves: pd.DataFrame | None, name: str,
             values: Sequence[Any]) -> Samples:
     """The samples of a sweep's counted trials; ``curves`` holds their curve points (columns
-    number, step, mean_reward). A trial whose value is not in ``values`` is left out."""
+    number, step, mean_reward), None when no AUC is needed. A trial whose value is not in
+    ``values`` is left out."""
     index = {value_key(v): i for i, v in enumerate(values)}
     final: dict[int, list[float]] = {}
     aucs: dict[int, list[float]] = {}
     seconds: dict[int, list[float]] = {}
-    ordered = curves.sort_values(["number", "step"], kind="stable")
-    rewards = {int(n): g["mean_reward"].to_numpy(dtype=float)
-               for n, g in ordered.groupby("number", sort=False)}
+    rewards = {}
+    if curves is not None:
+        ordered = curves.sort_values(["number", "step"], kind="stable")
+        rewards = {int(n): g["mean_reward"].to_numpy(dtype=float)
+                   for n, g in ordered.groupby("number", sort=False)}
     for trial in trials:
         if outcome(trial) != Outcome.COMPLETE or trial.value is None:
             continue
@@ -135,7 +147,7 @@ def swept_values(kind: str, definition: Mapping[str, Any],
     return name, ordered_values(planned, found, sort=kind != "confirm")
 
 
-def selected_index(trials: Sequence[FrozenTrial], curves: pd.DataFrame, name: str,
+def selected_index(trials: Sequence[FrozenTrial], curves: pd.DataFrame | None, name: str,
                    values: Sequence[Any], rule: str, min_seeds: int = MIN_SEEDS) -> int | None:
     """Index in ``values`` of the value ``rule`` selects among the complete runs; None when
     no value has ``min_seeds`` complete seeds."""

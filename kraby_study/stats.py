@@ -26,10 +26,11 @@ import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from statistics import NormalDist
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
-from scipy import integrate, stats
+import scipy
 
 from kraby_study.comparison import (
     ALPHA,
@@ -40,6 +41,9 @@ from kraby_study.comparison import (
     welch_two_sided_p,
 )
 from kraby_study.records import best_group
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 LEVEL = 0.95
 INTERVAL_NAME = "95 % Student-t confidence interval of the mean over seeds"
@@ -93,7 +97,7 @@ def t_interval(mean: np.ndarray | pd.Series | float, sd: np.ndarray | pd.Series 
     n_a = np.asarray(n, dtype=float)
     with np.errstate(invalid="ignore", divide="ignore"):
         dof = np.where(n_a >= 2, n_a - 1, np.nan)
-        half = stats.t.ppf(0.5 + level / 2, dof) * sd_a / np.sqrt(n_a)
+        half = scipy.stats.t.ppf(0.5 + level / 2, dof) * sd_a / np.sqrt(n_a)
     half = np.where(n_a >= 2, half, np.nan)
     return mean_a - half, mean_a + half
 
@@ -172,11 +176,11 @@ def iqm(values: Sequence[float]) -> float:
     fewer than 4 values it is the plain mean.
     """
     x = _array(values)
-    return float(stats.trim_mean(x, 0.25)) if len(x) else math.nan
+    return float(scipy.stats.trim_mean(x, 0.25)) if len(x) else math.nan
 
 
 def _iqm_along(x: np.ndarray, axis: int = -1) -> np.ndarray:
-    return stats.trim_mean(x, 0.25, axis=axis)
+    return scipy.stats.trim_mean(x, 0.25, axis=axis)
 
 
 def iqm_interval(values: Sequence[float], level: float = LEVEL) -> tuple[float, float]:
@@ -205,7 +209,7 @@ def iqm_interval(values: Sequence[float], level: float = LEVEL) -> tuple[float, 
         return low, high
     winsorised = np.clip(x, x[g], x[n - g - 1])
     se = float(np.std(winsorised, ddof=1)) / ((1 - 2 * 0.25) * math.sqrt(n))
-    half = float(stats.t.ppf(0.5 + level / 2, n - 2 * g - 1)) * se
+    half = float(scipy.stats.t.ppf(0.5 + level / 2, n - 2 * g - 1)) * se
     centre = iqm(x)
     return centre - half, centre + half
 
@@ -279,7 +283,7 @@ def holm_vs_best(scores: Mapping[int, Sequence[float]],
 
 
 def _p_improvement_along(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
-    u = stats.mannwhitneyu(x, y, axis=axis).statistic
+    u = scipy.stats.mannwhitneyu(x, y, axis=axis).statistic
     return u / (x.shape[axis] * y.shape[axis])
 
 
@@ -327,7 +331,7 @@ def p_improvement_interval(x: Sequence[float], y: Sequence[float],
         # BCa's acceleration is undefined when every jackknife value is equal (e.g. every seed
         # of one value beats every seed of the other); the distribution is then one point.
         warnings.simplefilter("ignore")
-        result = stats.bootstrap((a, b), _p_improvement_along, n_resamples=repetitions,
+        result = scipy.stats.bootstrap((a, b), _p_improvement_along, n_resamples=repetitions,
                                  vectorized=True, paired=False, confidence_level=level,
                                  method="BCa", rng=np.random.default_rng(seed))
     ci = result.confidence_interval
@@ -342,7 +346,7 @@ def p_improvement_interval(x: Sequence[float], y: Sequence[float],
 def iqr(values: Sequence[float]) -> float:
     """Interquartile range of a sample (``scipy.stats.iqr``), its repeatability; NaN if empty."""
     x = _array(values)
-    return float(stats.iqr(x)) if len(x) else math.nan
+    return float(scipy.stats.iqr(x)) if len(x) else math.nan
 
 
 @functools.lru_cache(maxsize=256)
@@ -359,9 +363,10 @@ def expected_normal_iqr(n: int) -> float:
     def order_mean(r: int) -> float:  # E[X_(r:n)], r from 1
         log_c = math.lgamma(n + 1) - math.lgamma(r) - math.lgamma(n - r + 1)
         def density(z: float) -> float:
-            return z * math.exp(log_c + (r - 1) * stats.norm.logcdf(z)
-                                + (n - r) * stats.norm.logsf(z) + stats.norm.logpdf(z))
-        return float(integrate.quad(density, -12, 12, limit=200)[0])
+            norm = scipy.stats.norm
+            return z * math.exp(log_c + (r - 1) * norm.logcdf(z) + (n - r) * norm.logsf(z)
+                                + norm.logpdf(z))
+        return float(scipy.integrate.quad(density, -12, 12, limit=200)[0])
 
     def quantile(p: float) -> float:
         h = (n - 1) * p
@@ -373,7 +378,8 @@ def expected_normal_iqr(n: int) -> float:
     return quantile(0.75) - quantile(0.25)
 
 
-NORMAL_IQR = float(stats.norm.ppf(0.75) - stats.norm.ppf(0.25))
+NORMAL_IQR = NormalDist().inv_cdf(0.75) - NormalDist().inv_cdf(0.25)
+"""The interquartile range of the standard normal distribution."""
 
 
 def iqr_unbiased(values: Sequence[float]) -> float:

@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import pandas as pd
 from optuna.trial import FrozenTrial
 
 from kraby_study.comparison import MIN_SEEDS
@@ -114,8 +113,7 @@ def sweep_selection(ledger: StudyLedger) -> SweepSelection | None:
     trials = counted(ledger.trials())
     name, values = swept_values(str(attrs.kind), attrs.definition, trials)
     # Only the auc rule reads the curves.
-    curves = (ledger.curves([t.number for t in trials]) if rule == "auc"
-              else pd.DataFrame(columns=["number", "step", "mean_reward"]))
+    curves = ledger.curves([t.number for t in trials]) if rule == SelectRule.AUC else None
     index = selected_index(trials, curves, name, values, rule)
     if index is None:
         return None

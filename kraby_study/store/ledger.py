@@ -8,10 +8,9 @@ from __future__ import annotations
 
 from collections.abc import Collection, Iterable, Mapping, Sequence
 from contextlib import AbstractContextManager
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import optuna
-import pandas as pd
 import sqlalchemy as sa
 from optuna.distributions import BaseDistribution
 from optuna.storages import RDBStorage
@@ -29,6 +28,9 @@ from kraby_study.records import (
 from kraby_study.store.attempts import requeue_stale
 from kraby_study.store.backend import LOCK_BASE, Backend
 from kraby_study.store.tables import CURVE_COLUMNS, curve_points
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 class StudyLedger:
@@ -91,6 +93,10 @@ class StudyLedger:
     def curves(self, numbers: Collection[int] | None = None) -> pd.DataFrame:
         """Learning-curve points (columns ``CURVE_COLUMNS``) of the given trials, or all, in one
         query, sorted by trial and step; empty for a plain Optuna store."""
+        # pandas is loaded here, by the commands that read curves (the report, the auc rule):
+        # list and most commands never need it, and it costs a quarter of a second.
+        import pandas as pd
+
         if numbers is None or any(n not in self._ids for n in numbers):
             self.trials()  # the ids of every trial, in one query
         ids = {trial_id: number for number, trial_id in self._ids.items()}
