@@ -20,7 +20,10 @@ best" when it is < alpha. Under the global null every claim is false, and the fa
 error is at most alpha whatever value the data make the best; under any configuration of
 means, a value with the highest true mean is called worse with probability at most alpha.
 Welch's t-test (unequal variances) makes this hold for unequal n and variances, as far as the
-Welch approximation holds (measured in ``benchmarks/bench_error_rates.py``).
+Welch approximation holds (measured in ``benchmarks/bench_error_rates.py``). Its degrees of
+freedom are Welch-Satterthwaite's between values of equal n, where Welch's test holds its level,
+and the conservative min(n_i, n_j) - 1 between values of unequal n, where Welch-Satterthwaite's
+let the family-wise error reach 0.106 (:func:`welch_df`).
 
 Values with fewer than ``min_seeds`` complete seeds are left out of the family: they are
 never best, tied or worse.
@@ -47,8 +50,9 @@ CONSTANT_RTOL = 1e-9
 """A sample whose range is at most this times the scale of the scores compared (their largest
 absolute value) has no spread: float noise such as 0.7 against 0.7 + 1e-15 is not a
 difference."""
-PROCEDURE = ("closed Holm step-down over one-sided Welch t-tests with min(n) - 1 degrees of "
-             "freedom (each value as a best)")
+PROCEDURE = ("closed Holm step-down over one-sided Welch t-tests with Welch-Satterthwaite "
+             "degrees of freedom between values of equal n, min(n) - 1 between values of "
+             "unequal n (each value as a best)")
 PROCEDURE_SHORT = "closed Holm-Welch step-down"
 
 K = TypeVar("K", bound=Hashable)
@@ -74,9 +78,9 @@ def _scale(x: np.ndarray, y: np.ndarray) -> float:
 
 
 def welch_greater_p(a: Sequence[float], b: Sequence[float]) -> float:
-    """One-sided Welch t-test p-value of "mean of a > mean of b", with the conservative
-    min(n_a, n_b) - 1 degrees of freedom (:func:`welch_greater_matrix`); NaN with fewer than 2
-    values on either side.
+    """One-sided Welch t-test p-value of "mean of a > mean of b", with the degrees of freedom of
+    :func:`welch_df` (Welch-Satterthwaite's at equal n, the conservative min(n_a, n_b) - 1 at
+    unequal n); NaN with fewer than 2 values on either side.
 
     Two samples without spread (:func:`no_spread`) are compared by their means within the same
     tolerance: p = 0 when a's mean is higher by more than it, else p = 1.
@@ -102,6 +106,34 @@ def welch_two_sided_p(a: Sequence[float], b: Sequence[float]) -> float:
     return float(scipy.stats.ttest_ind(x, y, equal_var=False).pvalue)
 
 
+def welch_df(n: np.ndarray, spread: np.ndarray) -> np.ndarray:
+    """Degrees of freedom of the one-sided Welch t-test of every pair of samples.
+
+    Welch-Satterthwaite's df when the two samples have equal n, min(n_i, n_j) - 1 otherwise.
+
+    Args:
+        n: Sample sizes, one per sample (each at least 2).
+        spread: Each sample's variance over its n (the squared standard error of its mean).
+
+    Returns:
+        A k x k array; entry [i, j] is the df of the test between samples i and j.
+    """
+    # At unequal n the estimated df grows exactly when the small sample's variance is small
+    # by chance: with n = 2 against n = 20 and Welch-Satterthwaite's df everywhere, the
+    # step-down's family-wise error reached 0.106 (bench_error_rates.py). min(n_i, n_j) - 1 is
+    # conservative for the Behrens-Fisher problem whatever the variances (Hsu 1938; Mickey and
+    # Brown 1966). At equal n that bound costs most of the power (family-wise error 0.003 at
+    # 5 x 5, alpha 0.05), and Welch's test holds its level there, so it keeps its own df; after
+    # each round of racing every survivor has equal n.
+    se2 = np.add.outer(spread, spread)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        satterthwaite = se2 ** 2 / np.add.outer(spread ** 2 / (n - 1), spread ** 2 / (n - 1))
+    # Both variances zero: the statistic is decided by the constant-sample rule, any df will do.
+    satterthwaite = np.where(np.isfinite(satterthwaite), satterthwaite,
+                             np.add.outer(n, n) - 2)
+    return np.where(np.equal.outer(n, n), satterthwaite, np.minimum.outer(n, n) - 1)
+
+
 def welch_greater_matrix(samples: Sequence[np.ndarray]) -> np.ndarray:
     """One-sided Welch p-values of every ordered pair at once: entry [j, g] is
     :func:`welch_greater_p` of sample j against sample g (each sample at least 2 values).
@@ -118,14 +150,8 @@ def welch_greater_matrix(samples: Sequence[np.ndarray]) -> np.ndarray:
     spread = var / n
     se2 = np.add.outer(spread, spread)
     diff = np.subtract.outer(mean, mean)
-    # Degrees of freedom min(n_i, n_j) - 1, not Welch-Satterthwaite's: with n = 2 against
-    # n = 20 the estimated df grows exactly when the small sample's variance is small by chance,
-    # and the step-down's family-wise error reached 0.106 (bench_error_rates.py). The smaller
-    # df is conservative for the Behrens-Fisher problem whatever the variances (Hsu 1938;
-    # Mickey and Brown 1966).
-    df = np.minimum.outer(n, n) - 1
     with np.errstate(divide="ignore", invalid="ignore"):
-        p = scipy.stats.t.sf(diff / np.sqrt(se2), df)
+        p = scipy.stats.t.sf(diff / np.sqrt(se2), welch_df(n, spread))
     # Neither sample spreads (within the tolerance): a difference of means is certain or none.
     both_flat = np.logical_and.outer(flat, flat)
     certain = np.where(diff > CONSTANT_RTOL * scale, 0.0, 1.0)

@@ -163,3 +163,21 @@ def write_study_file(root: Path, name: str, parameter: str, values: str, extra: 
     (folder / f"{name}.yaml").write_text(
         f"# @package _global_\nstudy:\n  name: {name}\n  parameter: {parameter}\n"
         f"  values: {values}\n{extra}")
+
+
+def newcombe_bounds(estimate: float, m: int, n: int, z: float = 1.959963984540054) -> tuple[
+        float, float]:
+    """Newcombe's (2006, method 5) interval of P(X > Y) by another route than the package's
+    root search: every solution of (estimate - t)^2 = z^2 V(t) is a root of the quartic
+    (estimate - t)^2 (2 - t)(1 + t) m n
+        - z^2 t (1 - t) [(2 - t)(1 + t) + (N* - 1)(1 - t)(1 + t) + (N* - 1) t (2 - t)],
+    N* = (m + n) / 2; the bounds are the extreme roots in [0, 1]."""
+    from numpy.polynomial import Polynomial as P
+
+    t, half = P([0.0, 1.0]), (m + n) / 2
+    left = (estimate - t) ** 2 * (2 - t) * (1 + t) * (m * n)
+    right = z ** 2 * t * (1 - t) * ((2 - t) * (1 + t) + (half - 1) * (1 - t) * (1 + t)
+                                    + (half - 1) * t * (2 - t))
+    roots = [r.real for r in (left - right).roots()
+             if abs(r.imag) < 1e-9 and -1e-9 <= r.real <= 1 + 1e-9]
+    return max(0.0, min(roots)), min(1.0, max(roots))

@@ -64,12 +64,13 @@ def test_float_noise_is_not_a_difference() -> None:
 
 def test_step_down_on_a_hand_worked_case() -> None:
     # Three values of 3 seeds, each with sd 1: means -3, 4, 4.5. One-sided Welch t of j over g:
-    # (m_j - m_g) / sqrt(2 / 3), df min(3, 3) - 1 = 2.
+    # (m_j - m_g) / sqrt(2 / 3). Equal n, so Welch-Satterthwaite's df:
+    # (1/3 + 1/3)^2 / ((1/3)^2 / 2 + (1/3)^2 / 2) = 4.
     final = {0: [-4.0, -3.0, -2.0], 1: [3.0, 4.0, 5.0], 2: [3.5, 4.5, 5.5]}
     se = math.sqrt(2 / 3)
-    pi0 = 2 * stats.t.sf(7.5 / se, 2)  # beaten hardest by 2: (k - 1) * p
-    pi1 = 2 * stats.t.sf(0.5 / se, 2)
-    pi2 = 2 * stats.t.sf(-0.5 / se, 2)  # 1 against 2: below the mean, p > 0.5
+    pi0 = 2 * stats.t.sf(7.5 / se, 4)  # beaten hardest by 2: (k - 1) * p
+    pi1 = 2 * stats.t.sf(0.5 / se, 4)
+    pi2 = 2 * stats.t.sf(-0.5 / se, 4)  # 1 against 2: below the mean, p > 0.5
     assert pi0 < pi1 < min(1.0, pi2)
     adjusted0 = 3 * pi0  # Holm, smallest first: x3
     adjusted1 = max(adjusted0, 2 * pi1)
@@ -83,14 +84,27 @@ def test_step_down_on_a_hand_worked_case() -> None:
     assert compare_with_best(final) == result
 
 
+def test_welch_degrees_of_freedom_by_equal_and_unequal_n() -> None:
+    # Equal n: SciPy's one-sided Welch test (Welch-Satterthwaite df), the independent oracle.
+    a, b = [1.0, 4.0, 2.5, 3.0], [0.0, 0.5, 2.0, -1.0]
+    assert welch_greater_p(a, b) == pytest.approx(
+        stats.ttest_ind(a, b, equal_var=False, alternative="greater").pvalue, rel=1e-12)
+    # Unequal n (3 against 5): means 2 and 0, variances 1 and 2.5, se sqrt(1/3 + 2.5/5),
+    # df min(3, 5) - 1 = 2, not Welch-Satterthwaite's 5.9.
+    three, five = [1.0, 2.0, 3.0], [-2.0, -1.0, 0.0, 1.0, 2.0]
+    assert welch_greater_p(three, five) == pytest.approx(
+        stats.t.sf(2 / math.sqrt(1 / 3 + 2.5 / 5), 2), rel=1e-12)
+
+
 def test_min_seeds_is_validated() -> None:
     with pytest.raises(ConfigError, match="report.min_seeds must be at least 2"):
         compose_config(["report.min_seeds=1"])
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("ns", [[3] * 3, [5] * 8, [10] * 8, [2, 5, 10, 20]])
+@pytest.mark.parametrize("ns", [[2] * 4, [3] * 3, [5] * 8, [10] * 8, [2, 5, 10, 20]])
 def test_family_wise_error_under_the_global_null(ns: list[int]) -> None:
+    # Equal n (Welch-Satterthwaite df, sd 1 and 2 alternating) and unequal n (min(n) - 1 df).
     simulations = 2000
     rng = np.random.default_rng(22)
     false_calls = sum(bool(compare_with_best({g: rng.normal(0, 1 + g % 2, n)

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import sqlite_url
+from conftest import newcombe_bounds, sqlite_url
 from optuna.distributions import CategoricalDistribution
 from optuna.trial import TrialState, create_trial
 from scipy import stats
@@ -18,13 +18,12 @@ from synthetic import Run, add_sweep, add_trials, write_curves
 
 from kraby_study.records import Outcome, StudyAttrs, TrialAttrs
 from kraby_study.report import ReportIndex, write_report
-from kraby_study.stats import BOOTSTRAP_SEED
 from kraby_study.store.store import Store
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 NEW_FIGURES = ["sample_efficiency", "time_to_threshold", "improvement"]
 BOOTSTRAP = 1000
-"""Resamples of the fixture's report: not the default, so the option must reach the tables."""
+"""report.bootstrap of the fixture's report: still accepted, though no interval bootstraps."""
 STEPS = (100, 200, 300, 400)
 
 # learning_rate: final scores per value; 0.01 is the best (mean 5.5).
@@ -114,19 +113,6 @@ def _summary(out: Path, study: str = "learning_rate") -> pd.DataFrame:
                        na_values=[""]).set_index("value")
 
 
-def _improvement_bootstrap(x: list[float], y: list[float],
-                           repetitions: int) -> tuple[float, float]:
-    """The BCa bootstrap of P(X > Y) + 0.5 P(X = Y), each sample resampled apart."""
-    def statistic(a: np.ndarray, b: np.ndarray, axis: int) -> np.ndarray:
-        wins = (a[..., :, None] > b[..., None, :]) + 0.5 * (a[..., :, None] == b[..., None, :])
-        return wins.mean(axis=(-2, -1))
-
-    result = stats.bootstrap((np.asarray(x), np.asarray(y)), statistic, n_resamples=repetitions,
-                             vectorized=True, paired=False, method="BCa",
-                             rng=np.random.default_rng(BOOTSTRAP_SEED))
-    return float(result.confidence_interval.low), float(result.confidence_interval.high)
-
-
 def _t_interval(values: list[float]) -> tuple[float, float, float]:
     x = np.asarray(values)
     half = stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / math.sqrt(len(x))
@@ -213,8 +199,11 @@ def test_holm_ties_and_probability_of_improvement(report: ReportIndex) -> None:
     raw = {v: stats.ttest_ind(best, FINALS[v], equal_var=False).pvalue for v in (0.001, 0.3)}
     family = {v: np.asarray(FINALS[v]) for v in (0.001, 0.01, 0.3)}  # 0.1 has one seed
 
-    def beats(j: float, g: float) -> float:  # one-sided Welch, min(n) - 1 df
+    def beats(j: float, g: float) -> float:
+        # One-sided Welch: SciPy's (Welch-Satterthwaite df) at equal n, min(n) - 1 df otherwise.
         x, y = family[j], family[g]
+        if len(x) == len(y):
+            return stats.ttest_ind(x, y, equal_var=False, alternative="greater").pvalue
         se = math.sqrt(x.var(ddof=1) / len(x) + y.var(ddof=1) / len(y))
         return stats.t.sf((x.mean() - y.mean()) / se, min(len(x), len(y)) - 1)
 
@@ -235,18 +224,22 @@ def test_holm_ties_and_probability_of_improvement(report: ReportIndex) -> None:
         row = summary.loc[value]
         assert row["p_improvement"] == pytest.approx(np.mean(pairs))
         assert row["p_improvement_low"] <= row["p_improvement"] <= row["p_improvement_high"]
+    # Newcombe's interval (method 5), from the roots of its quartic: 4 seeds against 4 at
+    # 0.75; every seed of the best beats every seed of 0.3 (4 against 3): up to 1, not a point.
     assert (summary.loc[0.001, "p_improvement_low"],
             summary.loc[0.001, "p_improvement_high"]) == pytest.approx(
-        _improvement_bootstrap(best, FINALS[0.001], BOOTSTRAP))
-    # Every seed of the best beats every seed of 0.3 in every resample: a one-point interval.
+        newcombe_bounds(0.75, 4, 4), abs=1e-6)  # summary.csv keeps 6 decimals
     assert (summary.loc[0.3, "p_improvement_low"],
-            summary.loc[0.3, "p_improvement_high"]) == (1.0, 1.0)
+            summary.loc[0.3, "p_improvement_high"]) == pytest.approx(
+        newcombe_bounds(1.0, 4, 3), abs=1e-6)
+    assert summary.loc[0.3, "p_improvement_low"] < 1.0 == summary.loc[0.3, "p_improvement_high"]
     assert summary.loc[0.001, "p_improvement"] == pytest.approx(0.75)
     assert summary.loc[0.3, "p_improvement"] == pytest.approx(1.0)
     assert math.isnan(summary.loc[0.01, "p_improvement"])
     text = (report.out / "learning_rate" / "summary.md").read_text()
     assert "closed Holm-Welch step-down, alpha 0.05" in text and "P(best > value)" in text
-    assert text.count("(1,000 resamples") == 1  # P(best > value)'s, as asked
+    assert text.count("95 % Newcombe score-type interval (Newcombe 2006, method 5)") == 1
+    assert "resamples" not in text and "BCa" not in text  # nothing bootstraps any more
     assert "no correction for multiple comparisons" not in report.markdown.read_text()
 
 

@@ -8,6 +8,7 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import newcombe_bounds
 from scipy import stats
 
 from kraby_study.stats import (
@@ -31,7 +32,7 @@ from kraby_study.stats import (
 
 NAN = math.nan
 SPREAD = [3.1, 0.4, 2.2, 5.9, 1.7, 4.4, 2.8, 3.6, 0.9, 5.1]
-"""Ten distinct values, enough for bootstrap intervals of some width."""
+"""Ten distinct values, enough for intervals of some width."""
 
 
 def nan_pair(pair: tuple[float, float]) -> bool:
@@ -174,20 +175,35 @@ def test_p_improvement_counts_pairs() -> None:
     assert math.isnan(p_improvement([1.0], []))
 
 
-def test_p_improvement_interval_on_a_hand_computed_bootstrap() -> None:
-    # y is always 0.5; a resample of x = [0, 1] beats it in 0, 1 or 2 of 2 seeds, with p = 1/4,
-    # 1/2, 1/4: the estimate is 0, 0.5 or 1, and the 95 % percentile interval is [0, 1].
-    assert p_improvement_interval([0.0, 1.0], [0.5, 0.5]) == pytest.approx((0.0, 1.0))
-    # Every seed of x beats every seed of y, in every resample.
-    assert p_improvement_interval([3.0, 4.0], [1.0, 2.0]) == pytest.approx((1.0, 1.0))
+def test_p_improvement_interval_on_newcombe_hand_worked_bounds() -> None:
+    # Every seed of x beats every seed of y (estimate 1, m = n = 2, N* = 2): the upper bound is
+    # 1, the lower the root below 1 of (1 - t)^2 = z^2 t (1 - t) / 4 [1 + (1 - t) / (2 - t)
+    # + t / (1 + t)]; at t = 0.38564 both sides are 0.3774.
+    low, high = p_improvement_interval([3.0, 4.0], [1.0, 2.0])
+    assert high == 1.0 and low == pytest.approx(0.38564, abs=1e-5)
+    assert (low, high) == pytest.approx(newcombe_bounds(1.0, 2, 2), abs=1e-9)
+    # Estimate 1/2 at m = n = 2 is symmetric about 1/2; with 5 against 3 seeds, 10 of 15 pairs.
+    assert p_improvement_interval([0.0, 1.0], [0.5, 0.5]) == pytest.approx(
+        newcombe_bounds(0.5, 2, 2), abs=1e-9)
+    five, three = [1.0, 2.0, 3.0, 4.0, 5.0], [0.5, 2.5, 3.5]
+    assert p_improvement(five, three) == pytest.approx(10 / 15)
+    assert p_improvement_interval(five, three) == pytest.approx(
+        newcombe_bounds(10 / 15, 5, 3), abs=1e-9)
 
 
-def test_p_improvement_interval_contains_the_estimate_and_is_reproducible() -> None:
+def test_p_improvement_interval_contains_the_estimate_and_narrows_with_seeds() -> None:
     other = [v + 1.0 for v in SPREAD[:8]]
     low, high = p_improvement_interval(SPREAD, other)
-    assert 0.0 <= low < p_improvement(SPREAD, other) < high <= 1.0
-    assert p_improvement_interval(SPREAD, other) == (low, high)
-    assert p_improvement_interval(SPREAD, other, seed=7) != (low, high)
+    assert 0.0 < low < p_improvement(SPREAD, other) < high < 1.0
+    # The same estimate from more seeds, or at a lower level, gives a narrower interval.
+    few = p_improvement_interval([1.0, 3.0], [2.0, 0.0])
+    many = p_improvement_interval([1.0, 3.0] * 5, [2.0, 0.0] * 5)
+    assert few[0] < many[0] < 0.75 < many[1] < few[1]
+    narrow = p_improvement_interval(SPREAD, other, level=0.5)
+    assert low < narrow[0] < narrow[1] < high
+    # Swapping the samples mirrors the interval about 1/2: V(t) = V(1 - t).
+    swapped = p_improvement_interval(other, SPREAD)
+    assert swapped == pytest.approx((1 - high, 1 - low), abs=1e-9)
 
 
 def test_p_improvement_interval_edge_cases_without_warnings() -> None:
@@ -195,8 +211,11 @@ def test_p_improvement_interval_edge_cases_without_warnings() -> None:
         warnings.simplefilter("error")
         assert nan_pair(p_improvement_interval([1.0], [1.0, 2.0]))
         assert nan_pair(p_improvement_interval([1.0, 2.0], []))
-        assert p_improvement_interval([1.0, 1.0], [2.0, 2.0]) == (0.0, 0.0)
-        assert p_improvement_interval([2.0, 2.0], [2.0, 2.0]) == (0.5, 0.5)
+        # Never one point, even without spread: two seeds a side cannot rule out much.
+        low, high = p_improvement_interval([1.0, 1.0], [2.0, 2.0])
+        assert low == 0.0 and high == pytest.approx(newcombe_bounds(0.0, 2, 2)[1], abs=1e-9)
+        assert p_improvement_interval([2.0, 2.0], [2.0, 2.0]) == pytest.approx(
+            newcombe_bounds(0.5, 2, 2), abs=1e-9)
 
 
 def test_compare_to_best_takes_the_first_of_tied_means() -> None:

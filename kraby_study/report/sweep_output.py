@@ -51,7 +51,7 @@ CAPTIONS = {
     "improvement": "Probability of improvement P(best > value) of the best value over each "
                    "other value: the share of pairs of seeds (one of each) where the best "
                    "value's final score is higher, ties counted half, with its 95 % "
-                   "BCa bootstrap interval. Dashed: 0.5, neither better.",
+                   "Newcombe score-type interval. Dashed: 0.5, neither better.",
 }
 NEW_FIGURES = ("sample_efficiency", "time_to_threshold", "improvement")
 """Figures that compare values, drawn when a study has more than one."""
@@ -95,7 +95,7 @@ def summary_table(sweep: Sweep) -> Table:
     header = [sweep.name, "complete", "failed", "pruned", "pending", "final score", "95 % CI", "sd",
               "IQM [95 % trimmed-t CI]", "final IQR", "final IQR (rescaled)", "AUC [95 % CI]",
               "env steps to threshold", "seconds to threshold", "reached", "training time (s)",
-              "Welch p vs best", "adjusted p (step-down)", "P(best > value) [95 % BCa CI]", "",
+              "Welch p vs best", "adjusted p (step-down)", "P(best > value) [95 % Newcombe CI]", "",
               "note"]
     rows = []
     for _, row in sweep.summary.iterrows():
@@ -135,8 +135,9 @@ def threshold_text(sweep: Sweep) -> str:
 
 
 def metric_notes(bootstrap: int, min_seeds: int = 2) -> str:
-    """What every interval and test of a sweep's summary is, each named once, for bootstraps
-    of ``bootstrap`` resamples and values needing ``min_seeds`` complete seeds."""
+    """What every interval and test of a sweep's summary is, each named once, for values needing
+    ``min_seeds`` complete seeds (``bootstrap``, the report option's resamples, is no longer
+    used by any interval)."""
     return (f"Final score, training time and AUC intervals: {INTERVAL_NAME}. IQM: "
             f"{iqm_interval_name()}. {AUC_NAME[0].upper()}{AUC_NAME[1:]}. Steps and "
             "seconds to threshold: restricted mean over the seeds with a curve, a seed that "
@@ -148,7 +149,7 @@ def metric_notes(bootstrap: int, min_seeds: int = 2) -> str:
             f"Welch p vs best: {TEST_NAME}. Adjusted p and the '\u2248 best' marks: "
             f"{HOLM_NAME}. Best, ties, most sample-efficient, fastest and most repeatable count "
             f"only values with at least report.min_seeds = {min_seeds} complete seeds. "
-            f"P(best > value): {p_improvement_name(bootstrap)}.")
+            f"P(best > value): {p_improvement_name()}.")
 
 
 def few_seeds_note(sweep: Sweep) -> str | None:
@@ -378,8 +379,6 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
                 caption = CAPTIONS[stem]
                 if stem == "time_to_threshold":
                     caption += f" {threshold_text(sweep)}"
-                elif stem == "improvement":
-                    caption += f" {sweep.bootstrap:,} resamples, fixed seed."
                 images.append(Image(f"{rel}/{path.name}", stem.replace("_", " "), caption))
     else:
         report.notes.append("no complete run yet: no figures")

@@ -4,7 +4,7 @@ value, and the best value's probability of improvement over each other value.
 
 Lines are means over the complete seeds of a value; bands and error bars are the 95 %
 Student-t intervals of those means, except the probability of improvement's, which are
-percentile-bootstrap intervals (see :mod:`kraby_study.stats`).
+Newcombe score-type intervals (see :mod:`kraby_study.stats`).
 """
 
 from __future__ import annotations
@@ -290,8 +290,8 @@ def time_to_threshold(sweep: Sweep, path: Path) -> Path:
 
 
 def improvement(sweep: Sweep, path: Path) -> Path:
-    """Probability of improvement of the best value over each other value, with its bootstrap
-    interval, against the value; a line at 0.5 (no improvement either way)."""
+    """Probability of improvement of the best value over each other value, with its Newcombe
+    score-type interval, against the value; a line at 0.5 (no improvement either way)."""
     fig, (ax,) = new_figure(SINGLE)
     best = sweep.best
     ax.axhline(0.5, color=MUTED, linestyle="--", linewidth=1.2, zorder=1)
@@ -316,8 +316,8 @@ def improvement(sweep: Sweep, path: Path) -> Path:
     ax.set_ylabel("P(best > value)")
     handles: list[Line2D | Patch] = [
         Line2D([], [], marker="o", linestyle="-", color=MUTED, markeredgecolor="black",
-               markersize=7, label=f"P(best > value) over pairs of seeds, 95 % bootstrap "
-               f"interval ({sweep.bootstrap:,} resamples)"),
+               markersize=7, label="P(best > value) over pairs of seeds, 95 % Newcombe "
+               "score-type interval"),
         Line2D([], [], color=MUTED, linestyle="--", label="0.5: neither better"),
     ]
     fig.legend(handles=handles, loc="outside lower center", ncols=1, frameon=False)

@@ -77,7 +77,7 @@ class Sweep:
             :func:`study_threshold`), False when the report's options set it.
         untrained: The untrained policy's reward: the mean first-bin reward of every complete
             seed of the study (NaN without curves).
-        bootstrap: Resamples of the bootstrap intervals.
+        bootstrap: The report option ``report.bootstrap`` (no interval bootstraps any more).
         verdict: The study's verdict (:func:`kraby_study.stats.verdict`).
     """
 
@@ -190,7 +190,7 @@ def summarise(trials: pd.DataFrame, labels: list[str],
     training time; the raw two-sided Welch p-value against the best value (``p_vs_best``) and
     the adjusted p of the closed Holm-Welch step-down (``p_holm``,
     :func:`kraby_study.comparison.compare_with_best`); the probability that the best value
-    beats this one, with its BCa bootstrap interval; a mark: ``best``, ``tie`` (adjusted
+    beats this one, with its Newcombe score-type interval; a mark: ``best``, ``tie`` (adjusted
     p >= 0.05: not significantly worse than the best) or empty; and a note naming why a value
     with fewer than ``min_seeds`` complete seeds is left out. The curve metrics are added by
     :func:`add_curve_metrics`.
@@ -219,8 +219,7 @@ def summarise(trials: pd.DataFrame, labels: list[str],
             improvement, improvement_low, improvement_high = np.nan, np.nan, np.nan
         else:
             improvement = p_improvement(scores[best], finals)
-            improvement_low, improvement_high = p_improvement_interval(
-                scores[best], finals, repetitions=bootstrap)
+            improvement_low, improvement_high = p_improvement_interval(scores[best], finals)
         rows.append({
             "value": label,
             "complete": int(count.get(Outcome.COMPLETE, 0)),
@@ -363,7 +362,7 @@ def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
 
 def arms_frame(sweep: Sweep) -> pd.DataFrame:
     """A confirm study's configurations: label, origin, the source's own score, and the
-    confirmed final score (mean, t-interval, IQM, bootstrap interval, n)."""
+    confirmed final score (mean, t-interval, IQM, trimmed-t interval, n)."""
     arms = {str(arm.get("label")): arm for arm in sweep.data.definition.get("arms") or []
             if isinstance(arm, dict)}
     rows = []
