@@ -1,10 +1,11 @@
 """How fast the command answers: ``--help``, a refused input, ``list``, and the first trial line.
 
 Each command runs as ``python -m kraby_study.cli`` from a checkout (``PYTHONPATH`` puts its
-``kraby_study`` first), in a fresh process, ``--repeats`` times; the table gives the median wall
-time. With ``--baseline DIR`` a second checkout (e.g. an older commit in a git worktree) is
+``kraby_study``, ``kraby_envs`` and ``kraby_conf`` first), in a fresh process, ``--repeats``
+times; the table gives the median wall time. With ``--baseline DIR`` a second checkout (e.g. an older commit in a git worktree) is
 measured in the same run, the two interleaved, and each row gets the ratio this / baseline.
-The import cost of the CLI module itself comes from ``python -X importtime``. Usage::
+The first row is a bare ``python -c "import kraby_study.cli"``: what every command pays before
+it parses its arguments. Usage::
 
     python benchmarks/bench_startup.py [--repeats 5] [--baseline /tmp/before]
 """
@@ -28,9 +29,19 @@ def command(root: Path, *args: str) -> list[str]:
     return [sys.executable, "-m", "kraby_study.cli", *args]
 
 
+SHIMS = Path(tempfile.mkdtemp(prefix="kraby-startup-"))
+"""Per checkout, a folder of links naming its packages as installed (envs/ is kraby_envs)."""
+
+
 def environment(root: Path) -> dict[str, str]:
-    """This process's environment with ``root`` first on the import path."""
-    return {**os.environ, "PYTHONPATH": str(root)}
+    """This process's environment with the checkout's packages first on the import path."""
+    shim = SHIMS / root.name
+    if not shim.exists():
+        shim.mkdir()
+        for name, folder in (("kraby_study", "kraby_study"), ("kraby_envs", "envs"),
+                             ("kraby_conf", "conf")):
+            (shim / name).symlink_to(root / folder)
+    return {**os.environ, "PYTHONPATH": str(shim)}
 
 
 def timed(root: Path, args: list[str], cwd: Path, code: int | None = 0) -> float:
@@ -65,14 +76,11 @@ def first_trial_line(root: Path, store: Path, cwd: Path) -> float:
 
 
 def import_seconds(root: Path, module: str) -> float:
-    """Cumulative import time of ``module`` (python -X importtime), in seconds."""
-    done = subprocess.run([sys.executable, "-X", "importtime", "-c", f"import {module}"],
-                          env=environment(root), capture_output=True, text=True, check=True)
-    for line in reversed(done.stderr.splitlines()):
-        parts = [p.strip() for p in line.split("|")]
-        if len(parts) == 3 and parts[2] == module:
-            return int(parts[1]) / 1e6
-    raise SystemExit(f"no importtime line for {module}")
+    """Wall seconds of a fresh interpreter that imports ``module`` and ends."""
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-c", f"import {module}"], env=environment(root),
+                   capture_output=True, check=True)
+    return time.perf_counter() - start
 
 
 def measure(root: Path, work: Path, repeats: int) -> dict[str, list[float]]:
