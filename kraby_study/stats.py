@@ -3,9 +3,10 @@
 Every statistic is over seeds: one value per complete seed (its final score, its AUC, ...).
 See docs/statistics.md for what each one means and why it was chosen.
 
-- Interval: the 95 % Student-t confidence interval of the mean over seeds,
-  mean +- t(0.975, n - 1) * s / sqrt(n), with s the sample standard deviation (ddof 1).
-  It needs at least two seeds; with one it is left empty.
+- Interval of a mean over seeds (final score, AUC, training time, the learning-curve bands):
+  the 95 % Hall skewness-corrected t interval (:func:`hall_interval`; Hall 1992), which is
+  the Student-t interval mean +- t(0.975, n - 1) * s / sqrt(n) moved and stretched by the
+  sample's skewness. It needs at least two seeds; with one it is left empty.
 - Robust summary: the interquartile mean (IQM) over seeds with its 95 % Tukey-McLaughlin
   trimmed-t interval, and the probability of improvement of the best value over another, after
   Agarwal et al., "Deep Reinforcement Learning at the Edge of the Statistical Precipice"
@@ -44,7 +45,8 @@ if TYPE_CHECKING:
     import pandas as pd
 
 LEVEL = 0.95
-INTERVAL_NAME = "95 % Student-t confidence interval of the mean over seeds"
+INTERVAL_NAME = ("95 % Hall skewness-corrected t interval of the mean over seeds (Hall 1992; "
+                 "the Student-t interval when the seeds' skewness is 0)")
 TEST_NAME = ("two-sided Welch's t-test against the best value, uncorrected (for information: "
              "the ties do not use it)")
 HOLM_NAME = (f"{PROCEDURE}, alpha = {ALPHA}: the adjusted p of 'this value is a best'; "
@@ -81,6 +83,9 @@ def t_interval(mean: np.ndarray | pd.Series | float, sd: np.ndarray | pd.Series 
                level: float = LEVEL) -> tuple[np.ndarray, np.ndarray]:
     """Student-t confidence interval of a mean, elementwise; NaN where n < 2.
 
+    The report's intervals of a mean use :func:`hall_interval`, which is this one when the
+    skewness is 0; the IQM's interval uses this one below 4 seeds.
+
     Args:
         mean: Sample means.
         sd: Sample standard deviations (ddof 1).
@@ -110,17 +115,107 @@ def welch_p(a: Sequence[float], b: Sequence[float]) -> float:
     return welch_two_sided_p(a, b)
 
 
-def describe(samples: pd.DataFrame, group: str, column: str) -> pd.DataFrame:
-    """Count, mean, sd and t interval of ``column`` per ``group``, vectorised.
+def hall_interval(mean: np.ndarray | pd.Series | float, sd: np.ndarray | pd.Series | float,
+                  n: np.ndarray | pd.Series | float,
+                  skewness: np.ndarray | pd.Series | float,
+                  level: float = LEVEL) -> tuple[np.ndarray, np.ndarray]:
+    """Hall's skewness-corrected t interval of a mean, elementwise; NaN where n < 2.
+
+    Peter Hall, "On the removal of skewness by transformation", Journal of the Royal
+    Statistical Society B 54(1), 1992, 221-228 (see also Zhou and Dinh, "Nonparametric
+    confidence intervals for the one- and two-sample problems", Biostatistics 6(2), 2005).
+    With T = (mean - mu) / (s / sqrt(n)), gamma the sample skewness and b = gamma / (3 sqrt(n)),
+    the monotone transform
+
+        g(T) = T + b T^2 + (b^2 / 3) T^3 + b / 2 = ((1 + b T)^3 - 1) / (3 b) + b / 2
+
+    removes T's skewness to first order, and is taken to follow t(n - 1). With
+    q = t(0.5 + level / 2, n - 1) the interval is
+
+        [mean - g^-1(q) s / sqrt(n), mean - g^-1(-q) s / sqrt(n)],
+
+    g^-1(v) = ((1 + 3 b (v - b / 2))^(1/3) - 1) / b with the real cube root, computed here as
+    3 (v - b / 2) / (c^2 + c + 1), c = (1 + 3 b (v - b / 2))^(1/3) (the same number, and
+    v - b / 2 at b = 0 without dividing by b). With gamma = 0 it is the Student-t interval
+    (:func:`t_interval`), which it also falls back to where gamma is NaN (s = 0).
+
+    Args:
+        mean: Sample means.
+        sd: Sample standard deviations (ddof 1).
+        n: Sample sizes.
+        skewness: Sample skewnesses, the biased moment estimator m3 / m2^1.5
+            (:func:`sample_skewness`).
+        level: Confidence level.
 
     Returns:
-        A frame indexed by group with columns n, mean, sd, low, high.
+        Lower and upper bounds, as float arrays.
+    """
+    mean_a = np.asarray(mean, dtype=float)
+    sd_a = np.asarray(sd, dtype=float)
+    n_a = np.asarray(n, dtype=float)
+    gamma = np.asarray(skewness, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dof = np.where(n_a >= 2, n_a - 1, np.nan)
+        q = scipy.stats.t.ppf(0.5 + level / 2, dof)
+        b = np.where(np.isfinite(gamma) & (sd_a > 0), gamma, 0.0) / (3 * np.sqrt(n_a))
+
+        def inverse(v: np.ndarray) -> np.ndarray:
+            shifted = v - b / 2
+            c = np.cbrt(1 + 3 * b * shifted)
+            return 3 * shifted / (c * c + c + 1)
+
+        se = sd_a / np.sqrt(n_a)
+        low = mean_a - inverse(q) * se
+        high = mean_a - inverse(-q) * se
+    keep = n_a >= 2
+    return np.where(keep, low, np.nan), np.where(keep, high, np.nan)
+
+
+def sample_skewness(values: Sequence[float]) -> float:
+    """The biased moment estimator of skewness, m3 / m2^1.5 (m_k the k-th central moment with
+    divisor n, as ``scipy.stats.skew(bias=True)``); NaN with fewer than 2 values or no spread.
+    0 for any 2 values."""
+    x = _array(values)
+    if len(x) < 2:
+        return math.nan
+    dev = x - np.mean(x)
+    m2 = float(np.mean(dev ** 2))
+    return float(np.mean(dev ** 3)) / m2 ** 1.5 if m2 > 0 else math.nan
+
+
+def _grouped_skewness(samples: pd.DataFrame, group: str | list[str], column: str
+                      ) -> pd.Series:
+    """:func:`sample_skewness` of ``column`` per ``group``, vectorised (NaN values skipped)."""
+    dev = samples[column].astype(float) - samples.groupby(group, sort=True)[column].transform(
+        "mean")
+    moments = samples.assign(_m2=dev ** 2, _m3=dev ** 3).groupby(group, sort=True)[
+        ["_m2", "_m3"]].mean()
+    return (moments["_m3"] / moments["_m2"] ** 1.5).where(moments["_m2"] > 0)
+
+
+def mean_bands(samples: pd.DataFrame, group: str | list[str], column: str) -> pd.DataFrame:
+    """Count, mean, sd, skewness and Hall interval (:func:`hall_interval`) of ``column`` per
+    ``group``, vectorised; NaN values are skipped.
+
+    Returns:
+        A frame indexed by group with columns n, mean, sd, skewness, low, high.
     """
     grouped = samples.groupby(group, sort=True)[column].agg(["count", "mean", "std"])
     grouped = grouped.rename(columns={"count": "n", "std": "sd"})
-    low, high = t_interval(grouped["mean"], grouped["sd"], grouped["n"])
+    grouped["skewness"] = _grouped_skewness(samples, group, column)
+    low, high = hall_interval(grouped["mean"], grouped["sd"], grouped["n"],
+                              grouped["skewness"])
     grouped["low"], grouped["high"] = low, high
     return grouped
+
+
+def describe(samples: pd.DataFrame, group: str, column: str) -> pd.DataFrame:
+    """Count, mean, sd, skewness and Hall interval of ``column`` per ``group`` (:func:`mean_bands`).
+
+    Returns:
+        A frame indexed by group with columns n, mean, sd, skewness, low, high.
+    """
+    return mean_bands(samples, group, column)
 
 
 def compare_to_best(scores: dict[int, list[float]],
@@ -152,7 +247,7 @@ def _array(values: Sequence[float]) -> np.ndarray:
 
 
 def mean_interval(values: Sequence[float], level: float = LEVEL) -> tuple[float, float, float]:
-    """Mean of a sample with its Student-t interval (:func:`t_interval`).
+    """Mean of a sample with its Hall skewness-corrected t interval (:func:`hall_interval`).
 
     Returns:
         (mean, low, high); low and high are NaN with fewer than 2 values, all three with none.
@@ -163,7 +258,8 @@ def mean_interval(values: Sequence[float], level: float = LEVEL) -> tuple[float,
     mean = float(np.mean(x))
     if len(x) < 2:
         return mean, math.nan, math.nan
-    low, high = t_interval(mean, float(np.std(x, ddof=1)), len(x), level)
+    low, high = hall_interval(mean, float(np.std(x, ddof=1)), len(x), sample_skewness(x),
+                              level)
     return mean, float(low), float(high)
 
 
@@ -203,8 +299,8 @@ def iqm_interval(values: Sequence[float], level: float = LEVEL) -> tuple[float, 
         return float(x[0]), float(x[0])
     g = n // 4
     if g == 0:
-        _, low, high = mean_interval(x, level)
-        return low, high
+        low, high = t_interval(float(np.mean(x)), float(np.std(x, ddof=1)), n, level)
+        return float(low), float(high)
     winsorised = np.clip(x, x[g], x[n - g - 1])
     se = float(np.std(winsorised, ddof=1)) / ((1 - 2 * 0.25) * math.sqrt(n))
     half = float(scipy.stats.t.ppf(0.5 + level / 2, n - 2 * g - 1)) * se

@@ -11,7 +11,7 @@ import numpy as np
 import optuna
 import pandas as pd
 import pytest
-from conftest import sqlite_url
+from conftest import hall_bounds, sqlite_url
 from optuna.distributions import FloatDistribution
 from optuna.trial import TrialState, create_trial
 from scipy import stats
@@ -20,7 +20,7 @@ from synthetic import Run, add_sweep, add_trials, learning_curve, write_curves
 from kraby_study.errors import ConfigError, StoreError
 from kraby_study.records import Outcome, StudyAttrs, TrialAttrs
 from kraby_study.report import ReportIndex, run_report, write_report
-from kraby_study.stats import t_interval, welch_p
+from kraby_study.stats import hall_interval, t_interval, welch_p
 from kraby_study.store.store import Store
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -153,6 +153,7 @@ def test_summary_numbers_equal_a_hand_computation(sweep_report: ReportIndex) -> 
     summary = _read_summary(out, "ent_coef")
     t2 = 4.302652729911275  # Student t, 97.5 % quantile, 2 degrees of freedom
     low = summary.loc[0.01]
+    # [1, 2, 3] has skewness 0: Hall's interval is the Student-t one.
     assert (low["complete"], low["failed"], low["pending"]) == (3, 1, 0)
     assert low["final_mean"] == pytest.approx(2.0)
     assert low["final_sd"] == pytest.approx(1.0)
@@ -163,7 +164,14 @@ def test_summary_numbers_equal_a_hand_computation(sweep_report: ReportIndex) -> 
     assert (high["complete"], high["failed"]) == (3, 0)
     assert high["final_mean"] == pytest.approx(5.0)
     assert high["final_sd"] == pytest.approx(math.sqrt(13.0), rel=1e-5)
-    assert high["final_high"] == pytest.approx(5.0 + t2 * math.sqrt(13.0 / 3.0), rel=1e-5)
+    # [2, 4, 9] is right-skewed: Hall's interval (the cubic's roots), above the Student-t one.
+    _, hall_low, hall_high = hall_bounds([2.0, 4.0, 9.0])
+    assert (high["final_low"], high["final_high"]) == pytest.approx((hall_low, hall_high),
+                                                                    rel=1e-5)
+    assert high["final_high"] > 5.0 + t2 * math.sqrt(13.0 / 3.0)
+    # Training time, the same interval: 20, 20, 26 s.
+    assert (high["time_low"], high["time_high"]) == pytest.approx(
+        hall_bounds([20.0, 20.0, 26.0])[1:], rel=1e-5)
     # Welch: t = 3 / sqrt(13/3 + 1/3), Welch-Satterthwaite degrees of freedom.
     var = (1.0 / 3.0, 13.0 / 3.0)
     t_stat = 3.0 / math.sqrt(sum(var))
@@ -173,12 +181,15 @@ def test_summary_numbers_equal_a_hand_computation(sweep_report: ReportIndex) -> 
     assert (high["mark"], low["mark"]) == ("best", "tie")  # p = 0.28: not told apart
     text = (out / "ent_coef" / "summary.md").read_text()
     assert "ent_coef: 0.1 best final score (mean 5" in text
-    assert "Welch's t-test" in text and "95 % Student-t" in text
+    assert "Welch's t-test" in text and "95 % Hall skewness-corrected t interval" in text
 
 
 def test_statistics_edge_cases() -> None:
     low, high = t_interval([1.0, 1.0], [0.5, 0.5], [1, 4])
     assert math.isnan(low[0]) and math.isnan(high[0])  # one seed: no interval
+    assert high[1] == pytest.approx(1.0 + stats.t.ppf(0.975, 3) * 0.25)
+    low, high = hall_interval([1.0, 1.0], [0.5, 0.5], [1, 4], [0.0, 0.0])
+    assert math.isnan(low[0]) and math.isnan(high[0])
     assert high[1] == pytest.approx(1.0 + stats.t.ppf(0.975, 3) * 0.25)
     assert math.isnan(welch_p([1.0], [1.0, 2.0]))
     assert welch_p([1.0, 1.0], [1.0, 1.0]) == 1.0

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import newcombe_bounds, sqlite_url
+from conftest import hall_bounds, newcombe_bounds, sqlite_url
 from optuna.distributions import CategoricalDistribution
 from optuna.trial import TrialState, create_trial
 from scipy import stats
@@ -113,12 +113,6 @@ def _summary(out: Path, study: str = "learning_rate") -> pd.DataFrame:
                        na_values=[""]).set_index("value")
 
 
-def _t_interval(values: list[float]) -> tuple[float, float, float]:
-    x = np.asarray(values)
-    half = stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / math.sqrt(len(x))
-    return float(x.mean()), float(x.mean() - half), float(x.mean() + half)
-
-
 def test_iqm_iqr_and_the_failed_run(report: ReportIndex) -> None:
     summary = _summary(report.out)
     low = summary.loc[0.001]
@@ -145,9 +139,28 @@ def test_auc_is_the_mean_of_each_seed_curve(report: ReportIndex) -> None:
         row = summary.loc[value]
         assert row["auc_mean"] == pytest.approx(np.mean(aucs), rel=1e-5)
         if len(aucs) > 1:
-            _, low, high = _t_interval(aucs)
+            _, low, high = hall_bounds(aucs)
             assert (row["auc_low"], row["auc_high"]) == pytest.approx((low, high), rel=1e-5)
     assert summary.loc[0.3, "auc_mean"] == pytest.approx(1.25 * 3.0)
+
+
+def test_curve_bands_are_hall_intervals_per_value_and_step() -> None:
+    from kraby_study.report.sweep_tables import curve_bands
+
+    rewards = {(0, 100): [1.0, 2.0, 3.0, 10.0], (0, 200): [4.0, 4.0, 4.0, 4.0],
+               (1, 100): [0.5], (1, 200): [2.0, 4.0, 9.0]}
+    curves = pd.DataFrame([(vi, step, r, 1.0) for (vi, step), rs in rewards.items() for r in rs],
+                          columns=["vi", "step", "mean_reward", "wall_time"])
+    bands = curve_bands(curves).set_index(["vi", "step"])
+    for key, values in rewards.items():
+        row = bands.loc[key]
+        assert row["n"] == len(values) and row["wall_time"] == 1.0
+        if len(values) < 2:
+            assert math.isnan(row["low"]) and math.isnan(row["high"])
+        elif np.ptp(values) == 0:
+            assert (row["low"], row["high"]) == (values[0], values[0])
+        else:
+            assert (row["mean"], row["low"], row["high"]) == pytest.approx(hall_bounds(values))
 
 
 def test_default_threshold_reached_and_never_reached(report: ReportIndex) -> None:
@@ -281,7 +294,7 @@ def test_confirm_study(report: ReportIndex) -> None:
     index = report.markdown.read_text()
     assert winner in text and winner in index
     assert "Confirmed verdict: t7 best final score (mean -0.011" in text
-    mean, low, high = _t_interval([-0.010, -0.012, -0.011])
+    mean, low, high = hall_bounds([-0.010, -0.012, -0.011])
     row = next(line for line in text.splitlines() if line.startswith("| t12 |"))
     assert "trial 12 of search 'ppo_search'" in row and "-0.0123" in row
     row = next(line for line in text.splitlines() if line.startswith("| t7 |"))

@@ -8,18 +8,21 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import newcombe_bounds
+from conftest import hall_bounds, newcombe_bounds
 from scipy import stats
 
 from kraby_study.stats import (
     ALPHA,
     HOLM_NAME,
+    INTERVAL_NAME,
     IQM_INTERVAL_NAME,
     Verdict,
     auc,
     compare_to_best,
     default_threshold,
+    describe,
     first_reach,
+    hall_interval,
     holm,
     iqm,
     iqm_interval,
@@ -27,6 +30,8 @@ from kraby_study.stats import (
     mean_interval,
     p_improvement,
     p_improvement_interval,
+    sample_skewness,
+    t_interval,
     verdict,
 )
 
@@ -58,8 +63,10 @@ def test_iqm_interval_on_a_hand_worked_trimmed_t() -> None:
     # [2, 2, 3, 4, 4], sd 1 (squares 1+1+0+1+1 over 4). se = 1 / (0.5 sqrt 5); t(0.975, 2).
     half = 4.302652729911275 * 1 / (0.5 * math.sqrt(5))
     assert iqm_interval([10.0, 1.0, 3.0, 2.0, 4.0]) == pytest.approx((3 - half, 3 + half))
-    # n < 4: nothing cut, the Student-t interval of the mean.
+    # n < 4: nothing cut, the Student-t interval of the mean (not Hall's: [0, 1, 5] is skewed).
     assert iqm_interval([0.0, 1.0]) == pytest.approx(mean_interval([0.0, 1.0])[1:])
+    half = stats.t.ppf(0.975, 2) * stats.sem([0.0, 1.0, 5.0])
+    assert iqm_interval([0.0, 1.0, 5.0]) == pytest.approx((2 - half, 2 + half))
 
 
 def test_iqm_interval_contains_the_estimate_and_narrows_with_the_level() -> None:
@@ -79,6 +86,7 @@ def test_iqm_interval_edge_cases_without_warnings() -> None:
 
 def test_interval_names_name_the_method_and_the_procedure() -> None:
     assert IQM_INTERVAL_NAME.startswith("95 % Tukey-McLaughlin trimmed-t interval")
+    assert INTERVAL_NAME.startswith("95 % Hall skewness-corrected t interval of the mean")
     assert "closed Holm step-down" in HOLM_NAME and "alpha = 0.05" in HOLM_NAME
 
 
@@ -123,7 +131,8 @@ def test_iqr() -> None:
 
 
 def test_mean_interval() -> None:
-    # [1, 2, 3]: mean 2, sd 1, half-width t(0.975, 2) / sqrt(3) = 4.3027 / 1.7321 = 2.4841.
+    # [1, 2, 3]: mean 2, sd 1, skewness 0, so Hall's interval is the Student-t one: half-width
+    # t(0.975, 2) / sqrt(3) = 4.3027 / 1.7321 = 2.4841.
     mean, low, high = mean_interval([1.0, 2.0, 3.0])
     half = stats.t.ppf(0.975, 2) / math.sqrt(3)
     assert half == pytest.approx(2.4841, abs=1e-4)
@@ -131,6 +140,83 @@ def test_mean_interval() -> None:
     mean, low, high = mean_interval([4.0])
     assert mean == 4.0 and math.isnan(low) and math.isnan(high)
     assert all(math.isnan(v) for v in mean_interval([]))
+
+
+def test_mean_interval_is_halls_on_a_hand_worked_skewed_sample() -> None:
+    # [1, 2, 3, 10]: mean 4, deviations -3, -2, -1, 6; m2 = 50 / 4 = 12.5, m3 = 180 / 4 = 45,
+    # skewness 45 / 12.5^1.5 = 1.01823; s = sqrt(50 / 3), b = 1.01823 / (3 * 2) = 0.169706.
+    x = [1.0, 2.0, 3.0, 10.0]
+    assert sample_skewness(x) == pytest.approx(45 / 12.5 ** 1.5, rel=1e-12)
+    assert sample_skewness(x) == pytest.approx(stats.skew(x, bias=True), rel=1e-12)
+    mean, low, high = mean_interval(x)
+    # The inverse by another route: the real root of the cubic g(T) = v (numpy.roots).
+    assert (mean, low, high) == pytest.approx(hall_bounds(x), rel=1e-9)
+    # By hand: g^-1(v) = ((1 + 3 b (v - b / 2))^(1/3) - 1) / b at v = +-q, q = t(0.975, 3).
+    b, q, se = 45 / 12.5 ** 1.5 / 6, stats.t.ppf(0.975, 3), math.sqrt(50 / 3) / 2
+    def inverse(v: float) -> float:
+        w = 1 + 3 * b * (v - b / 2)
+        return (math.copysign(abs(w) ** (1 / 3), w) - 1) / b
+    assert (low, high) == pytest.approx((4 - inverse(q) * se, 4 - inverse(-q) * se), rel=1e-9)
+    # Right skew moves the interval up: the upper bound is further from the mean than the
+    # Student-t one, the lower bound nearer.
+    t_low, t_high = 4 - q * se, 4 + q * se
+    assert t_low < low < mean < t_high < high
+
+
+@pytest.mark.parametrize("x", [SPREAD, [0.1, 0.5, 0.2, 3.0, 0.3], [-5.0, 0.0, 0.2, 0.1, 0.3, -0.1],
+                               [1e6 + 1.0, 1e6 + 1.5, 1e6 + 7.0]])
+def test_hall_interval_against_the_cubic_roots(x: list[float]) -> None:
+    assert mean_interval(x) == pytest.approx(hall_bounds(x), rel=1e-9)
+    assert mean_interval(x, level=0.8) == pytest.approx(hall_bounds(x, level=0.8), rel=1e-9)
+
+
+def test_hall_interval_reduces_to_scipys_t_interval_without_skewness() -> None:
+    # Symmetric samples, and any 2 values (whose skewness is 0): SciPy's t interval.
+    for x in ([1.0, 2.0, 3.0], [0.0, 1.0], [3.0, -7.5], [1.0, 2.0, 4.0, 5.0], SPREAD[:2]):
+        expected = stats.t.interval(0.95, len(x) - 1, loc=np.mean(x), scale=stats.sem(x))
+        assert mean_interval(x)[1:] == pytest.approx(expected, rel=1e-12, abs=1e-12)
+    assert sample_skewness([3.0, -7.5]) == pytest.approx(0.0, abs=1e-12)
+    # Skewness exactly 0 in the vectorised form gives t_interval elementwise.
+    means, sds, ns = np.array([1.0, -2.0]), np.array([0.5, 3.0]), np.array([3, 10])
+    hall = hall_interval(means, sds, ns, np.zeros(2))
+    plain = t_interval(means, sds, ns)
+    assert np.allclose(hall, plain, rtol=1e-14, atol=0)
+
+
+def test_hall_interval_edge_cases_without_warnings() -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        # No spread: the skewness is undefined and the interval is the one point.
+        assert mean_interval([2.5, 2.5, 2.5]) == (2.5, 2.5, 2.5)
+        assert math.isnan(sample_skewness([2.5, 2.5, 2.5]))
+        assert math.isnan(sample_skewness([1.0]))
+        # NaN skewness with a spread: the Student-t interval; n < 2: NaN.
+        low, high = hall_interval([1.0, 1.0, 1.0], [0.5, 0.5, 0.0], [1, 4, 3],
+                                  [math.nan, math.nan, math.nan])
+        assert math.isnan(low[0]) and math.isnan(high[0])
+        assert (low[1], high[1]) == pytest.approx(
+            (1 - stats.t.ppf(0.975, 3) * 0.25, 1 + stats.t.ppf(0.975, 3) * 0.25))
+        assert (low[2], high[2]) == (1.0, 1.0)
+
+
+def test_describe_gives_the_same_interval_as_mean_interval() -> None:
+    # describe (final score, training time) and mean_interval (AUC, the benchmark) print one
+    # interval; NaN values are skipped as mean_interval would never see them.
+    import pandas as pd
+
+    groups = {0: [1.0, 2.0, 3.0, 10.0], 1: [5.0, 5.0, 5.0], 2: [7.0], 3: [1.0, 2.0],
+              4: SPREAD}
+    frame = pd.DataFrame([(g, v) for g, vs in groups.items() for v in vs] + [(3, math.nan)],
+                         columns=["g", "v"])
+    described = describe(frame, "g", "v")
+    for g, values in groups.items():
+        mean, low, high = mean_interval(values)
+        row = described.loc[g]
+        assert row["n"] == len(values) and row["mean"] == pytest.approx(mean)
+        if len(values) < 2:
+            assert math.isnan(row["low"]) and math.isnan(row["high"])
+        else:
+            assert (row["low"], row["high"]) == pytest.approx((low, high), rel=1e-12)
 
 
 # Comparisons -------------------------------------------------------------------------------------

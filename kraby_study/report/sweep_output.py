@@ -34,20 +34,24 @@ from kraby_study.stats import (
 MARK_TEXT = {"best": "best", "tie": "\u2248 best", "": ""}
 CAPTIONS = {
     "learning_curves": "Mean episode reward against environment steps, mean over seeds with its "
-                       "95 % t-interval; (b) zooms on the last quarter of training.",
+                       "95 % Hall skewness-corrected t interval; (b) zooms on the last quarter "
+                       "of training.",
     "final_score": "Final score (mean episode reward over the last 10 % of training) of every "
-                   "seed; mean and 95 % t-interval beside them. Shaded: the best mean, and the "
+                   "seed; mean and 95 % Hall skewness-corrected t interval beside them. "
+                   "Shaded: the best mean, and the "
                    f"values not significantly worse than it ({PROCEDURE_NAME}).",
     "wallclock": "Mean episode reward against wall-clock time since the start of training.",
-    "training_time": "Training time of every run, with mean and 95 % t-interval.",
+    "training_time": ("Training time of every run, with mean and 95 % Hall "
+                      "skewness-corrected t interval."),
     "sample_efficiency": "Sample efficiency (AUC: the mean of a seed's binned mean episode "
                          "rewards over the whole run, the normalised area under its learning "
-                         "curve) of every seed; mean and 95 % t-interval beside them.",
+                         "curve) of every seed; mean and 95 % Hall skewness-corrected t "
+                         "interval beside them.",
     "time_to_threshold": "Environment steps (a) and seconds (b) until a seed's learning curve "
                          "first reached the threshold, for every seed that reached it; beside "
-                         "them the mean over those seeds with its 95 % t-interval. k/N: seeds "
-                         "that reached it of the value's complete seeds; 'none reached' marks "
-                         "values where none did.",
+                         "them the mean over those seeds with its 95 % Hall skewness-corrected "
+                         "t interval. k/N: seeds that reached it of the value's complete "
+                         "seeds; 'none reached' marks values where none did.",
     "improvement": "Probability of improvement P(best > value) of the best value over each "
                    "other value: the share of pairs of seeds (one of each) where the best "
                    "value's final score is higher, ties counted half, with its 95 % "

@@ -3,8 +3,8 @@ wall-clock time, training time, final score, sample efficiency and time to thres
 value, and the best value's probability of improvement over each other value.
 
 Lines are means over the complete seeds of a value; bands and error bars are the 95 %
-Student-t intervals of those means, except the probability of improvement's, which are
-Newcombe score-type intervals (see :mod:`kraby_study.stats`).
+Hall skewness-corrected t intervals of those means (Hall 1992), except the probability of
+improvement's, which are Newcombe score-type intervals (see :mod:`kraby_study.stats`).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from kraby_study.stats import mean_interval
 LATE_FRACTION = 0.25
 """The zoomed panel shows the last quarter of training."""
 REWARD_LABEL = "mean episode reward"
-BAND_NOTE = "line: mean over seeds\nband: 95 % t-interval (n >= 2)"
+BAND_NOTE = "line: mean over seeds\nband: 95 % Hall skewness-corrected\nt interval (n >= 2)"
 
 
 def _title(sweep: Sweep, what: str) -> str:
@@ -175,7 +175,7 @@ def _legend_entries(extra: list[Line2D | Patch]) -> list[Line2D | Patch]:
     return [Line2D([], [], marker="o", linestyle="", color=MUTED, alpha=0.55, markersize=5,
                    label="one seed"),
             Line2D([], [], marker="o", linestyle="-", color=MUTED, markeredgecolor="black",
-                   markersize=7, label="mean, 95 % t-interval"), *extra]
+                   markersize=7, label="mean, 95 % Hall skewness-corrected t interval"), *extra]
 
 
 def training_time(sweep: Sweep, path: Path) -> Path:
@@ -244,7 +244,7 @@ def _threshold_text(sweep: Sweep) -> str:
 
 def time_to_threshold(sweep: Sweep, path: Path) -> Path:
     """Env steps (a) and seconds (b) until each seed's curve first reached the threshold:
-    every seed that reached it, the mean over those seeds with its t-interval, and how many of
+    every seed that reached it, the mean over those seeds with its Hall interval, and how many of
     the complete seeds reached it; values where none did are marked."""
     fig, axes = new_figure(WIDE, ncols=2)
     seeds = sweep.seeds
@@ -283,7 +283,7 @@ def time_to_threshold(sweep: Sweep, path: Path) -> Path:
                             "reached the threshold"))
     handles = _legend_entries(extra)
     handles[0].set_label("one seed that reached the threshold")
-    handles[1].set_label("mean over those seeds, 95 % t-interval")
+    handles[1].set_label("mean over those seeds, 95 % Hall skewness-corrected t interval")
     fig.legend(handles=handles, loc="outside lower center", ncols=2, frameon=False)
     fig.suptitle(_title(sweep, f"time to threshold, {_threshold_text(sweep)}"))
     return save(fig, path)

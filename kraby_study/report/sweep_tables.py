@@ -40,10 +40,10 @@ from kraby_study.stats import (
     iqm_interval,
     iqr,
     iqr_unbiased,
+    mean_bands,
     mean_interval,
     p_improvement,
     p_improvement_interval,
-    t_interval,
     verdict,
 )
 
@@ -163,14 +163,13 @@ def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.Data
 
 
 def curve_bands(curves: pd.DataFrame) -> pd.DataFrame:
-    """Mean reward and its t interval over seeds, per value and step (vectorised)."""
+    """Mean reward and its Hall skewness-corrected t interval over seeds
+    (:func:`kraby_study.stats.mean_bands`), per value and step (vectorised)."""
     if curves.empty:
         return pd.DataFrame(columns=["vi", "step", "n", "mean", "sd", "low", "high", "wall_time"])
-    grouped = curves.groupby(["vi", "step"], sort=True).agg(
-        n=("mean_reward", "count"), mean=("mean_reward", "mean"), sd=("mean_reward", "std"),
-        wall_time=("wall_time", "mean"))
-    grouped["low"], grouped["high"] = t_interval(grouped["mean"], grouped["sd"], grouped["n"])
-    return grouped.reset_index()
+    grouped = mean_bands(curves, ["vi", "step"], "mean_reward")
+    grouped["wall_time"] = curves.groupby(["vi", "step"], sort=True)["wall_time"].mean()
+    return grouped[["n", "mean", "sd", "low", "high", "wall_time"]].reset_index()
 
 
 def _finals(done: pd.DataFrame) -> dict[int, list[float]]:
@@ -185,7 +184,7 @@ def left_out_note(n: int, min_seeds: int) -> str:
 
 def summarise(trials: pd.DataFrame, labels: list[str],
               bootstrap: int = BOOTSTRAP_REPETITIONS, min_seeds: int = MIN_SEEDS) -> pd.DataFrame:
-    """One row per value: run counts; the complete seeds' final score (mean, sd, t-interval;
+    """One row per value: run counts; the complete seeds' final score (mean, sd, Hall interval;
     IQM with its trimmed-t interval; IQR raw and rescaled to be comparable across n) and
     training time; the raw two-sided Welch p-value against the best value (``p_vs_best``) and
     the adjusted p of the closed Holm-Welch step-down (``p_holm``,
@@ -313,7 +312,7 @@ def seed_metrics(trials: pd.DataFrame, curves: pd.DataFrame, threshold: float) -
 
 def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame) -> pd.DataFrame:
     """The summary with the curve metrics of each value's complete seeds: AUC (mean and
-    t-interval over the seeds with a curve), env steps and seconds to the threshold and how
+    Hall interval over the seeds with a curve), env steps and seconds to the threshold and how
     many seeds reached it.
 
     Steps and seconds to the threshold are restricted means over the seeds with a curve: a seed
@@ -362,7 +361,7 @@ def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
 
 def arms_frame(sweep: Sweep) -> pd.DataFrame:
     """A confirm study's configurations: label, origin, the source's own score, and the
-    confirmed final score (mean, t-interval, IQM, trimmed-t interval, n)."""
+    confirmed final score (mean, Hall interval, IQM, trimmed-t interval, n)."""
     arms = {str(arm.get("label")): arm for arm in sweep.data.definition.get("arms") or []
             if isinstance(arm, dict)}
     rows = []
