@@ -2,10 +2,10 @@
 
 Each command runs as ``python -m kraby_study.cli`` from a checkout (``PYTHONPATH`` puts its
 ``kraby_study``, ``kraby_envs`` and ``kraby_conf`` first), in a fresh process, ``--repeats``
-times; the table gives the median wall time. With ``--baseline DIR`` a second checkout (e.g. an older commit in a git worktree) is
-measured in the same run, the two interleaved, and each row gets the ratio this / baseline.
-The first row is a bare ``python -c "import kraby_study.cli"``: what every command pays before
-it parses its arguments. Usage::
+times; the table gives the median wall time. With ``--baseline DIR`` a second checkout (e.g.
+an older commit in a git worktree) is measured in the same run, the two interleaved, and each
+row gets the ratio this / baseline.
+Usage::
 
     python benchmarks/bench_startup.py [--repeats 5] [--baseline /tmp/before]
 """
@@ -75,14 +75,6 @@ def first_trial_line(root: Path, store: Path, cwd: Path) -> float:
         proc.wait()
 
 
-def import_seconds(root: Path, module: str) -> float:
-    """Wall seconds of a fresh interpreter that imports ``module`` and ends."""
-    start = time.perf_counter()
-    subprocess.run([sys.executable, "-c", f"import {module}"], env=environment(root),
-                   capture_output=True, check=True)
-    return time.perf_counter() - start
-
-
 def measure(root: Path, work: Path, repeats: int) -> dict[str, list[float]]:
     """Every measurement of one checkout, ``repeats`` times."""
     small = work / f"small-{root.name}.db"
@@ -92,8 +84,6 @@ def measure(root: Path, work: Path, repeats: int) -> dict[str, list[float]]:
                        cwd=work, env=environment(root), capture_output=True, check=True)
     rows: dict[str, list[float]] = {}
     for _ in range(repeats):
-        rows.setdefault("import kraby_study.cli", []).append(
-            import_seconds(root, "kraby_study.cli"))
         rows.setdefault("kraby-study --help", []).append(timed(root, ["--help"], work))
         rows.setdefault("refused input (run ppo.gamma=1.5)", []).append(timed(
             root, ["run", "study=ent_coef", "ppo.gamma=1.5",
