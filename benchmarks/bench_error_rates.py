@@ -12,7 +12,7 @@
   (skew-normal, shape -4) and right-skewed (lognormal, sigma 0.5) data. The final score, AUC
   and training-time intervals (and the learning-curve bands) are one method, Hall's
   skewness-corrected t interval (``stats.mean_interval``, the same numbers as
-  ``stats.describe`` and ``stats.mean_bands``), and share one row; the plain Student-t interval
+  ``stats.describe``), and share one row; the plain Student-t interval
   it replaced is measured on the same samples and printed apart, for comparison (it is not in
   ``coverage.csv`` nor in the last line). P(improvement)'s Newcombe interval is measured for a
   value 1 sd better, n seeds a side.
@@ -40,7 +40,7 @@ import pandas as pd
 from scipy import stats as sps
 
 from kraby_study import stats
-from kraby_study.comparison import ALPHA, compare_with_best
+from kraby_study.comparison import ALPHA, compare_with_best, holm
 from kraby_study.coverage import COVERAGE_PATH
 
 SEED = 20240522
@@ -80,7 +80,7 @@ def old_rule(scores: dict[int, np.ndarray]) -> list[int]:
     diff = np.mean(x) - np.array([np.mean(scores[g]) for g in others])
     df = (top + spread) ** 2 / (top ** 2 / (len(x) - 1) + spread ** 2 / (n - 1))
     pvalues = 2 * sps.t.sf(np.abs(diff) / np.sqrt(top + spread), df)
-    adjusted = stats.holm(list(pvalues))
+    adjusted = holm(list(pvalues))
     return [g for g, p in zip(others, adjusted, strict=True) if p < ALPHA]
 
 
@@ -99,7 +99,7 @@ def min_df_rule(scores: dict[int, np.ndarray]) -> list[int]:
     np.fill_diagonal(beats, np.nan)
     pi = np.minimum(1.0, (len(groups) - 1) * np.nanmin(beats, axis=0))
     best = groups[int(np.argmax(mean))]
-    adjusted = stats.holm(list(pi))
+    adjusted = holm(list(pi))
     return [g for g, p in zip(groups, adjusted, strict=True) if g != best and p < ALPHA]
 
 

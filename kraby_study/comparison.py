@@ -159,13 +159,22 @@ def welch_greater_matrix(samples: Sequence[np.ndarray]) -> np.ndarray:
     return np.where(both_flat, certain, p)
 
 
-def _holm(pvalues: list[float]) -> list[float]:
-    """Holm (1979) adjusted p-values (:func:`kraby_study.stats.holm`, without NaN)."""
-    p = np.asarray(pvalues, dtype=float)
-    order = np.argsort(p, kind="stable")
-    m = len(p)
+def holm(pvalues: Sequence[float]) -> list[float]:
+    """Holm (1979) step-down adjusted p-values, in the order given.
+
+    With the m p-values sorted up, p(1) <= ... <= p(m), the i-th adjusted one is
+    max over j <= i of min(1, (m - j + 1) p(j)). Reject where adjusted p < alpha: the chance of
+    any false rejection stays <= alpha. SciPy has no Holm correction (only BH and BY).
+
+    Returns:
+        Adjusted p-values; NaN entries stay NaN and do not count in m.
+    """
+    p = np.asarray(pvalues, dtype=float).ravel()
+    adjusted = np.full(len(p), math.nan)
+    present = np.flatnonzero(~np.isnan(p))
+    order = present[np.argsort(p[present], kind="stable")]
+    m = len(order)
     scaled = np.minimum(1.0, (m - np.arange(m)) * p[order])
-    adjusted = np.empty(m)
     adjusted[order] = np.maximum.accumulate(scaled)
     return [float(v) for v in adjusted]
 
@@ -234,7 +243,7 @@ def compare_with_best(scores: Mapping[K, Sequence[float]], alpha: float = ALPHA,
     beaten = np.where(np.eye(k, dtype=bool), np.nan, welch_greater_matrix(
         [family[g] for g in groups]))
     pi = (np.minimum(1.0, (k - 1) * np.nanmin(beaten, axis=0)) if k > 1 else np.ones(1))
-    adjusted = dict(zip(groups, _holm(list(pi)), strict=True))
+    adjusted = dict(zip(groups, holm(list(pi)), strict=True))
     adjusted[best] = math.nan
     worse = [g for g in groups if g != best and adjusted[g] < alpha]
     tied = [g for g in groups if g != best and not adjusted[g] < alpha]

@@ -193,7 +193,7 @@ def _grouped_skewness(samples: pd.DataFrame, group: str | list[str], column: str
     return (moments["_m3"] / moments["_m2"] ** 1.5).where(moments["_m2"] > 0)
 
 
-def mean_bands(samples: pd.DataFrame, group: str | list[str], column: str) -> pd.DataFrame:
+def describe(samples: pd.DataFrame, group: str | list[str], column: str) -> pd.DataFrame:
     """Count, mean, sd, skewness and Hall interval (:func:`hall_interval`) of ``column`` per
     ``group``, vectorised; NaN values are skipped.
 
@@ -207,15 +207,6 @@ def mean_bands(samples: pd.DataFrame, group: str | list[str], column: str) -> pd
                               grouped["skewness"])
     grouped["low"], grouped["high"] = low, high
     return grouped
-
-
-def describe(samples: pd.DataFrame, group: str, column: str) -> pd.DataFrame:
-    """Count, mean, sd, skewness and Hall interval of ``column`` per ``group`` (:func:`mean_bands`).
-
-    Returns:
-        A frame indexed by group with columns n, mean, sd, skewness, low, high.
-    """
-    return mean_bands(samples, group, column)
 
 
 def compare_to_best(scores: dict[int, list[float]],
@@ -271,10 +262,6 @@ def iqm(values: Sequence[float]) -> float:
     """
     x = _array(values)
     return float(scipy.stats.trim_mean(x, 0.25)) if len(x) else math.nan
-
-
-def _iqm_along(x: np.ndarray, axis: int = -1) -> np.ndarray:
-    return scipy.stats.trim_mean(x, 0.25, axis=axis)
 
 
 def iqm_interval(values: Sequence[float], level: float = LEVEL) -> tuple[float, float]:
@@ -343,26 +330,6 @@ def default_threshold(untrained: float, best_final: float, fraction: float = 0.9
     """The reward a curve must reach by default: ``fraction`` of the way from the untrained
     policy's reward to the best value's final score."""
     return untrained + fraction * (best_final - untrained)
-
-
-def holm(pvalues: Sequence[float]) -> list[float]:
-    """Holm (1979) step-down adjusted p-values, in the order given.
-
-    With the m p-values sorted up, p(1) <= ... <= p(m), the i-th adjusted one is
-    max over j <= i of min(1, (m - j + 1) p(j)). Reject where adjusted p < alpha: the chance of
-    any false rejection stays <= alpha. SciPy has no Holm correction (only BH and BY).
-
-    Returns:
-        Adjusted p-values; NaN entries stay NaN and do not count in m.
-    """
-    p = _array(pvalues)
-    adjusted = np.full(len(p), math.nan)
-    present = np.flatnonzero(~np.isnan(p))
-    order = present[np.argsort(p[present], kind="stable")]
-    m = len(order)
-    scaled = np.minimum(1.0, (m - np.arange(m)) * p[order])
-    adjusted[order] = np.maximum.accumulate(scaled)
-    return [float(v) for v in adjusted]
 
 
 def holm_vs_best(scores: Mapping[int, Sequence[float]],

@@ -11,6 +11,7 @@ import pytest
 from conftest import hall_bounds, newcombe_bounds
 from scipy import stats
 
+from kraby_study.comparison import holm
 from kraby_study.stats import (
     ALPHA,
     HOLM_NAME,
@@ -23,7 +24,6 @@ from kraby_study.stats import (
     describe,
     first_reach,
     hall_interval,
-    holm,
     iqm,
     iqm_interval,
     iqr,

@@ -40,7 +40,6 @@ from kraby_study.stats import (
     iqm_interval,
     iqr,
     iqr_unbiased,
-    mean_bands,
     mean_interval,
     p_improvement,
     p_improvement_interval,
@@ -164,10 +163,10 @@ def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.Data
 
 def curve_bands(curves: pd.DataFrame) -> pd.DataFrame:
     """Mean reward and its Hall skewness-corrected t interval over seeds
-    (:func:`kraby_study.stats.mean_bands`), per value and step (vectorised)."""
+    (:func:`kraby_study.stats.describe`), per value and step (vectorised)."""
     if curves.empty:
         return pd.DataFrame(columns=["vi", "step", "n", "mean", "sd", "low", "high", "wall_time"])
-    grouped = mean_bands(curves, ["vi", "step"], "mean_reward")
+    grouped = describe(curves, ["vi", "step"], "mean_reward")
     grouped["wall_time"] = curves.groupby(["vi", "step"], sort=True)["wall_time"].mean()
     return grouped[["n", "mean", "sd", "low", "high", "wall_time"]].reset_index()
 
