@@ -37,10 +37,8 @@ from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
 import numpy as np
-import scipy
+import scipy  # its submodules load on first use: list and best pay for scipy.stats only to test
 
-# scipy loads its submodules on first use: scipy.stats costs half a second to import, and
-# commands that test nothing (list, most of best) never pay it.
 from kraby_study.records import best_group
 
 ALPHA = 0.05

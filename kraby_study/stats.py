@@ -35,6 +35,7 @@ from kraby_study.comparison import (
     ALPHA,
     MIN_SEEDS,
     PROCEDURE,
+    best_with_evidence,
     compare_with_best,
     procedure_name,
     welch_two_sided_p,
@@ -222,7 +223,7 @@ def compare_to_best(scores: dict[int, list[float]],
         The best group (None if none has enough seeds) and p-values by group (NaN for the best
         itself or when a test is impossible).
     """
-    best = compare_with_best(scores, min_seeds=min_seeds).best
+    best = best_with_evidence(scores, min_seeds)
     if best is None:
         return None, {}
     pvalues = {g: (math.nan if g == best else welch_p(scores[best], v))
@@ -524,7 +525,7 @@ def verdict(final: Mapping[int, Sequence[float]], auc_means: Mapping[int, float]
     need = max(2, int(min_seeds))
     scores = {g: [float(v) for v in vs if not math.isnan(v)] for g, vs in final.items()}
     enough = {g for g, v in scores.items() if len(v) >= need}
-    best = compare_with_best(scores, min_seeds=need).best
+    best = best_with_evidence(scores, need)
     # NaN >= ALPHA is False: a group without a test is not tied.
     tied = [g for g in scores if best is not None and g != best and g in enough
             and float(p_holm.get(g, math.nan)) >= ALPHA]

@@ -30,7 +30,7 @@ def campaign_selection(store: Store, name: str) -> Selection:
         if stage["name"] in store.study_names():
             done = sweep_selection(store.load(str(stage["name"])))
         if done is None or not done.finished:
-            progress = (f"{done.tally.complete}/{done.planned} complete" if done is not None
+            progress = (f"{done.tally.complete}/{done.tally.planned} complete" if done is not None
                         else "not run yet")
             raise StoreError(f"campaign {name!r} is not finished: stage {number}/{len(stages)} "
                              f"{stage['name']} is {progress}; rerun `kraby-study run "

@@ -95,11 +95,6 @@ class SweepSelection:
     """Outcomes of the study's counted trials, and the runs planned."""
 
     @property
-    def planned(self) -> int:
-        """Runs planned."""
-        return self.tally.planned
-
-    @property
     def finished(self) -> bool:
         """No planned run is still to come."""
         return self.tally.finished
