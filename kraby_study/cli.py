@@ -128,6 +128,8 @@ CONFIRM_FLAGS = [
 def flag_overrides(args: argparse.Namespace, flags: Sequence[Flag]) -> list[str]:
     """The flags given, as key=value overrides, placed before the user's own overrides."""
     out = []
+    if getattr(args, "racing", False):
+        out.append("racing.enabled=true")
     if getattr(args, "baseline", None):
         out.append(f"confirm.baselines=[{','.join(args.baseline)}]")
     for flag in flags:
@@ -188,7 +190,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     plan = dataclasses.replace(expand_study(cfg), inputs=[i.stored() for i in lookup.inputs])
     # Loaded once the input is known to be good: a refused input answers at once.
     from kraby_study.run.executor import executor_for
-    from kraby_study.run.plan_source import closing_line
+    from kraby_study.run.study_run import closing_line
 
     with executor_for(cfg) as executor:
         summary, counts = run_stage(cfg, plan, executor)
@@ -199,7 +201,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 def run_stage(cfg: DictConfig, plan: StudyPlan, executor: Executor) -> tuple[CommandRun, Tally]:
     """Run a plan on the command's store and executor: (what this command ran, the plan's
     outcomes)."""
-    from kraby_study.run.plan_source import run_plan
+    from kraby_study.run.study_run import run_plan
 
     with open_writer(cfg) as store:
         return run_plan(store, plan, executor, executor.workers(cfg.workers), sys.stdout,
@@ -222,9 +224,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     """One training run, stored like a trial, its model saved."""
     from kraby_study.plan.train import train_plan
     from kraby_study.run.executor import executor_for
-    from kraby_study.run.plan_source import run_plan, train_outcome
+    from kraby_study.run.study_run import run_plan, train_outcome
 
     cfg = compose_config(with_default(flag_overrides(args, [STORAGE]), "ppo", "tuned"))
+    if cfg.racing.enabled:
+        raise ConfigError("racing is for run and confirm: train makes one run")
     plan = train_plan(cfg)
     with executor_for(cfg) as executor, open_writer(cfg) as store:
         summary, _ = run_plan(store, plan, executor, 1, sys.stdout, **run_options(cfg))
@@ -263,6 +267,9 @@ def cmd_optuna(args: argparse.Namespace) -> int:
 
     overrides = with_default(flag_overrides(args, SEARCH_FLAGS), "budget", "quick")
     cfg = compose_config(overrides)
+    if cfg.racing.enabled:
+        raise ConfigError("racing is for run and confirm: a search races its trials' seeds "
+                          "with --pruner wilcoxon")
     validate_search(cfg)
     starts = [(f"ppo={name}", settings_with_ppo(name, overrides))
               for name in cfg.search.enqueue]
@@ -281,7 +288,7 @@ def cmd_confirm(args: argparse.Namespace) -> int:
     from kraby_study.answers.configurations import confirmed_study
     from kraby_study.plan.confirm import baseline_arm, confirm_plan
     from kraby_study.run.executor import executor_for
-    from kraby_study.run.plan_source import closing_line, run_plan
+    from kraby_study.run.study_run import closing_line, run_plan
     from kraby_study.store.store import opened
 
     overrides = flag_overrides(args, CONFIRM_FLAGS)
@@ -388,6 +395,15 @@ def build_parser() -> argparse.ArgumentParser:
         "search.checkpoints equal env-step intervals of the first seed, then the mean score "
         "after each further seed; it stops no trial in the first search.warmup (half) of the "
         "first seed.\n\n" + EPILOG)
+    for name in ("run", "confirm"):
+        parsers[name].add_argument(
+            "--racing", action="store_true",
+            help="run seeds in rounds and stop the values significantly worse than the best "
+            "(as racing.enabled=true; racing.min_seeds, default 3, and racing.alpha, default "
+            "0.05, tune it); budget.seeds (confirm: --seeds) is the most any value gets")
+    parsers["optuna"].add_argument(
+        "--racing", action="store_true",
+        help="not for searches: a search races its seeds with --pruner wilcoxon")
     parsers["confirm"].add_argument(
         "--baseline", action="append", type=_baseline, metavar="ppo=NAME",
         help="add a ppo config's settings as one more configuration (repeatable), e.g. "

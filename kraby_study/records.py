@@ -242,6 +242,10 @@ class StudyAttrs:
     campaign: dict[str, Any] | None = None
     """A campaign stage's place: the campaign's name, this stage's number (from 1) and every
     stage (study, parameter, select, documented)."""
+    race: dict[str, Any] | None = None
+    """A raced study's standing, rewritten after each of its runs: rounds decided, whether the
+    race is over, runs used and, per value, its seeds ended, the round it was dropped after
+    and the p that dropped it (:mod:`kraby_study.race`)."""
 
     @staticmethod
     def stored_names() -> dict[str, str]:

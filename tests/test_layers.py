@@ -22,7 +22,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("plan", ("kraby_study.plan",)),
     ("store", ("kraby_study.store",)),
     ("stats", ("kraby_study.stats", "kraby_study.comparison", "kraby_study.coverage",
-               "kraby_study.selection")),
+               "kraby_study.selection", "kraby_study.race")),
     ("answers", ("kraby_study.answers",)),
     ("run", ("kraby_study.run",)),
     ("report", ("kraby_study.report",)),

@@ -166,6 +166,18 @@ class ReportConfig:
 
 
 @dataclass
+class RacingConfig:
+    """Racing a sweep's or a confirm study's seeds (see docs/studies.md, Racing)."""
+
+    enabled: bool = False
+    """Run seeds in rounds and stop the values significantly worse than the best."""
+    min_seeds: int = 3
+    """Seeds every value gets before a value can be dropped (2 .. the most seeds)."""
+    alpha: float = 0.05
+    """Family-wise error of every drop of the race together, in (0, 0.5]."""
+
+
+@dataclass
 class ConfirmConfig:
     """What ``confirm`` retrains on fresh seeds (see the command's --help)."""
 
@@ -232,6 +244,7 @@ class KrabyConfig:
     search: SearchConfig = field(default_factory=SearchConfig)
     report: ReportConfig = field(default_factory=ReportConfig)
     confirm: ConfirmConfig = field(default_factory=ConfirmConfig)
+    racing: RacingConfig = field(default_factory=RacingConfig)
     storage: str = "sqlite:///studies/kraby.db"
     """Database URL: a SQLite file (created on demand) or postgresql+psycopg://user@host/db."""
     executor: str = "local"

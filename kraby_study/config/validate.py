@@ -122,6 +122,7 @@ def validate(cfg: DictConfig) -> None:
     _require(int(cfg.confirm.top) >= 1, f"confirm.top must be at least 1, got {cfg.confirm.top}")
     _require(int(cfg.confirm.seeds) >= 2,
              f"confirm.seeds must be at least 2 (an interval needs two), got {cfg.confirm.seeds}")
+    validate_racing(cfg.racing)
     if cfg.report.threshold is not None:
         _finite("report.threshold", float(cfg.report.threshold))
     if cfg.study is not None:
@@ -130,6 +131,21 @@ def validate(cfg: DictConfig) -> None:
         for stage in cfg.campaign.stages:
             if stage.select is not None:
                 SelectRule.check(str(stage.select), f"campaign stage {stage.study}: select")
+
+
+def validate_racing(racing: DictConfig, seeds: int | None = None,
+                    where: str = "budget.seeds") -> None:
+    """A race's settings hold together: alpha in (0, 0.5], min_seeds at least 2 and, when
+    racing with ``seeds`` the most seeds a value gets (named ``where``), at most that."""
+    alpha = float(racing.alpha)
+    _require(0 < alpha <= 0.5, f"racing.alpha must be in (0, 0.5], got {racing.alpha}")
+    _require(int(racing.min_seeds) >= 2,
+             f"racing.min_seeds must be at least 2 (a test needs two seeds), got "
+             f"{racing.min_seeds}")
+    if racing.enabled and seeds is not None:
+        _require(int(racing.min_seeds) <= seeds,
+                 f"racing.min_seeds ({racing.min_seeds}) must not exceed {where} ({seeds}), "
+                 "the most seeds a value gets")
 
 
 EXECUTORS = ("local", "ray")

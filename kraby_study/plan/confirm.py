@@ -15,6 +15,7 @@ from typing import Any
 from omegaconf import DictConfig
 
 from kraby_study.errors import ConfigError
+from kraby_study.plan.racing import race_rules
 from kraby_study.plan.settings import model_path, settings_with_ppo
 from kraby_study.plan.spec import StudyPlan, TrialSpec
 from kraby_study.records import StudyKind, sweep_key
@@ -89,6 +90,7 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
         raise ConfigError(f"confirm: two configurations are named alike ({', '.join(labels)})")
     seeds = fresh_seeds(source.used_seeds if source else set(), int(cfg.confirm.seeds),
                         first=int(cfg.seed))
+    racing = race_rules(cfg, seeds, "confirm.seeds")
     steps = source.steps if source else int(cfg.budget.steps)
     curve_every = source.curve_every if source else int(cfg.budget.curve_every)
     name = confirm_name(source.name if source else None, [a.label for a in baselines])
@@ -106,5 +108,7 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
         "seeds": seeds, "steps": steps, "curve_every": curve_every,
         "env_keys": source.env_keys if source else [],
     }
+    if racing is not None:
+        definition["racing"] = racing.stored()
     return StudyPlan(name=name, parameter=PARAMETER, values=labels, specs=specs,
-                     definition=definition)
+                     definition=definition, racing=racing)

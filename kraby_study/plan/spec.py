@@ -44,6 +44,53 @@ class TrialSpec:
 
 
 @dataclass(frozen=True)
+class RaceRules:
+    """How a race runs: its settings (``racing.*`` and ``budget.seeds``)."""
+
+    seeds: int
+    """Most seeds any value gets."""
+    round_seeds: tuple[int, ...] = ()
+    """The seed of each round, first round first (``seed``, ``seed + 1``, ... in a sweep)."""
+    min_seeds: int = 3
+    """Seeds every value gets before the first look (at least 2)."""
+    alpha: float = 0.05
+    """Family-wise error rate over every look of the race."""
+
+    @property
+    def looks(self) -> int:
+        """Rounds after which values can be dropped: min_seeds, ..., seeds."""
+        return max(1, self.seeds - self.min_seeds + 1)
+
+    @property
+    def look_alpha(self) -> float:
+        """The level of each look (alpha spent equally)."""
+        return self.alpha / self.looks
+
+    def describe(self) -> str:
+        """How reports name the rule, e.g. 'racing from round 3 of 10, alpha 0.05 spent
+        over 8 looks (0.00625 each)'."""
+        return (f"racing from round {self.min_seeds} of {self.seeds}: closed Holm-Welch "
+                f"step-down at each look, alpha {self.alpha:g} spent equally over {self.looks} "
+                f"looks ({self.look_alpha:.3g} each)")
+
+    def stored(self) -> dict[str, float | int]:
+        """The rules as a study's definition stores them: a race is never extended or mixed
+        with a fixed design under one name (changing them would change past drops)."""
+        return {"seeds": self.seeds, "min_seeds": self.min_seeds, "alpha": self.alpha,
+                "round_seeds": list(self.round_seeds)}
+
+    @classmethod
+    def of(cls, definition: dict[str, Any]) -> RaceRules | None:
+        """The rules of a stored definition; None for a study that did not race."""
+        stored = definition.get("racing")
+        if not stored:
+            return None
+        return cls(seeds=int(stored["seeds"]),
+                   round_seeds=tuple(int(s) for s in stored["round_seeds"]),
+                   min_seeds=int(stored["min_seeds"]), alpha=float(stored["alpha"]))
+
+
+@dataclass(frozen=True)
 class StudyPlan:
     """A study laid out (a sweep, a confirm study or a train run): its definition for the store and
     one spec per value and seed."""
@@ -59,6 +106,8 @@ class StudyPlan:
     """Settings taken from earlier studies' selected values (``Input.stored()``)."""
     campaign: dict[str, Any] | None = None
     """A campaign stage's place in its campaign (``Campaign.record``)."""
+    racing: RaceRules | None = None
+    """How its seeds race (:mod:`kraby_study.race`); None: every value gets every seed."""
 
     def notes(self) -> StudyAttrs:
         """What is stored beside the definition: rule, inputs, campaign."""

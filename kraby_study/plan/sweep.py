@@ -7,6 +7,7 @@ from omegaconf import DictConfig
 
 from kraby_study.config.validate import to_container, validate_env, validate_ppo
 from kraby_study.errors import ConfigError
+from kraby_study.plan.racing import race_rules
 from kraby_study.plan.settings import model_path, resolved_settings, with_value
 from kraby_study.plan.spec import StudyPlan, TrialSpec
 from kraby_study.records import StudyKind, param_name, sweep_key, value_key, value_label
@@ -27,6 +28,7 @@ def expand_study(cfg: DictConfig) -> StudyPlan:
         raise ConfigError(f"study {study.name!r} lists no values")
     if len({value_key(v) for v in values}) != len(values):
         raise ConfigError(f"study {study.name!r} lists a value twice")
+    racing = race_rules(cfg, run_seeds(cfg), "budget.seeds")
     specs = []
     for index, value in enumerate(values):
         trial_cfg = with_value(cfg, study.parameter, value)
@@ -57,7 +59,10 @@ def expand_study(cfg: DictConfig) -> StudyPlan:
         "steps": int(cfg.budget.steps),
         "curve_every": int(cfg.budget.curve_every),
     }
+    if racing is not None:
+        definition["racing"] = racing.stored()
     return StudyPlan(name=str(study.name), parameter=str(study.parameter), values=values,
-                     specs=specs, definition=definition, select=str(study.select))
+                     specs=specs, definition=definition, select=str(study.select),
+                     racing=racing)
 
 

@@ -1,31 +1,21 @@
-"""Run a study plan (a sweep, a confirm study or a train run): queue its trials in the store,
-run them, record their results."""
+"""The trial source of a study plan (a sweep, a confirm study or a train run): queue its runs in
+the store, hand them out, record their results."""
 
 from __future__ import annotations
-
-from typing import TextIO
 
 from optuna.trial import FrozenTrial
 
 from kraby_study.plan.spec import StudyPlan, TrialSpec
 from kraby_study.records import (
-    Outcome,
     StudyAttrs,
     StudyKind,
-    Tally,
     TrialAttrs,
     is_interrupted,
     latest_by_key,
-    outcome,
     param_name,
-    tally,
 )
-from kraby_study.run.executor import Executor
-from kraby_study.run.progress import Progress
-from kraby_study.run.runner import CommandRun, Retrying, run_trials
-from kraby_study.run.source import StudySource, requeue_orphans
+from kraby_study.run.source import StudySource
 from kraby_study.store.ledger import StudyLedger
-from kraby_study.store.store import Store
 
 
 def swept_name(plan: StudyPlan) -> str | None:
@@ -76,56 +66,3 @@ class PlanSource(StudySource):
         """The counted attempt of each planned run that has one."""
         latest = latest_by_key(self.ledger.trials())
         return [latest[key] for key in self.specs if key in latest]
-
-
-def run_plan(store: Store, plan: StudyPlan, executor: Executor, workers: int, stream: TextIO,
-             live: bool | None = None, heartbeat_seconds: float = 5.0,
-             retry_seconds: float = 60.0) -> tuple[CommandRun, Tally]:
-    """Queue, run and record a plan's trials, ``workers`` at once on the executor; returns
-    this command's summary and the outcomes of the plan's runs."""
-    kind = str(plan.definition.get("kind"))
-    ledger = store.define(plan.name, StudyAttrs(kind=kind, definition=plan.definition,
-                                                fingerprint=plan.fingerprint))
-    ledger.update(plan.notes())
-    requeue_orphans(ledger, stream)
-    source = PlanSource(ledger, plan)
-    source.queue_missing()
-    before = tally(source.counted())
-    pending = len(plan.specs) - before.ended
-    slots = min(workers, max(pending, 1))
-    print(f"study {plan.name}: {len(plan.specs)} trials, {before.complete} complete, "
-          f"{before.failed} failed, {pending} to run on {slots} worker(s)", file=stream,
-          flush=True)
-    progress = Progress(plan.name, len(plan.specs), before.ended, stream, live)
-    summary = run_trials(Retrying(source, retry_seconds, stream), slots, progress, executor,
-                         heartbeat_seconds=heartbeat_seconds)
-    return summary, tally(source.counted())
-
-
-def closing_line(noun: str, plan: StudyPlan, counts: Tally) -> str:
-    """The line a command ends with: ``study NAME: 7/10 complete, 1 failed, 2 left (rerun ...)``."""
-    total = len(plan.specs)
-    return (f"{noun} {plan.name}: {counts.complete}/{total} complete, {counts.failed} failed"
-            + (f", {total - counts.ended} left (rerun the same command to continue)"
-               if counts.ended < total else ""))
-
-
-def train_outcome(store: Store, plan: StudyPlan, summary: CommandRun, seed: int,
-                  stream: TextIO) -> int:
-    """Print how a ``train`` run ended (score, model) and return the command's exit code: 0
-    complete, 1 failed or not run, 130 interrupted."""
-    trial = latest_by_key(store.load(plan.name).trials()).get(plan.specs[0].key)
-    if trial is None:
-        return 130 if summary.interrupted else 1
-    attrs = TrialAttrs.of(trial)
-    line = f"train {plan.name} seed {seed}: {outcome(trial)}"
-    if trial.value is not None:
-        line += f", final score {trial.value:.4g} over {attrs.env_steps} steps"
-    if attrs.failure:
-        line += f" ({attrs.failure})"
-    print(line, file=stream)
-    if attrs.model_path and trial.value is not None:
-        print(f"model: {attrs.model_path}", file=stream)
-    if summary.interrupted:
-        return 130
-    return 0 if outcome(trial) == Outcome.COMPLETE else 1

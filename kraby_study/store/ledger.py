@@ -179,6 +179,16 @@ class StudyLedger:
         else:
             self._study.tell(number, state=TrialState.FAIL)
 
+    def withdraw(self, number: int, reason: str) -> bool:
+        """End a queued trial that will never run (a raced value's queued retry once the value
+        is dropped) as pruned, saying why; False when it had already left the queue."""
+        trial_id = self._id(number)
+        try:
+            self._storage.set_trial_user_attr(trial_id, "failure", reason)
+            return self._storage.set_trial_state_values(trial_id, TrialState.PRUNED)
+        except optuna.exceptions.UpdateFinishedTrialError:
+            return False
+
     def requeue(self, number: int, reason: str) -> None:
         """Give back a trial that will not finish here, saying why, and queue a new attempt."""
         trial_id = self._id(number)

@@ -1,0 +1,227 @@
+"""Racing against the fixed design (a measurement, not a test).
+
+Two parts:
+
+- ``--store URL``: replays racing (``kraby_study.race.race``, the rules ``racing.*`` would use)
+  on every complete fixed-design sweep of a store (every value with all its seeds) and prints,
+  per study, the runs the race uses against the fixed design's, the values it drops and when,
+  and whether the raced selection (the study's own rule, on the survivors' raced seeds) lies
+  in the fixed design's tie set (the best value and the values tied with it under the closed
+  Holm-Welch step-down, alpha 0.05, on all seeds). A replay runs rounds in lockstep: a live
+  race may also run up to one round ahead on idle workers (docs/studies.md, Racing).
+- ``--simulations N``: the race's family-wise error under the global null (every value from
+  one distribution, so any drop is false) and its savings and error when one value is 1 sd
+  better, over a grid of shapes, each with ``N`` simulated races.
+
+Usage::
+
+    python benchmarks/bench_racing.py --store sqlite:///quick10.db [--min-seeds 3]
+        [--alpha 0.05] [--simulations 2000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from kraby_study.comparison import compare_with_best
+from kraby_study.plan.spec import RaceRules
+from kraby_study.race import race
+from kraby_study.records import (
+    Outcome,
+    SelectRule,
+    StudyKind,
+    TrialAttrs,
+    counted,
+    outcome,
+    parse_sweep_key,
+    value_label,
+)
+from kraby_study.selection import select
+from kraby_study.stats import auc
+from kraby_study.store.store import opened_for_reading
+
+SEED = 20261125
+SHAPES = [(3, 10), (5, 10), (8, 10), (12, 10), (5, 5), (8, 20)]
+"""Values x seeds of the simulated races (the documented studies have 4 to 8 values)."""
+
+
+@dataclass(frozen=True)
+class Replay:
+    """One study's race replayed on its fixed-design runs."""
+
+    study: str
+    values: int
+    seeds: int
+    fixed_runs: int
+    raced_runs: int
+    dropped: list[str]
+    raced_selection: str
+    fixed_tie_set: list[str]
+
+    @property
+    def inside(self) -> bool:
+        """The raced selection is in the fixed design's tie set."""
+        return self.raced_selection in self.fixed_tie_set
+
+
+def replay_store(url: str, min_seeds: int, alpha: float) -> list[Replay]:
+    """Replay racing on every sweep of the store whose values all have the same number (>= 2)
+    of seeds, every run complete or failed."""
+    out = []
+    with opened_for_reading(url) as store:
+        for name in store.study_names():
+            ledger = store.load(name)
+            attrs = ledger.attrs
+            if StudyKind.of(attrs.kind) != StudyKind.SWEEP or attrs.definition.get("racing"):
+                continue
+            found = replay_study(ledger, min_seeds, alpha)
+            if found is not None:
+                out.append(found)
+    return out
+
+
+def replay_study(ledger, min_seeds: int, alpha: float) -> Replay | None:  # noqa: ANN001
+    """Replay one fixed-design sweep; None when it is not complete (or not rectangular)."""
+    attrs = ledger.attrs
+    values = list(attrs.definition["values"])
+    trials = counted(ledger.trials())
+    runs: dict[int, dict[int, float]] = {}
+    seconds: dict[int, dict[int, float]] = {}
+    numbers: dict[int, dict[int, int]] = {}
+    seeds_seen: set[int] = set()
+    for trial in trials:
+        parsed = parse_sweep_key(trial.user_attrs.get("key"))
+        if parsed is None:
+            continue
+        ended = outcome(trial)
+        if ended not in (Outcome.COMPLETE, Outcome.FAILED):
+            return None
+        value, seed = parsed
+        seeds_seen.add(seed)
+        runs.setdefault(value, {})[seed] = (float(trial.value) if ended == Outcome.COMPLETE
+                                            else math.nan)
+        seconds.setdefault(value, {})[seed] = float(TrialAttrs.of(trial).wall_time or math.nan)
+        numbers.setdefault(value, {})[seed] = trial.number
+    order = sorted(seeds_seen)
+    n = len(order)
+    if n < 2 or len(runs) != len(values) or any(len(r) != n for r in runs.values()):
+        return None
+    by_round = {v: {i: runs[v][s] for i, s in enumerate(order)} for v in runs}
+    rules = RaceRules(seeds=n, round_seeds=tuple(order), min_seeds=min(min_seeds, n),
+                      alpha=alpha)
+    state = race(list(range(len(values))), by_round, rules)
+    used = {v: state.dropped[v].round if v in state.dropped else state.rounds
+            for v in range(len(values))}
+    rule = SelectRule.of(attrs.select)
+    curves = (ledger.curves([t.number for t in trials]) if rule == SelectRule.AUC else None)
+
+    def pick(per_value: dict[int, int]) -> int | None:
+        final = {v: [by_round[v][i] for i in range(k) if not math.isnan(by_round[v][i])]
+                 for v, k in per_value.items()}
+        secs = {v: [seconds[v][order[i]] for i in range(k)] for v, k in per_value.items()}
+        aucs: dict[int, list[float]] = {v: [] for v in per_value}
+        if curves is not None:
+            for v, k in per_value.items():
+                for i in range(k):
+                    points = curves[curves["number"] == numbers[v][order[i]]]
+                    if len(points):
+                        aucs[v].append(auc(points["mean_reward"].to_numpy(dtype=float)))
+        return select(rule, final, aucs, secs)
+
+    raced = pick({v: used[v] for v in state.survivors})
+    full = {v: [x for x in by_round[v].values() if not math.isnan(x)] for v in by_round}
+    fixed = compare_with_best(full)
+    tie_set = [fixed.best, *fixed.tied] if fixed.best is not None else []
+    label = {v: value_label(values[v]) for v in range(len(values))}
+    return Replay(
+        study=ledger.name, values=len(values), seeds=n, fixed_runs=len(values) * n,
+        raced_runs=sum(used.values()),
+        dropped=[f"{label[v]}@{d.round}" for v, d in state.dropped.items()],
+        raced_selection=label[raced] if raced is not None else "-",
+        fixed_tie_set=[label[v] for v in tie_set])
+
+
+def simulate(job: tuple[int, int, float, int, int, int, float]) -> tuple[int, int, float,
+                                                                          float, float, float]:
+    """Races on normal data: (values, seeds, effect, share of races with a false drop, runs
+    used over fixed runs, share of races that dropped the truly best value)."""
+    k, n, effect, min_seeds, sims, seed, alpha = job
+    rng = np.random.default_rng(seed)
+    rules = RaceRules(seeds=n, round_seeds=tuple(range(n)), min_seeds=min(min_seeds, n),
+                      alpha=alpha)
+    false_drop = 0
+    best_dropped = 0
+    used = 0
+    for _ in range(sims):
+        x = rng.normal(size=(k, n))
+        x[0] += effect
+        state = race(list(range(k)), {v: dict(enumerate(x[v])) for v in range(k)}, rules)
+        if effect == 0:
+            false_drop += bool(state.dropped)
+        best_dropped += 0 in state.dropped
+        used += sum(state.dropped[v].round if v in state.dropped else state.rounds
+                    for v in range(k))
+    return k, n, effect, false_drop / sims, used / (sims * k * n), best_dropped / sims
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--store", help="a store with complete fixed-design sweeps")
+    parser.add_argument("--min-seeds", type=int, default=3)
+    parser.add_argument("--alpha", type=float, default=0.05)
+    parser.add_argument("--simulations", type=int, default=0,
+                        help="simulated races per shape (0: none)")
+    args = parser.parse_args()
+    if args.store:
+        start = time.perf_counter()
+        replays = replay_store(args.store, args.min_seeds, args.alpha)
+        print(f"racing replayed on {args.store} (min_seeds {args.min_seeds}, alpha "
+              f"{args.alpha:g}, spent equally over the looks):\n")
+        print("| study | values x seeds | fixed runs | raced runs | share | dropped (after "
+              "round) | raced selection | fixed tie set | inside |")
+        print("|---|---|---:|---:|---:|---|---|---|---|")
+        for r in replays:
+            print(f"| {r.study} | {r.values} x {r.seeds} | {r.fixed_runs} | {r.raced_runs} | "
+                  f"{100 * r.raced_runs / r.fixed_runs:.0f} % | {', '.join(r.dropped) or '-'} "
+                  f"| {r.raced_selection} | {', '.join(r.fixed_tie_set)} | "
+                  f"{'yes' if r.inside else 'NO'} |")
+        fixed = sum(r.fixed_runs for r in replays)
+        raced = sum(r.raced_runs for r in replays)
+        if replays:
+            print(f"\ntogether: {raced} of {fixed} runs ({100 * raced / fixed:.0f} %); raced "
+                  f"selection inside the fixed tie set in {sum(r.inside for r in replays)} of "
+                  f"{len(replays)} studies ({time.perf_counter() - start:.1f} s)")
+        else:
+            print("no complete fixed-design sweep in the store")
+    if args.simulations:
+        start = time.perf_counter()
+        jobs = [(k, n, effect, args.min_seeds, args.simulations, SEED + 7 * i + j, args.alpha)
+                for i, (k, n) in enumerate(SHAPES) for j, effect in enumerate((0.0, 1.0, 2.0))]
+        with ProcessPoolExecutor() as pool:
+            found = list(pool.map(simulate, jobs))
+        print(f"\nsimulated races on normal data ({args.simulations} per row, min_seeds "
+              f"{args.min_seeds}, alpha {args.alpha:g}); effect: the first value's mean, in sd, "
+              "above the others'\n")
+        print("| values x seeds | effect | P(any drop) under the null | runs used / fixed | "
+              "P(best value dropped) |")
+        print("|---|---:|---:|---:|---:|")
+        worst = 0.0
+        for k, n, effect, fwer, share, lost in found:
+            fw = f"{fwer:.3f}" if effect == 0 else "-"
+            if effect == 0:
+                worst = max(worst, fwer)
+            print(f"| {k} x {n} | {effect:g} | {fw} | {share:.2f} | {lost:.3f} |")
+        mcse = math.sqrt(args.alpha * (1 - args.alpha) / args.simulations)
+        print(f"\nmax family-wise error of a race {worst:.3f} over {len(SHAPES)} shapes (alpha "
+              f"{args.alpha:g}, Monte-Carlo se {mcse:.3f}; "
+              f"{time.perf_counter() - start:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()
