@@ -1,0 +1,380 @@
+"""Racing: the procedure on constructed scores, a raced sweep on a fake pool, and the commands
+(bad input, resume after SIGKILL, PostgreSQL, a raced campaign)."""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import signal
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from conftest import (
+    FAST_HEARTBEAT,
+    SERVER,
+    TINY,
+    children,
+    file_digest,
+    fresh_database,
+    has_study,
+    load,
+    run_cli,
+    spawn_cli,
+    sqlite_url,
+    tiny_with_steps,
+    wait_for,
+    write_study_file,
+)
+from optuna.trial import TrialState
+
+from kraby_study.answers.raced import study_race
+from kraby_study.comparison import compare_with_best
+from kraby_study.config.compose import compose_config
+from kraby_study.plan.spec import RaceRules, TrialSpec
+from kraby_study.plan.sweep import expand_study
+from kraby_study.race import race
+from kraby_study.records import (
+    Outcome,
+    StudyAttrs,
+    TrialAttrs,
+    TrialResult,
+    counted,
+    latest_by_key,
+    outcome,
+    parse_sweep_key,
+)
+from kraby_study.run.pool import Event
+from kraby_study.run.study_run import run_plan
+from kraby_study.store.store import opened
+
+# race() -----------------------------------------------------------------------------------------
+
+
+def test_the_looks_share_alpha_equally() -> None:
+    rules = RaceRules(seeds=10, min_seeds=3, alpha=0.05)
+    assert rules.looks == 8
+    assert rules.look_alpha == pytest.approx(0.00625)
+    assert RaceRules(seeds=3, min_seeds=3).looks == 1
+
+
+def test_a_value_far_below_the_others_is_dropped_after_round_min_seeds() -> None:
+    # Three values whose scores differ by 100 sd: after round 3 the step-down's p of the worst
+    # is about 1e-5 (Welch t about 120 on 4 df), far below 0.05 / 4 looks.
+    runs = {0: dict(enumerate([0.0, 0.1, -0.1, 0.05, 0.0])),
+            1: dict(enumerate([0.02, -0.08, 0.1, 0.0, -0.05])),
+            2: dict(enumerate([-10.0, -10.1, -9.9, -10.0, -10.05]))}
+    state = race([0, 1, 2], runs, RaceRules(seeds=6, min_seeds=3))
+    assert list(state.dropped) == [2] and state.dropped[2].round == 3
+    look = compare_with_best({v: [runs[v][i] for i in range(3)] for v in runs}, alpha=0.0125)
+    assert state.dropped[2].p == pytest.approx(look.p_adjusted[2]) and look.p_adjusted[2] < 1e-3
+    # Rounds 4 and 5 are decided (every value left has them); round 6 is not run yet.
+    assert state.rounds == 5 and not state.over and state.survivors == [0, 1]
+    assert state.wanted(0, 5) and not state.wanted(2, 3)
+
+
+def test_before_round_min_seeds_nothing_is_dropped() -> None:
+    runs = {0: {0: 0.0, 1: 0.1}, 1: {0: -10.0, 1: -10.1}}
+    state = race([0, 1], runs, RaceRules(seeds=5, min_seeds=3))
+    assert state.rounds == 2 and not state.dropped
+
+
+def test_a_round_is_decided_only_when_every_value_left_has_ended_it() -> None:
+    runs = {0: {0: 0.0, 1: 0.1, 2: -0.1}, 1: {0: 0.0, 1: 0.1, 2: -0.1}, 2: {0: -10.0, 1: -10.1}}
+    state = race([0, 1, 2], runs, RaceRules(seeds=5, min_seeds=3))
+    assert state.rounds == 2 and not state.dropped
+
+
+def test_the_race_ends_when_one_value_is_left() -> None:
+    runs = {0: dict(enumerate([0.0, 0.1, -0.1])), 1: dict(enumerate([-10.0, -10.1, -9.9]))}
+    state = race([0, 1], runs, RaceRules(seeds=10, min_seeds=3))
+    assert state.dropped[1].round == 3 and state.over
+    assert not state.wanted(0, 3)  # the winner needs no more seeds
+
+
+def test_drops_follow_the_step_down_round_by_round() -> None:
+    """On random data with one value 4 sd better, each drop is exactly what the procedure says
+    at that round's level, on the first r seeds of the values still in the race."""
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(6, 10))
+    x[0] += 4.0
+    rules = RaceRules(seeds=10, min_seeds=3)
+    runs = {v: dict(enumerate(x[v])) for v in range(6)}
+    state = race(list(range(6)), runs, rules)
+    alive, expected = list(range(6)), {}
+    for r in range(3, 11):
+        if len(alive) <= 1:
+            break
+        look = compare_with_best({v: list(x[v, :r]) for v in alive}, alpha=rules.look_alpha)
+        for v in look.worse:
+            expected[v] = r
+        alive = [v for v in alive if v not in expected]
+    assert {v: d.round for v, d in state.dropped.items()} == expected
+    assert expected, "the constructed data drop something"
+
+
+def test_identical_values_are_never_dropped() -> None:
+    runs = {v: dict(enumerate([0.5, 0.7, 0.6, 0.55])) for v in range(4)}
+    state = race(list(range(4)), runs, RaceRules(seeds=4, min_seeds=2))
+    assert not state.dropped and state.over and state.rounds == 4
+
+
+def test_failed_runs_count_as_ended_without_a_score() -> None:
+    nan = math.nan
+    runs = {0: dict(enumerate([0.0, 0.1, -0.1])), 1: dict(enumerate([nan, nan, nan])),
+            2: dict(enumerate([-10.0, -10.1, -9.9]))}
+    state = race([0, 1, 2], runs, RaceRules(seeds=5, min_seeds=3))
+    # Round 3 is decided; value 1 has no score, so it is never tested (never dropped).
+    assert state.rounds == 3 and 1 not in state.dropped and 2 in state.dropped
+
+
+# A raced sweep on a fake pool ----------------------------------------------------------------
+
+SCORES = {  # value -> final score of seeds 0, 1, 2, ...
+    0.1: [0.0, 0.1, -0.1, 0.05, 0.0, 0.02],
+    0.2: [0.02, -0.08, 0.1, 0.0, -0.05, 0.01],
+    0.3: [-10.0, -10.1, -9.9, -10.0, -10.05, -10.02],
+    0.4: [0.01, 0.03, -0.02, -0.04, 0.06, 0.0],
+}
+
+
+class ScorePool:
+    """A pool whose runs end at once with the score SCORES gives their value and seed."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self.playing: dict[int, TrialSpec] = {}
+        self.submitted: list[TrialSpec] = []
+
+    def idle(self) -> int:
+        return self.size - len(self.playing)
+
+    def submit(self, number: int, spec: TrialSpec) -> None:
+        self.playing[number] = spec
+        self.submitted.append(spec)
+
+    def running(self) -> dict[int, TrialSpec]:
+        return dict(self.playing)
+
+    def events(self, timeout: float) -> list[Event]:
+        out = []
+        for number, spec in list(self.playing.items()):
+            del self.playing[number]
+            out.append(Event("result", number, TrialResult(
+                outcome=Outcome.COMPLETE, final_score=SCORES[spec.value][spec.seed],
+                env_steps=spec.steps, wall_time=1.0)))
+        return out
+
+    def reply(self, event: Event, keep_going: bool) -> None:
+        raise AssertionError("sweeps never checkpoint")
+
+    def close(self, terminate: bool = False) -> None:
+        self.playing.clear()
+
+
+class ScoreExecutor:
+    def __init__(self) -> None:
+        self.pools: list[ScorePool] = []
+
+    def workers(self, configured: int | None) -> int:
+        return configured or 1
+
+    def pool(self, size: int) -> ScorePool:
+        self.pools.append(ScorePool(size))
+        return self.pools[-1]
+
+
+def raced_plan(workdir: Path, seeds: int = 6, *extra: str) -> Any:
+    write_study_file(workdir, "fake", "ppo.clip_range", "[0.1, 0.2, 0.3, 0.4]")
+    cfg = compose_config(["study=fake", *TINY, f"budget.seeds={seeds}", "racing.enabled=true",
+                          *extra])
+    return expand_study(cfg)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_raced_sweep_drops_what_the_procedure_says_and_never_runs_its_later_seeds(
+        workdir: Path, workers: int) -> None:
+    plan = raced_plan(workdir)
+    executor = ScoreExecutor()
+    with opened(sqlite_url(workdir / "r.db")) as store:
+        summary, counts = run_plan(store, plan, executor, workers, io.StringIO(), live=False)
+        ledger = store.load("fake")
+        trials = counted(ledger.trials())
+        stored = ledger.attrs.race
+    submitted = [(spec.value, spec.seed) for spec in executor.pools[0].submitted]
+    # Rounds: no seed k + 1 starts before every value has started seed k (with two workers a
+    # round's tail may start the next round, never two ahead).
+    for i, (_, seed) in enumerate(submitted):
+        assert all(s >= seed - 1 for _, s in submitted[i:])
+    assert sorted(submitted[:4]) == [(v, 0) for v in (0.1, 0.2, 0.3, 0.4)]
+    # 0.3 is 100 sd below the rest: dropped after round 3, so it ran 3 seeds (one ahead at most
+    # with two workers); the three others run all six.
+    ran_03 = sorted(s for v, s in submitted if v == 0.3)
+    assert ran_03 == [0, 1, 2] if workers == 1 else ran_03[:3] == [0, 1, 2] and len(ran_03) <= 4
+    for value in (0.1, 0.2, 0.4):
+        assert sorted(s for v, s in submitted if v == value) == list(range(6))
+    assert len(submitted) == len(set(submitted)) == len(trials)
+    assert all(outcome(t) == Outcome.COMPLETE for t in trials)
+    # Stored: per value its seeds, its drop round and p; the race is over.
+    by_value = {v["value"]: v for v in stored["values"]}
+    assert by_value[0.3]["dropped_at"] == 3 and 0 < by_value[0.3]["p"] < 0.05 / 4
+    assert all(by_value[v]["dropped_at"] is None for v in (0.1, 0.2, 0.4))
+    assert by_value[0.1]["seeds"] == 6 and by_value[0.3]["seeds"] == len(ran_03)
+    assert stored["over"] and stored["rounds"] == 6
+    assert stored["runs"] == len(trials) and stored["fixed_runs"] == 24
+    assert counts.planned == len(trials) == counts.complete and counts.finished
+    assert summary.complete == len(trials)
+    # The replay from the store agrees with what was stored.
+    with opened(sqlite_url(workdir / "r.db")) as store:
+        ledger = store.load("fake")
+        replay = study_race(ledger.attrs.definition, ledger.trials())
+    assert replay is not None and {v: d.round for v, d in replay.dropped.items()} == {2: 3}
+
+
+def test_a_race_run_again_runs_nothing(workdir: Path) -> None:
+    plan = raced_plan(workdir)
+    with opened(sqlite_url(workdir / "r.db")) as store:
+        run_plan(store, plan, ScoreExecutor(), 1, io.StringIO(), live=False)
+        executor = ScoreExecutor()
+        out = io.StringIO()
+        run_plan(store, plan, executor, 1, out, live=False)
+    assert executor.pools[0].submitted == []
+    assert "0 to run" in out.getvalue() and "race fake: 21 of 24 runs (88 %)" in out.getvalue()
+
+
+def test_a_dropped_values_queued_retry_is_withdrawn(workdir: Path) -> None:
+    """A retry queued for a value the race then drops never runs and is not left pending."""
+    plan = raced_plan(workdir)
+    with opened(sqlite_url(workdir / "r.db")) as store:
+        ledger = store.define(plan.name, StudyAttrs(kind="sweep", definition=plan.definition,
+                                                    fingerprint=plan.fingerprint))
+        # Seed 3 of 0.3 queued ahead (as a round's tail would, then given back).
+        spec = next(s for s in plan.specs if s.value == 0.3 and s.seed == 3)
+        ledger.queue({"clip_range": 0.3}, TrialAttrs(key=spec.key, seed=spec.seed))
+        run_plan(store, plan, ScoreExecutor(), 1, io.StringIO(), live=False)
+        trials = store.load("fake").trials()
+    queued = [t for t in trials if t.user_attrs.get("key") == spec.key]
+    assert len(queued) == 1 and queued[0].state == TrialState.PRUNED
+    assert "withdrawn" in queued[0].user_attrs["failure"]
+
+
+# Commands ---------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["racing.min_seeds=1"], "racing.min_seeds must be at least 2"),
+    (["budget.seeds=3", "racing.min_seeds=4"],
+     "racing.min_seeds (4) must not exceed budget.seeds (3)"),
+    (["racing.alpha=0"], "racing.alpha must be in (0, 0.5]"),
+    (["racing.alpha=0.6"], "racing.alpha must be in (0, 0.5]"),
+])
+def test_bad_racing_input_is_one_line_and_writes_nothing(
+        workdir: Path, capsys: pytest.CaptureFixture[str], args: list[str], message: str) -> None:
+    assert run_cli("run", "study=clip_range", "--racing", *TINY, *args) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert not (workdir / "studies").exists()
+
+
+def test_racing_on_a_search_or_a_train_run_is_refused(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("optuna", "--racing", "--trials", "1", *TINY) == 2
+    err = capsys.readouterr().err
+    assert "--pruner wilcoxon" in err and len(err.strip().splitlines()) == 1
+    assert run_cli("train", "racing.enabled=true", *TINY) == 2
+    assert "racing is for run and confirm" in capsys.readouterr().err
+    assert run_cli("confirm", "--racing", "--baseline", "ppo=tuned", "--seeds", "2", *TINY) == 2
+    assert "racing.min_seeds (3) must not exceed confirm.seeds (2)" in capsys.readouterr().err
+    assert not (workdir / "studies").exists()
+
+
+def test_a_raced_study_is_never_mixed_with_the_same_study_run_fixed(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write_study_file(workdir, "mix", "ppo.clip_range", "[0.1, 0.3]")
+    assert run_cli("run", "study=mix", *TINY, "budget.seeds=2") == 0
+    db = workdir / "studies" / "kraby.db"
+    before = file_digest(db)
+    capsys.readouterr()
+    assert run_cli("run", "study=mix", *TINY, "budget.seeds=2", "--racing",
+                   "racing.min_seeds=2") == 2
+    err = capsys.readouterr().err
+    assert "defined differently" in err and "racing" in err
+    assert len(err.strip().splitlines()) == 1 and file_digest(db) == before
+
+
+def _race_consistent(url: str, name: str) -> dict[str, Any]:
+    """The stored race agrees with its replay, no run ran twice, and no value ran past its
+    drop by more than one round's tail."""
+    trials = load(url, name).get_trials()
+    attrs = StudyAttrs.of(load(url, name).user_attrs)
+    latest = latest_by_key(trials)
+    complete = [t.user_attrs["key"] for t in trials if t.state == TrialState.COMPLETE]
+    assert len(complete) == len(set(complete)), complete
+    replay = study_race(attrs.definition, trials)
+    assert replay is not None and replay.over
+    stored = attrs.race or {}
+    assert {v: d.round for v, d in replay.dropped.items()} == {
+        i: v["dropped_at"] for i, v in enumerate(stored["values"]) if v["dropped_at"]}
+    for key, trial in latest.items():
+        value, seed = parse_sweep_key(key) or (None, None)
+        if value in replay.dropped and outcome(trial) == Outcome.COMPLETE:
+            assert seed is not None and seed <= replay.dropped[value].round, key
+    return stored
+
+
+@pytest.mark.slow
+def test_a_race_resumes_after_sigkill(workdir: Path) -> None:
+    db = sqlite_url(workdir / "k.db")
+    write_study_file(workdir, "rk", "ppo.clip_range", "[0.1, 0.2, 0.3]")
+    args = ["run", "study=rk", "workers=2", f"storage={db}", *tiny_with_steps(2048),
+            "budget.seeds=4", "--racing", "racing.min_seeds=2"]
+    proc = spawn_cli(*args, cwd=workdir)
+    wait_for(lambda: has_study(db, "rk") and sum(
+        t.state == TrialState.COMPLETE for t in load(db, "rk").get_trials()) >= 3, proc=proc)
+    for pid in [proc.pid, *children(proc.pid, workers_only=False)]:
+        os.kill(pid, signal.SIGKILL)
+    proc.wait()
+    proc = spawn_cli(*args, cwd=workdir)
+    out, _ = proc.communicate(timeout=600)
+    assert proc.returncode == 0, out
+    stored = _race_consistent(db, "rk")
+    assert stored["over"] and "race rk:" in out
+
+
+@pytest.mark.slow
+@pytest.mark.postgres
+@pytest.mark.skipif(not SERVER, reason="KRABY_TEST_POSTGRES_URL is not set")
+def test_two_commands_race_one_study_on_postgresql(workdir: Path) -> None:
+    write_study_file(workdir, "rp", "ppo.clip_range", "[0.1, 0.2, 0.3]")
+    with fresh_database() as url:
+        args = ["run", "study=rp", "workers=1", f"storage={url}", *tiny_with_steps(1024),
+                "budget.seeds=4", "--racing", "racing.min_seeds=2", *FAST_HEARTBEAT]
+        procs = [spawn_cli(*args, cwd=workdir) for _ in range(2)]
+        outs = [p.communicate(timeout=600)[0] for p in procs]
+        for proc, out in zip(procs, outs, strict=True):
+            assert proc.returncode == 0, out
+        stored = _race_consistent(url, "rp")
+        assert stored["over"]
+        assert all("clip_range=" in out.split("raced", 1)[1] for out in outs), outs
+
+
+@pytest.mark.slow
+def test_a_raced_campaign_races_every_stage(workdir: Path) -> None:
+    for name, parameter in (("c1", "ppo.gamma"), ("c2", "ppo.clip_range"),
+                            ("c3", "ppo.ent_coef")):
+        values = {"c1": "[0.5, 0.99]", "c2": "[0.1, 0.3]", "c3": "[0.0, 0.05]"}[name]
+        write_study_file(workdir, name, parameter, values)
+    folder = workdir / "conf" / "campaign"
+    folder.mkdir(parents=True)
+    (folder / "trio.yaml").write_text("# @package campaign\n" + yaml.safe_dump({
+        "name": "trio", "stages": [{"study": "c1"}, {"study": "c2"}, {"study": "c3"}]}))
+    assert run_cli("run", "campaign=trio", *TINY, "budget.seeds=3", "--racing",
+                   "racing.min_seeds=2") == 0
+    db = sqlite_url(workdir / "studies" / "kraby.db")
+    for stage in ("trio-c1", "trio-c2", "trio-c3"):
+        attrs = StudyAttrs.of(load(db, stage).user_attrs)
+        assert attrs.definition["racing"] == {"seeds": 3, "min_seeds": 2, "alpha": 0.05,
+                                              "round_seeds": [0, 1, 2]}
+        _race_consistent(db, stage)
