@@ -114,3 +114,19 @@ def test_a_report_folder_that_cannot_be_written_is_one_line(
     err = _one_line_error(capsys, "report", "--storage", sqlite_url(one_study), "--out",
                           "/proc/kraby-reports")
     assert "report folder" in err
+
+
+@pytest.mark.parametrize(("setting", "message"), [
+    ("report.threshold=2", "report.threshold must be at most 0"),
+    ("report.threshold=nan", "report.threshold"),
+    ("report.bootstrap=10", "report.bootstrap must be at least 100"),
+    ("report.min_seeds=1", "report.min_seeds must be at least 2"),
+])
+def test_a_report_setting_out_of_range_is_one_line(
+        workdir: Path, one_study: Path, capsys: pytest.CaptureFixture[str], setting: str,
+        message: str) -> None:
+    before = file_digest(one_study)
+    err = _one_line_error(capsys, "report", "--storage", sqlite_url(one_study), "--out",
+                          str(workdir / "r"), setting)
+    assert message in err
+    assert file_digest(one_study) == before and not (workdir / "r").exists()

@@ -125,6 +125,10 @@ def validate(cfg: DictConfig) -> None:
     validate_racing(cfg.racing)
     if cfg.report.threshold is not None:
         _finite("report.threshold", float(cfg.report.threshold))
+        # The reward is minus a squared distance: no episode scores above 0.
+        _require(float(cfg.report.threshold) <= 0.0,
+                 f"report.threshold must be at most 0, the leg's highest possible episode "
+                 f"reward (minus a squared distance), got {cfg.report.threshold}")
     if cfg.study is not None:
         SelectRule.check(str(cfg.study.select))
     if cfg.campaign is not None:
