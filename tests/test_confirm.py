@@ -11,6 +11,7 @@ from conftest import TINY, file_digest, load, run_cli, sqlite_url
 from optuna.trial import TrialState
 
 from kraby_study.config.compose import compose_config
+from kraby_study.plan.confirm import Arm, distinct_arms
 from kraby_study.plan.settings import resolved_settings
 from kraby_study.plan.space import fitted_params
 from kraby_study.records import counted
@@ -78,11 +79,18 @@ def test_confirm_retrains_the_top_configurations_on_fresh_seeds(
     study = load(db, "tiny-confirm")
     trials = study.trials
     definition = study.user_attrs["kraby_definition"]
-    labels = [ranked[0].user_attrs["key"], ranked[1].user_attrs["key"], "ppo=tuned"]
+    tuned = resolved_settings(compose_config([*TINY, "ppo=tuned"]))
+    # A top trial with the tuned settings (the search's enqueued t0) is one arm with the
+    # baseline, named after both; otherwise the baseline is an arm of its own.
+    labels = [t.user_attrs["key"] + (" = ppo=tuned" if t.user_attrs["settings"] == tuned else "")
+              for t in ranked[:2]]
+    if not any(label.endswith(" = ppo=tuned") for label in labels):
+        labels.append("ppo=tuned")
     assert definition["values"] == labels and definition["source_winner"] == labels[0]
     assert [a["source_score"] for a in definition["arms"][:2]] == [ranked[0].value,
                                                                    ranked[1].value]
-    assert len(trials) == 3 * 2 and all(t.state == TrialState.COMPLETE for t in trials)
+    assert len(trials) == len(labels) * 2
+    assert all(t.state == TrialState.COMPLETE for t in trials)
     # Seeds no trial of the search used: it trained seeds 0 and 1 (2 per trial).
     used = {t.user_attrs["seed"] + i for t in search for i in range(2)}
     seeds = {t.user_attrs["seed"] for t in trials}
@@ -90,14 +98,14 @@ def test_confirm_retrains_the_top_configurations_on_fresh_seeds(
     # Each arm trains its source's settings exactly; the steps are the search's budget.
     for trial in trials:
         arm = labels.index(trial.params["config"])
-        settings = (ranked[arm].user_attrs["settings"] if arm < 2
-                    else resolved_settings(compose_config([*TINY, "ppo=tuned"])))
+        settings = ranked[arm].user_attrs["settings"] if arm < 2 else tuned
         assert trial.user_attrs["settings"] == settings
         assert trial.user_attrs["env_steps"] == 512
     # Resumable: the same command has nothing left to run.
     capsys.readouterr()
     assert run_cli(*args) == 0
-    assert "0 to run" in capsys.readouterr().out and len(load(db, "tiny-confirm").trials) == 6
+    assert "0 to run" in capsys.readouterr().out
+    assert len(load(db, "tiny-confirm").trials) == len(labels) * 2
     # best writes the confirmed winner's settings.
     assert run_cli("best", "--study-name", "tiny-confirm", "--name", "confirmed") == 0
     assert "confirm 'tiny-confirm'" in capsys.readouterr().out
@@ -149,3 +157,24 @@ def test_a_confirm_study_defined_otherwise_is_refused(
     assert "'tiny-confirm'" in err and "defined differently" in err and err.count("\n") == 1
     assert file_digest(db) == before
     assert sqlite_url(db)  # the store is where the search left it
+
+
+def test_arms_with_the_same_settings_are_one_arm_with_every_name() -> None:
+    tuned = {"ppo": {"gamma": 0.8}}
+    arms = [Arm("t0", tuned, "trial 0", -0.1), Arm("t3", {"ppo": {"gamma": 0.5}}, "trial 3", -0.2),
+            Arm("ppo=tuned", dict(tuned), "the config ppo=tuned"),
+            Arm("ppo=tuned", dict(tuned), "the config ppo=tuned")]
+    merged = distinct_arms(arms)
+    assert [a.label for a in merged] == ["t0 = ppo=tuned", "t3"]
+    assert merged[0].origin == "trial 0; the config ppo=tuned"
+    assert merged[0].source_score == -0.1 and merged[0].settings == tuned
+
+
+def test_a_search_trial_equal_to_a_baseline_is_trained_once(folder: Path) -> None:
+    # t1 is the enqueued start config: the search's base settings with start's own values.
+    assert run_cli("confirm", "--study-name", "tiny", "--top", "4", "--seeds", "2",
+                   "--baseline", "ppo=start", "--baseline", "ppo=start", *TINY) == 0
+    study = load(folder / "studies" / "kraby.db", "tiny-confirm")
+    labels = study.user_attrs["kraby_definition"]["values"]
+    assert "t1 = ppo=start" in labels and len(labels) == 4
+    assert len(study.trials) == 4 * 2

@@ -8,6 +8,7 @@ already read from the store.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -71,6 +72,24 @@ def fresh_seeds(used: set[int], count: int, first: int = 0) -> list[int]:
     return seeds
 
 
+def distinct_arms(arms: Sequence[Arm]) -> list[Arm]:
+    """One arm per distinct configuration, in the order first seen: arms whose complete
+    settings are equal (a search trial that was an enqueued config, a baseline given twice)
+    become one, labelled with each of their names (``t0 = ppo=tuned``), their origins joined,
+    with the first source score there is."""
+    groups: dict[str, list[Arm]] = {}
+    for arm in arms:
+        groups.setdefault(json.dumps(arm.settings, sort_keys=True, default=str), []).append(arm)
+    out = []
+    for same in groups.values():
+        labels = list(dict.fromkeys(arm.label for arm in same))
+        origins = list(dict.fromkeys(arm.origin for arm in same))
+        score = next((a.source_score for a in same if a.source_score is not None), None)
+        out.append(Arm(label=" = ".join(labels), settings=same[0].settings,
+                       origin="; ".join(origins), source_score=score))
+    return out
+
+
 def confirm_name(source: str | None, baselines: list[str]) -> str:
     """``NAME-confirm``, or ``confirm-<baselines>`` when only baselines are retrained."""
     return f"{source}-confirm" if source else "confirm-" + "+".join(baselines)
@@ -82,7 +101,8 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
     Raises:
         ConfigError: Two arms share a label, or there is no arm at all.
     """
-    arms = (source.arms if source else []) + baselines
+    given = (source.arms if source else []) + baselines
+    arms = distinct_arms(given)
     labels = [arm.label for arm in arms]
     if not arms:
         raise ConfigError("confirm needs --study-name NAME or at least one --baseline ppo=NAME")
@@ -102,7 +122,7 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
     definition = {
         "kind": StudyKind.CONFIRM.value, "parameter": PARAMETER, "values": labels,
         "source": source.name if source else None,
-        "source_winner": source.arms[0].label if source else None,
+        "source_winner": arms[0].label if source and source.arms else None,
         "arms": [{"label": a.label, "origin": a.origin, "source_score": a.source_score,
                   "settings": a.settings} for a in arms],
         "seeds": seeds, "steps": steps, "curve_every": curve_every,
