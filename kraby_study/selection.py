@@ -13,12 +13,16 @@ rules read the same per-seed numbers the report shows, and the ties are the repo
 Every rule considers only values with at least ``min_seeds`` complete seeds (default 2, the
 report's ``report.min_seeds`` default), so one lucky seed is never selected. Ties inside a rule
 go to the first group in order; NaN never wins.
+
+In a raced study (:mod:`kraby_study.race`) every rule considers only the race's survivors: the
+caller passes the dropped values (``dropped``), which are never best, tied or selected, and the
+survivors are compared by the same procedure on all their seeds.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable, Mapping, Sequence
+from collections.abc import Collection, Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -67,7 +71,8 @@ def _means(groups: Mapping[K, Sequence[float]]) -> dict[K, float]:
 
 
 def select(rule: str, final: Mapping[K, Sequence[float]], aucs: Mapping[K, Sequence[float]],
-           seconds: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS) -> K | None:
+           seconds: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS,
+           dropped: Collection[K] = ()) -> K | None:
     """The selected group under ``rule``; None when no group can be selected.
 
     Args:
@@ -76,8 +81,13 @@ def select(rule: str, final: Mapping[K, Sequence[float]], aucs: Mapping[K, Seque
         aucs: AUC of each complete seed with a curve, by group.
         seconds: Training time of each complete seed, by group.
         min_seeds: Fewest complete seeds a group needs to be selected (at least 2).
+        dropped: Groups a race dropped: left out of every rule, as if never run.
     """
     SelectRule.check(rule)
+    if dropped:
+        final = {g: vs for g, vs in final.items() if g not in dropped}
+        aucs = {g: vs for g, vs in aucs.items() if g not in dropped}
+        seconds = {g: vs for g, vs in seconds.items() if g not in dropped}
     scores = {g: [float(v) for v in vs if not math.isnan(float(v))] for g, vs in final.items()}
     if rule == SelectRule.FINAL_SCORE:
         return best_with_evidence(scores, min_seeds)
@@ -148,8 +158,10 @@ def swept_values(kind: str, definition: Mapping[str, Any],
 
 
 def selected_index(trials: Sequence[FrozenTrial], curves: pd.DataFrame | None, name: str,
-                   values: Sequence[Any], rule: str, min_seeds: int = MIN_SEEDS) -> int | None:
+                   values: Sequence[Any], rule: str, min_seeds: int = MIN_SEEDS,
+                   dropped: Collection[int] = ()) -> int | None:
     """Index in ``values`` of the value ``rule`` selects among the complete runs; None when
-    no value has ``min_seeds`` complete seeds."""
+    no value has ``min_seeds`` complete seeds. ``dropped``: indices in ``values`` of the values
+    a race dropped (:func:`kraby_study.answers.raced.dropped_indices`), never selected."""
     found = samples(trials, curves, name, values)
-    return select(rule, found.final, found.aucs, found.seconds, min_seeds)
+    return select(rule, found.final, found.aucs, found.seconds, min_seeds, dropped)

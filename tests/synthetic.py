@@ -17,7 +17,9 @@ import optuna
 from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
 from optuna.trial import TrialState, create_trial
 
-from kraby_study.plan.spec import fingerprint
+from kraby_study.answers.raced import ended_runs, race_record
+from kraby_study.plan.spec import RaceRules, fingerprint
+from kraby_study.race import race
 from kraby_study.records import (
     CurvePoint,
     Failure,
@@ -25,6 +27,7 @@ from kraby_study.records import (
     StudyAttrs,
     TrialAttrs,
     failure,
+    latest_by_key,
     sweep_key,
 )
 from kraby_study.store.ledger import StudyLedger
@@ -49,7 +52,8 @@ class Run:
     Attributes:
         value: The swept value.
         seed: The run's seed.
-        outcome: complete, failed or pending (queued, not run yet).
+        outcome: complete, failed, pruned (a raced value's retry withdrawn once the value was
+            dropped) or pending (queued, not run yet).
         final_score: Final score of a complete run.
         wall_time: Training time (s).
         failure: Reason of a failed run.
@@ -88,10 +92,14 @@ def define(store: Store, name: str, kind: str, definition: dict[str, Any],
 
 
 def add_sweep(store: Store, name: str, parameter: str, values: Sequence[Any],
-              runs: Sequence[Run], steps: int = 250_000, curve_every: int = 1000) -> StudyLedger:
-    """A sweep study holding the given runs, with the attributes the runner stores."""
+              runs: Sequence[Run], steps: int = 250_000, curve_every: int = 1000,
+              racing: RaceRules | None = None) -> StudyLedger:
+    """A sweep study holding the given runs, with the attributes the runner stores; with
+    ``racing``, a raced sweep (see :func:`add_raced_sweep`)."""
     definition = {"kind": "sweep", "parameter": parameter, "values": list(values),
                   "settings": SETTINGS, "steps": steps, "curve_every": curve_every}
+    if racing is not None:
+        definition["racing"] = racing.stored()
     ledger = define(store, name, "sweep", definition, len(runs))
     study = optuna.load_study(study_name=name, storage=store.storage)
     short = parameter.split(".")[-1]
@@ -111,6 +119,9 @@ def add_sweep(store: Store, name: str, parameter: str, values: Sequence[Any],
         if run.outcome == Outcome.COMPLETE:
             attrs.final_score = run.final_score
             state, value = TrialState.COMPLETE, run.final_score
+        elif run.outcome == Outcome.PRUNED:
+            attrs.failure = run.failure or "withdrawn: its value was dropped by the race"
+            state, value = TrialState.PRUNED, None
         else:
             attrs.failure = run.failure or DIVERGED
             state, value = TrialState.FAIL, None
@@ -119,6 +130,21 @@ def add_sweep(store: Store, name: str, parameter: str, values: Sequence[Any],
                                        user_attrs=attrs.stored())])
         curves[number] = run.curve
     write_curves(ledger, curves)
+    return ledger
+
+
+def add_raced_sweep(store: Store, name: str, parameter: str, values: Sequence[Any],
+                    runs: Sequence[Run], rules: RaceRules, select: str | None = None,
+                    steps: int = 250_000, curve_every: int = 1000) -> StudyLedger:
+    """A raced sweep as the race leaves it: its definition has a ``racing`` entry (``rules``;
+    the runs' seeds must be its ``round_seeds``), its runs are the ones the race made (a value
+    the test means dropped has fewer), and the race replayed on them is stored on the study
+    (``StudyAttrs.race``) beside the selection rule ``select``."""
+    ledger = add_sweep(store, name, parameter, values, runs, steps, curve_every, racing=rules)
+    latest = latest_by_key(ledger.trials())
+    done = ended_runs(latest, list(rules.round_seeds))
+    state = race(list(range(len(values))), done, rules)
+    ledger.update(StudyAttrs(select=select, race=race_record(list(values), state, done)))
     return ledger
 
 
@@ -199,3 +225,36 @@ def add_trials(store: Store, name: str, trials: Sequence[optuna.trial.FrozenTria
     """Add finished trials to a stored study as they are (Optuna's own API: the package's store
     has no door for trials that did not run)."""
     optuna.load_study(study_name=name, storage=store.storage).add_trials(list(trials))
+
+
+RACE_RULES = RaceRules(seeds=6, round_seeds=tuple(range(6)), min_seeds=3, alpha=0.05)
+"""The example race's rules: 6 seeds, looks after rounds 3 to 6 at 0.05 / 4 = 0.0125 each."""
+RACE_VALUES = [0.3, 0.1, 0.2]
+"""The example race's values in its study file's order (the report sorts them: 0.1, 0.2, 0.3)."""
+RACE_FINALS: dict[float, list[float | None]] = {
+    0.1: [1.00, 1.02, 0.98, -1.0, 3.0, 1.0],
+    0.2: [0.97, 1.01, 0.96, -1.0, 2.9, 1.0],
+    0.3: [0.60, 0.65, 0.55, None],
+}
+"""Final scores by seed (None: failed). 0.3 is far below the others over the first three
+seeds, so the look after round 3 drops it; its fourth seed, run ahead of the round, failed, and
+its fifth was queued and withdrawn. The survivors' later seeds spread so widely that, on all
+seeds, 0.3 could not be told from the best: without the race it would be tied, and as the
+fastest (10 s against 60 s and 100 s) the fastest_tied rule would select it."""
+RACE_WALL = {0.1: 100.0, 0.2: 60.0, 0.3: 10.0}
+
+
+def race_example_runs(steps: int = 4000, points: int = 40) -> list[Run]:
+    """The runs of the example race (:data:`RACE_FINALS`), with curves."""
+    rng = np.random.default_rng(7)
+    runs = []
+    for value in RACE_VALUES:
+        wall = RACE_WALL[value]
+        for seed, final in enumerate(RACE_FINALS[value]):
+            if final is None:
+                runs.append(Run(value=value, seed=seed, outcome=Outcome.FAILED, wall_time=wall))
+            else:
+                runs.append(Run(value=value, seed=seed, final_score=final, wall_time=wall,
+                                curve=learning_curve(final, steps, points, wall, rng)))
+    runs.append(Run(value=0.3, seed=4, outcome=Outcome.PRUNED, wall_time=0.0))
+    return runs

@@ -7,6 +7,7 @@ import csv
 import os
 import shutil
 import signal
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -28,13 +29,32 @@ from conftest import (
     tiny_with_steps,
     wait_for,
 )
-from optuna.trial import TrialState
+from omegaconf import DictConfig
+from optuna.distributions import CategoricalDistribution
+from optuna.trial import TrialState, create_trial
+from synthetic import add_trials
 
+from kraby_study.answers.raced import ended_runs, race_record
 from kraby_study.answers.selected import sweep_selection
 from kraby_study.config.compose import compose_config
+from kraby_study.plan.campaign import campaign_of
+from kraby_study.plan.spec import StudyPlan
 from kraby_study.plan.sweep import expand_study
-from kraby_study.records import StudyAttrs, TrialAttrs, counted
+from kraby_study.race import race
+from kraby_study.records import (
+    StudyAttrs,
+    Tally,
+    TrialAttrs,
+    counted,
+    latest_by_key,
+    param_name,
+    parse_sweep_key,
+    tally,
+)
+from kraby_study.report import write_report
+from kraby_study.run.campaign_run import run_campaign
 from kraby_study.run.plan_source import PlanSource
+from kraby_study.run.runner import CommandRun
 from kraby_study.store.store import opened
 
 SEEDS = "budget.seeds=2"
@@ -298,3 +318,69 @@ def test_two_commands_on_postgresql_share_one_campaign(workdir: Path) -> None:
         ran = [sum(out.count(f"] {p}") for p in ("gamma=", "clip_range=", "ent_coef="))
                for out in outs]
         assert all(count >= 1 for count in ran), ran
+
+
+RACED_SCORES = {0: [0.0, 0.001], 1: [1.0, 1.001]}
+"""A raced stage's runs, by value index and seed index: value 1 far ahead after round 2, so
+the look after it drops value 0 and the race is over with one value left (4 of 6 runs)."""
+
+
+def raced_stage(cfg: DictConfig, plan: StudyPlan) -> tuple[CommandRun, Tally]:
+    """Stand-in for a raced stage's run: store the runs of :data:`RACED_SCORES` under the
+    stage's plan, and the race they make, as the race source leaves them."""
+    assert plan.racing is not None
+    seeds = list(plan.racing.round_seeds)
+    short = param_name(plan.parameter)
+    with opened(str(cfg.storage)) as store:
+        ledger = store.define(plan.name, StudyAttrs(kind="sweep", definition=plan.definition,
+                                                    fingerprint=plan.fingerprint))
+        ledger.update(plan.notes())
+        for spec in plan.specs:
+            vi, seed = parse_sweep_key(spec.key) or (0, 0)
+            scores = RACED_SCORES[vi]
+            if seeds.index(seed) >= len(scores):
+                continue
+            score = scores[seeds.index(seed)]
+            attrs = TrialAttrs(key=spec.key, seed=seed, settings=spec.settings,
+                               steps=spec.steps, env_steps=spec.steps, wall_time=1.0,
+                               final_score=score)
+            add_trials(store, plan.name, [create_trial(
+                state=TrialState.COMPLETE, value=score, params={short: spec.value},
+                distributions={short: CategoricalDistribution(plan.values)},
+                user_attrs=attrs.stored())])
+        latest = latest_by_key(ledger.trials())
+        runs = ended_runs(latest, seeds)
+        state = race(list(range(len(plan.values))), runs, plan.racing)
+        assert state.over and list(state.dropped) == [0]
+        ledger.update(StudyAttrs(planned=len(latest),
+                                 race=race_record(plan.values, state, runs)))
+        return CommandRun(), tally(counted(ledger.trials()), len(latest))
+
+
+def test_a_raced_campaign_goes_on_and_selects_among_each_stages_survivors(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write_conf(workdir)
+    url = sqlite_url(workdir / "raced.db")
+    overrides = ["campaign=tri", *TINY, "budget.seeds=3", "racing.enabled=true",
+                 "racing.min_seeds=2", f"storage={url}"]
+    campaign = campaign_of(compose_config(overrides), overrides)
+    # A raced stage ends with fewer runs than values x seeds: it is finished, not "left".
+    assert run_campaign(campaign, raced_stage, sys.stdout) == 0
+    out = capsys.readouterr().out
+    assert "3/3 stages finished" in out and "run(s) left" not in out
+    assert "stage 1/3 tri-s_gamma: 4/4 complete, 0 failed; selected gamma=0.99" in out
+    # Each stage selects its survivor (the second value), and the next stage trains with it.
+    with opened(url, create=False, writer=False) as store:
+        for name, value in (("tri-s_gamma", 0.99), ("tri-s_clip", 0.3), ("tri-s_ent", 0.05)):
+            chosen = sweep_selection(store.load(name))
+            assert chosen is not None and chosen.finished and chosen.value == value, name
+    # The report's campaign table says each stage raced and selected among its survivors.
+    index = write_report(url, workdir / "report", policy=False)
+    with open(index.out / "tri" / "campaign.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert [r["selected"] for r in rows] == ["0.99", "0.3", "0.05"]
+    rule = ("racing from round 2 of 3: closed Holm-Welch step-down at each look, alpha 0.05 "
+            "spent equally over 2 looks (0.025 each)")
+    for row, dropped in zip(rows, ("0.5", "0.1", "0"), strict=True):
+        assert (f"; raced ({rule}), selected among the survivors; dropped: {dropped} after "
+                "round 2; raced: 4 of 6 runs (67 %)") in row["notes"], row["notes"]

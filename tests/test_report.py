@@ -15,13 +15,28 @@ from conftest import hall_bounds, sqlite_url
 from optuna.distributions import FloatDistribution
 from optuna.trial import TrialState, create_trial
 from scipy import stats
-from synthetic import Run, add_sweep, add_trials, learning_curve, write_curves
+from synthetic import (
+    RACE_FINALS,
+    RACE_RULES,
+    RACE_VALUES,
+    RACE_WALL,
+    Run,
+    add_raced_sweep,
+    add_sweep,
+    add_trials,
+    learning_curve,
+    race_example_runs,
+    write_curves,
+)
 
+from kraby_study.answers.selected import selection_of, sweep_selection
 from kraby_study.errors import ConfigError, StoreError
+from kraby_study.plan.spec import RaceRules
 from kraby_study.records import Outcome, StudyAttrs, TrialAttrs
-from kraby_study.report import ReportIndex, run_report, write_report
+from kraby_study.report import ReportIndex, run_report, sweep_plots, write_report
+from kraby_study.selection import select
 from kraby_study.stats import hall_interval, t_interval, welch_p
-from kraby_study.store.store import Store
+from kraby_study.store.store import Store, opened
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 SWEEP_FIGURES = ["learning_curves", "final_score", "wallclock", "training_time"]
@@ -323,3 +338,186 @@ def test_report_of_a_trained_store_shows_the_policy(tmp_path: Path) -> None:
     assert "clip_range/policy.gif" in (out / "index.md").read_text()
     for stem in SWEEP_FIGURES:
         assert (out / "clip_range" / f"{stem}.png").stat().st_size > 10_000
+
+
+# Racing -----------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def raced_store(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """The example race of tests/synthetic.py: clip_range over 0.3, 0.1, 0.2 (the study file's
+    order), 0.3 dropped after round 3, rule fastest_tied; and a fixed sweep beside it."""
+    url = sqlite_url(tmp_path_factory.mktemp("raced") / "k.db")
+    store = Store(url)
+    try:
+        add_raced_sweep(store, "clip_range", "ppo.clip_range", RACE_VALUES, race_example_runs(),
+                        RACE_RULES, select="fastest_tied", steps=4000, curve_every=100)
+        add_sweep(store, "ent_coef", "ppo.ent_coef", [0.01, 0.1], _runs(
+            {0.01: [1.0, 2.0, 3.0], 0.1: [2.0, 4.0, 9.0]},
+            {0.01: [10.0, 12.0, 14.0], 0.1: [20.0, 20.0, 26.0]}), steps=4000, curve_every=100)
+    finally:
+        store.close()
+    return url
+
+
+@pytest.fixture(scope="module")
+def raced_report(raced_store: str, tmp_path_factory: pytest.TempPathFactory) -> ReportIndex:
+    return write_report(raced_store, tmp_path_factory.mktemp("raced_out"), policy=False)
+
+
+def _race_p() -> float:
+    """The adjusted p of 0.3 at the look after round 3, by hand: the closed Holm-Welch
+    step-down over three values, each one-sided Welch test at equal n (SciPy's)."""
+    first = {v: RACE_FINALS[v][:3] for v in (0.1, 0.2, 0.3)}
+
+    def beats(j: float, g: float) -> float:
+        return stats.ttest_ind(first[j], first[g], equal_var=False,
+                               alternative="greater").pvalue
+
+    pi = {g: min(1.0, 2 * min(beats(j, g) for j in first if j != g)) for g in first}
+    assert pi[0.3] == min(pi.values())  # first in Holm's order: times 3
+    return 3 * pi[0.3]
+
+
+def test_a_raced_summary_shows_the_dropped_value_as_worse(raced_report: ReportIndex) -> None:
+    summary = _read_summary(raced_report.out, "clip_range")
+    assert list(summary.index) == [0.1, 0.2, 0.3]  # sorted, unlike the study file's order
+    assert summary.loc[0.3, "dropped_at"] == 3
+    assert summary[["dropped_at"]].loc[[0.1, 0.2]].isna().all().all()
+    # 0.3: 3 complete, the run ahead of its round failed, the withdrawn retry pruned.
+    assert tuple(summary.loc[0.3, ["complete", "failed", "pruned"]]) == (3, 1, 1)
+    p = _race_p()
+    assert 0.001 < p < RACE_RULES.look_alpha == 0.0125
+    assert summary.loc[0.3, "note"] == (f"dropped by the race after round 3, adjusted p "
+                                        f"{p:.3f}, at the race's per-look alpha 0.0125")
+    # Never best or tied; the survivors compared on all their seeds, by the usual procedure.
+    assert list(summary["mark"].fillna("")) == ["best", "tie", ""]
+    assert math.isnan(summary.loc[0.3, "p_holm"])
+    assert summary.loc[0.2, "p_holm"] >= 0.05
+    # The raw Welch p against the best stays, for information.
+    assert summary.loc[0.3, "p_vs_best"] == pytest.approx(
+        welch_p(RACE_FINALS[0.1], RACE_FINALS[0.3][:3]), rel=1e-4)
+
+
+def test_a_dropped_value_is_never_selected(raced_store: str,
+                                           raced_report: ReportIndex) -> None:
+    # Without the race, 0.3 would be tied with the best on all seeds and, as the fastest,
+    # selected by fastest_tied: the race's survivors are what the rule may pick from.
+    final = {v: [x for x in RACE_FINALS[v] if x is not None] for v in (0.1, 0.2, 0.3)}
+    seconds = {v: [RACE_WALL[v]] * len(final[v]) for v in final}
+    assert select("fastest_tied", final, {}, seconds) == 0.3
+    assert select("fastest_tied", final, {}, seconds, dropped=[0.3]) == 0.2
+    summary = _read_summary(raced_report.out, "clip_range")
+    assert summary["selected"].tolist() == [False, True, False]
+    text = (raced_report.out / "clip_range" / "summary.md").read_text()
+    assert "Selected (rule fastest_tied: " in text and "): 0.2." in text
+    # The store's answers (list, best, ${winner:...}, campaigns) pick the same survivor.
+    with opened(raced_store, create=False, writer=False) as store:
+        chosen = sweep_selection(store.load("clip_range"))
+        assert chosen is not None and chosen.value == 0.2 and chosen.finished
+        assert chosen.rule == "fastest_tied" and len(chosen.trials) == 6
+        shown = selection_of(store.load("clip_range"))
+        assert shown is not None and shown.short.startswith("clip_range=0.2 ")
+
+
+def test_a_raced_verdict_says_what_the_race_saved(raced_report: ReportIndex) -> None:
+    text = (raced_report.out / "clip_range" / "summary.md").read_text()
+    verdict = text.split("\n\n")[1]
+    # 6 + 6 seeds of the survivors, 0.3's 3 complete and 1 failed; the withdrawn retry did
+    # not run. The fixed design: 3 values x 6 seeds.
+    assert "raced: 16 of 18 runs (89 %)" in verdict
+    rule = RACE_RULES.describe()
+    assert rule == ("racing from round 3 of 6: closed Holm-Welch step-down at each look, alpha "
+                    "0.05 spent equally over 4 looks (0.0125 each)")
+    assert verdict.count(rule) == 1 and text.count(rule) == 1
+    assert "dropped 0.3 after round 3 (adjusted p 0.00" in verdict
+    assert verdict.startswith("clip_range: 0.1 best final score (")
+    assert "tied (not significantly worse, closed Holm-Welch step-down, alpha 0.05): 0.2)" \
+        in verdict
+    # The table says where the race dropped it, and the notes what a dropped row shows.
+    header = next(line for line in text.splitlines() if line.startswith("| clip_range |"))
+    assert "| pending | dropped after round | final score |" in header
+    row = next(line for line in text.splitlines() if line.startswith("| 0.3 |"))
+    assert "| 3 | 1 | 1 | 0 | 3 |" in row and "(race, round 3) |" in row
+    assert "| dropped | dropped by the race after round 3" in row
+    assert "a value the race dropped is never best, tied, selected" in text
+
+
+def test_dropped_values_are_dashed_in_the_curve_figures(
+        raced_store: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    styles: dict[str, dict[str, str]] = {}
+    legends: dict[str, str] = {}
+    real_save = sweep_plots.save
+
+    def spy(fig: object, path: Path) -> Path:
+        for ax in fig.axes:  # type: ignore[attr-defined]
+            for line in ax.get_lines():
+                if not line.get_label().startswith("_"):
+                    styles.setdefault(path.stem, {})[line.get_label().split()[0]] = \
+                        line.get_linestyle()
+            if ax.get_legend() is not None:
+                legends[path.stem] = ax.get_legend().get_title().get_text()
+        return real_save(fig, path)
+
+    monkeypatch.setattr(sweep_plots, "save", spy)
+    index = write_report(raced_store, tmp_path / "r", study="clip_range", policy=False)
+    for stem in ("learning_curves", "wallclock"):
+        assert styles[stem] == {"0.1": "-", "0.2": "-", "0.3": "--"}, stem
+        assert "dashed: dropped by the race" in legends[stem]
+        png = index.out / "clip_range" / f"{stem}.png"
+        assert png.read_bytes()[:8] == PNG_MAGIC
+    markdown = index.markdown.read_text()
+    assert markdown.count("Dashed: values dropped by the race") == 2
+
+
+def test_a_fixed_study_gains_only_an_empty_dropped_at_column(raced_report: ReportIndex) -> None:
+    out = raced_report.out
+    summary = pd.read_csv(out / "ent_coef" / "summary.csv", keep_default_na=False)
+    columns = list(summary.columns)
+    assert columns[columns.index("pending") + 1] == "dropped_at"
+    assert (summary["dropped_at"] == "").all()
+    text = (out / "ent_coef" / "summary.md").read_text()
+    section = (out / "index.md").read_text().split("## ent_coef")[1]
+    for words in ("dropped after round", "dropped by the race", "raced", "Race ("):
+        assert words not in text and words not in section, words
+
+
+def test_a_raced_confirm_study_compares_its_surviving_configurations(tmp_path: Path) -> None:
+    """The source's winner t12, dropped by the race: not the confirmed winner, and said so."""
+    labels = ["tuned", "t7", "t12"]
+    finals = {"tuned": [-0.012, -0.010, -0.013, -0.011, -0.012],
+              "t7": [-0.010, -0.012, -0.011, -0.013, -0.009], "t12": [-0.30, -0.31, -0.29]}
+    rules = RaceRules(seeds=5, round_seeds=(100, 101, 102, 103, 104), min_seeds=3)
+    definition = {"kind": "confirm", "parameter": "config", "values": labels,
+                  "source": "ppo_search", "source_winner": "t12",
+                  "arms": [{"label": label, "origin": "-", "source_score": None}
+                           for label in labels],
+                  "steps": 400, "curve_every": 100, "racing": rules.stored()}
+    url = sqlite_url(tmp_path / "k.db")
+    store = Store(url)
+    try:
+        ledger = store.define("ppo_search-confirm", StudyAttrs(
+            kind="confirm", definition=definition, fingerprint="x", planned=13))
+        distribution = optuna.distributions.CategoricalDistribution(labels)
+        for vi, label in enumerate(labels):
+            for index, final in enumerate(finals[label]):
+                seed = rules.round_seeds[index]
+                attrs = TrialAttrs(key=f"v{vi}-s{seed}", seed=seed, final_score=final,
+                                   wall_time=4.0, env_steps=400)
+                add_trials(store, ledger.name, [create_trial(
+                    state=TrialState.COMPLETE, value=final, params={"config": label},
+                    distributions={"config": distribution}, user_attrs=attrs.stored())])
+    finally:
+        store.close()
+    index = write_report(url, tmp_path / "r", policy=False)
+    summary = pd.read_csv(index.out / "ppo_search-confirm" / "summary.csv",
+                          keep_default_na=False, na_values=[""]).set_index("value")
+    assert list(summary.index) == labels  # a confirm study keeps its order
+    assert summary.loc["t12", "dropped_at"] == 3
+    assert summary["dropped_at"].isna().sum() == 2
+    assert summary.loc["t7", "mark"] == "best" and pd.isna(summary.loc["t12", "mark"])
+    text = (index.out / "ppo_search-confirm" / "summary.md").read_text()
+    assert ("ppo_search's winner t12 is not the confirmed winner: t7 has the best mean final "
+            "score on 5 fresh seeds. The race dropped t12 after round 3.") in text
+    assert "raced: 13 of 15 runs (87 %)" in text
+    assert "on at most 5 fresh seeds each, raced" in text

@@ -11,7 +11,7 @@ from optuna.trial import FrozenTrial, TrialState, create_trial
 
 from kraby_study.errors import ConfigError
 from kraby_study.records import SelectRule
-from kraby_study.selection import samples, select
+from kraby_study.selection import samples, select, selected_index
 from kraby_study.stats import holm_vs_best
 
 # Three values of n_epochs: 30 is best, 10 is statistically tied with it (its seeds overlap 30's),
@@ -77,3 +77,20 @@ def test_samples_group_stored_trials_by_value_with_auc_and_time() -> None:
     assert found.aucs == {0: [-2.0, -3.0], 1: [-3.0]}
     assert select("auc", found.final, found.aucs, found.seconds) == 0
     assert select("final_score", found.final, found.aucs, found.seconds) == 0
+
+
+def test_a_value_a_race_dropped_is_never_selected_by_any_rule() -> None:
+    # Dropping the best (30) leaves 10 the best of the survivors under every rule.
+    for rule in SelectRule:
+        assert select(rule, FINAL, AUCS, SECONDS, dropped=[2]) == 1
+    # Dropping the tied 10 leaves fastest_tied no tie to trade for time: the best, 30.
+    assert select("fastest_tied", FINAL, AUCS, SECONDS, dropped=[1]) == 2
+    assert select("final_score", FINAL, AUCS, SECONDS, dropped=[0, 1, 2]) is None
+
+
+def test_selected_index_takes_the_dropped_values_by_their_index_in_values() -> None:
+    trials = [_trial(n, score, gamma, 10.0) for n, (score, gamma) in enumerate(
+        [(-1.0, 0.8), (-1.1, 0.8), (-0.5, 0.9), (-0.6, 0.9)])]
+    assert selected_index(trials, None, "gamma", [0.8, 0.9], "final_score") == 1
+    assert selected_index(trials, None, "gamma", [0.8, 0.9], "final_score", dropped=[1]) == 0
+    assert selected_index(trials, None, "gamma", [0.9, 0.8], "final_score", dropped=[1]) == 0

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from optuna.trial import FrozenTrial
 
 from kraby_study.plan.spec import RaceRules
-from kraby_study.race import Race, race
-from kraby_study.records import Outcome, latest_by_key, outcome, parse_sweep_key
+from kraby_study.race import Drop, Race, race
+from kraby_study.records import Outcome, latest_by_key, outcome, parse_sweep_key, value_key
 
 
 def place(key: str, seeds: list[int]) -> tuple[int, int] | None:
@@ -46,6 +47,60 @@ def study_race(definition: Mapping[str, Any], trials: list[FrozenTrial]) -> Race
         return None
     runs = ended_runs(latest_by_key(trials), list(rules.round_seeds))
     return race(list(range(len(definition["values"]))), runs, rules)
+
+
+@dataclass(frozen=True)
+class StudyRace:
+    """A stored study's race as its answers and report read it, its values by their index in
+    a list the caller gives (the report's order may differ from the study file's)."""
+
+    rules: RaceRules
+    dropped: dict[int, Drop]
+    """The dropped values by their index in the caller's list, each with its round and p."""
+    runs: int
+    """Runs the race made: ended complete or failed (a withdrawn retry is not a run)."""
+    fixed_runs: int
+    """Runs of the fixed design: every value with every seed."""
+    rounds: int
+    """Rounds decided so far."""
+    over: bool
+    """The race is over: one value is left, or every value left has all its seeds."""
+
+    @property
+    def share(self) -> float:
+        """Runs made over the fixed design's runs."""
+        return self.runs / self.fixed_runs if self.fixed_runs else math.nan
+
+    def saved_text(self) -> str:
+        """``raced: 31 of 60 runs (52 %)``."""
+        return f"raced: {self.runs} of {self.fixed_runs} runs ({100 * self.share:.0f} %)"
+
+
+def race_of(definition: Mapping[str, Any], trials: list[FrozenTrial],
+            values: Sequence[Any]) -> StudyRace | None:
+    """The race of a stored study with its dropped values mapped onto ``values`` (matched by
+    :func:`kraby_study.records.value_key`, not by position); None for a study that did not
+    race. A dropped value not in ``values`` is left out."""
+    rules = RaceRules.of(dict(definition))
+    if rules is None:
+        return None
+    planned = list(definition["values"])
+    runs = ended_runs(latest_by_key(trials), list(rules.round_seeds))
+    state = race(list(range(len(planned))), runs, rules)
+    index = {value_key(v): i for i, v in enumerate(values)}
+    dropped = {index[value_key(planned[v])]: drop for v, drop in state.dropped.items()
+               if value_key(planned[v]) in index}
+    return StudyRace(rules=rules, dropped=dropped, runs=sum(len(r) for r in runs.values()),
+                     fixed_runs=len(planned) * rules.seeds, rounds=state.rounds,
+                     over=state.over)
+
+
+def dropped_indices(definition: Mapping[str, Any], trials: list[FrozenTrial],
+                    values: Sequence[Any]) -> list[int]:
+    """Indices in ``values`` of the values a stored study's race dropped (none for a study
+    that did not race): the values no selection rule, best or tie may name."""
+    found = race_of(definition, trials, values)
+    return sorted(found.dropped) if found is not None else []
 
 
 def race_record(values: list[Any], state: Race[int], runs: dict[int, dict[int, float]]

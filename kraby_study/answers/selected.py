@@ -12,6 +12,7 @@ from typing import Any
 
 from optuna.trial import FrozenTrial
 
+from kraby_study.answers.raced import dropped_indices
 from kraby_study.comparison import MIN_SEEDS
 from kraby_study.errors import StoreError
 from kraby_study.records import (
@@ -102,14 +103,17 @@ class SweepSelection:
 
 def sweep_selection(ledger: StudyLedger) -> SweepSelection | None:
     """What a swept study's stored rule (:mod:`kraby_study.selection`) selects among its
-    complete runs; None when none is complete."""
+    complete runs (of a raced study, among the race's survivors); None when none is
+    complete."""
     attrs = ledger.attrs
     rule = SelectRule.of(attrs.select)
     trials = counted(ledger.trials())
     name, values = swept_values(str(attrs.kind), attrs.definition, trials)
     # Only the auc rule reads the curves.
     curves = ledger.curves([t.number for t in trials]) if rule == SelectRule.AUC else None
-    index = selected_index(trials, curves, name, values, rule)
+    # A raced study selects among its survivors: a dropped value is never selected.
+    dropped = dropped_indices(attrs.definition, trials, values)
+    index = selected_index(trials, curves, name, values, rule, dropped=dropped)
     if index is None:
         return None
     key = value_key(values[index])

@@ -14,7 +14,7 @@ import pandas as pd
 
 from kraby_study.records import Outcome, value_key, value_label
 from kraby_study.report.document import Block, Heading, Links, Table, Text, write_csvs
-from kraby_study.report.sweep_tables import Sweep
+from kraby_study.report.sweep_tables import Sweep, note_part
 from kraby_study.selection import RULE_TEXT
 from kraby_study.stats import PROCEDURE_NAME
 
@@ -53,17 +53,25 @@ def _settings(sweep: Sweep, vi: int) -> dict[str, Any]:
 
 
 def stage_notes(sweep: Sweep | None) -> str:
-    """How a stage's selection was decided: the procedure behind its best and ties, and the
-    values it left out for too few seeds."""
+    """How a stage's selection was decided: the procedure behind its best and ties, whether
+    the stage raced (it then selects among the race's survivors) and the values it left out
+    for too few seeds."""
     if sweep is None:
         return ""
     text = (f"best and ties: {PROCEDURE_NAME}; only values with at least {sweep.min_seeds} "
             "complete seeds can be selected")
-    rows = sweep.summary[sweep.summary["note"].astype(bool)] if "note" in sweep.summary else []
-    if len(rows):
+    race = sweep.race
+    if race is not None:
+        dropped = ", ".join(f"{sweep.labels[vi]} after round {drop.round}"
+                            for vi, drop in sorted(sweep.dropped.items(),
+                                                   key=lambda item: (item[1].round, item[0])))
+        text += (f"; raced ({race.rules.describe()}), selected among the survivors; dropped: "
+                 f"{dropped or 'none'}; {race.saved_text()}")
+    left = ([(r["value"], r["complete"]) for _, r in sweep.summary.iterrows()
+             if note_part(r["note"], "left out: ")] if "note" in sweep.summary else [])
+    if left:
         text += "; left out: " + ", ".join(
-            f"{r['value']} ({r['complete']} seed{'s' if r['complete'] != 1 else ''})"
-            for _, r in rows.iterrows())
+            f"{value} ({n} seed{'s' if n != 1 else ''})" for value, n in left)
     return text
 
 

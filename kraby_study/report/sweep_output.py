@@ -19,7 +19,7 @@ from kraby_study.report.document import Block, Heading, Image, Items, Links, Tab
 from kraby_study.report.document import to_markdown as blocks_to_markdown
 from kraby_study.report.study_report import StudyReport
 from kraby_study.report.style import number, styled
-from kraby_study.report.sweep_tables import Sweep, arms_frame
+from kraby_study.report.sweep_tables import Sweep, arms_frame, note_part
 from kraby_study.selection import RULE_TEXT
 from kraby_study.stats import (
     AUC_NAME,
@@ -59,6 +59,9 @@ CAPTIONS = {
 }
 NEW_FIGURES = ("sample_efficiency", "time_to_threshold", "improvement")
 """Figures that compare values, drawn when a study has more than one."""
+DASHED_CAPTION = " Dashed: values dropped by the race (their seeds up to the drop)."
+"""Added to the curve figures' captions of a raced study."""
+DASHED_FIGURES = ("learning_curves", "wallclock")
 
 
 def _p_text(p: float, mark: str) -> str:
@@ -94,18 +97,32 @@ def _steps(value: float) -> str:
     return f"{value:,.0f}" if np.isfinite(value) else "-"
 
 
+def _race_p_text(sweep: Sweep, vi: int, row: pd.Series) -> str:
+    """The adjusted p cell: the survivors' step-down's, or the race's look that dropped it."""
+    drop = sweep.dropped.get(vi)
+    if drop is None:
+        return _p_text(row["p_holm"], row["mark"])
+    return f"{_p_text(drop.p, '')} (race, round {drop.round})"
+
+
 def summary_table(sweep: Sweep) -> Table:
-    """The summary as a table of formatted cells, best and tied rows marked."""
-    header = [sweep.name, "complete", "failed", "pruned", "pending", "final score", "95 % CI", "sd",
+    """The summary as a table of formatted cells, best and tied rows marked; a raced study's
+    table says after which round the race dropped a value."""
+    raced = sweep.race is not None
+    header = [sweep.name, "complete", "failed", "pruned", "pending",
+              *(["dropped after round"] if raced else []),
+              "final score", "95 % CI", "sd",
               "IQM [95 % trimmed-t CI]", "final IQR", "final IQR (rescaled)", "AUC [95 % CI]",
               "env steps to threshold", "seconds to threshold", "reached", "training time (s)",
               "Welch p vs best", "adjusted p (step-down)", "P(best > value) [95 % Newcombe CI]", "",
               "note"]
     rows = []
-    for _, row in sweep.summary.iterrows():
+    for vi, row in sweep.summary.iterrows():
+        dropped = vi in sweep.dropped
         rows.append([
             str(row["value"]), str(row["complete"]), str(row["failed"]), str(row["pruned"]),
             str(row["pending"]),
+            *([str(sweep.dropped[vi].round) if dropped else "-"] if raced else []),
             number(row["final_mean"]), _interval(row["final_low"], row["final_high"]),
             number(row["final_sd"], 3),
             _with_interval(row["iqm"], row["iqm_low"], row["iqm_high"]),
@@ -114,11 +131,11 @@ def summary_table(sweep: Sweep) -> Table:
             _steps(row["steps_to_threshold"]), number(row["seconds_to_threshold"], 3),
             _reached(row),
             _with_interval(row["time_mean"], row["time_low"], row["time_high"]),
-            _p_text(row["p_vs_best"], row["mark"]), _p_text(row["p_holm"], row["mark"]),
+            _p_text(row["p_vs_best"], row["mark"]), _race_p_text(sweep, int(vi), row),
             "-" if row["mark"] == "best" else
             _with_interval(row["p_improvement"], row["p_improvement_low"],
                            row["p_improvement_high"]),
-            MARK_TEXT[row["mark"]], str(row["note"] or "")])
+            "dropped" if dropped else MARK_TEXT[row["mark"]], str(row["note"] or "")])
     return Table(header, rows, marks=list(sweep.summary["mark"]))
 
 
@@ -138,10 +155,14 @@ def threshold_text(sweep: Sweep) -> str:
             f"seeds) to the best value's mean final score ({number(final)}).")
 
 
-def metric_notes(bootstrap: int, min_seeds: int = 2) -> str:
+def metric_notes(bootstrap: int, min_seeds: int = 2, raced: bool = False) -> str:
     """What every interval and test of a sweep's summary is, each named once, for values needing
     ``min_seeds`` complete seeds (``bootstrap``, the report option's resamples, is no longer
-    used by any interval)."""
+    used by any interval); ``raced``: what a dropped value's row shows."""
+    race = (" Raced: a value the race dropped is never best, tied, selected or any answer of "
+            "the verdict; its adjusted p is that of the race's look that dropped it, at the "
+            "race's per-look alpha (the rule is in the verdict), and the survivors are "
+            "compared on all their seeds." if raced else "")
     return (f"Final score, training time and AUC intervals: {INTERVAL_NAME}. IQM: "
             f"{iqm_interval_name()}. {AUC_NAME[0].upper()}{AUC_NAME[1:]}. Steps and "
             "seconds to threshold: restricted mean over the seeds with a curve, a seed that "
@@ -153,7 +174,7 @@ def metric_notes(bootstrap: int, min_seeds: int = 2) -> str:
             f"Welch p vs best: {TEST_NAME}. Adjusted p and the '\u2248 best' marks: "
             f"{HOLM_NAME}. Best, ties, most sample-efficient, fastest and most repeatable count "
             f"only values with at least report.min_seeds = {min_seeds} complete seeds. "
-            f"P(best > value): {p_improvement_name()}.")
+            f"P(best > value): {p_improvement_name()}.{race}")
 
 
 def few_seeds_note(sweep: Sweep) -> str | None:
@@ -164,13 +185,32 @@ def few_seeds_note(sweep: Sweep) -> str | None:
 
 
 def left_out_text(sweep: Sweep) -> str | None:
-    """The values left out of every comparison and answer, and why; None when none is."""
-    rows = sweep.summary[sweep.summary["note"].astype(bool)]
-    if rows.empty:
+    """The values left out of every comparison and answer for too few seeds, and why; None
+    when none is."""
+    notes = [(r["value"], note_part(r["note"], "left out: "))
+             for _, r in sweep.summary.iterrows()]
+    notes = [(value, note) for value, note in notes if note]
+    if not notes:
         return None
     return ("Left out of the best, the ties and the verdict: "
-            + "; ".join(f"{r['value']} ({r['note'].removeprefix('left out: ')})"
-                        for _, r in rows.iterrows()) + ".")
+            + "; ".join(f"{value} ({note.removeprefix('left out: ')})" for value, note in notes)
+            + ".")
+
+
+def race_text(sweep: Sweep) -> str | None:
+    """What a raced study's race did: its rule (named once), the values it dropped and when,
+    and the runs it made against the fixed design's; None for a study that did not race."""
+    race = sweep.race
+    if race is None:
+        return None
+    dropped = ", ".join(f"{_label(sweep, vi)} after round {drop.round} (adjusted p "
+                        f"{_p_text(drop.p, '')})" for vi, drop in sorted(
+                            sweep.dropped.items(), key=lambda item: (item[1].round, item[0])))
+    state = "the race is over" if race.over else f"{race.rounds} round(s) decided so far"
+    return (f"Race ({race.rules.describe()}): "
+            + (f"dropped {dropped}" if dropped else "nothing dropped")
+            + f"; {state}; {race.saved_text()}. Best, ties and the selection are among the "
+            "survivors.")
 
 
 def _label(sweep: Sweep, vi: int) -> str:
@@ -219,7 +259,7 @@ def verdict(sweep: Sweep) -> str:
     if result.tied:
         first += (f"; tied (not significantly worse, {PROCEDURE_NAME}): "
                   f"{', '.join(_label(sweep, vi) for vi in result.tied)}")
-    elif len(sweep.values) > 1 and summary["p_holm"].notna().any():
+    elif len(sweep.values) > 1 and (summary["p_holm"].notna().any() or sweep.dropped):
         noun = "configuration" if sweep.kind == StudyKind.CONFIRM else "value"
         first += f"; every other {noun} tested is worse ({PROCEDURE_NAME})"
     parts.append(first + ")")
@@ -240,6 +280,9 @@ def verdict(sweep: Sweep) -> str:
                      f"{number(row['final_iqr'], 3)}, n={row['complete']})")
     prefix = "Confirmed verdict" if sweep.kind == StudyKind.CONFIRM else sweep.name
     text = f"{prefix}: " + "; ".join(parts) + "."
+    raced = race_text(sweep)
+    if raced:
+        text += f" {raced}"
     left_out = left_out_text(sweep)
     if left_out:
         text += f" {left_out}"
@@ -279,7 +322,11 @@ def winner_text(sweep: Sweep) -> str | None:
     text = f"{owner} winner {winner} is not the confirmed winner: {label} has {fresh}."
     if winner not in sweep.labels:
         return text + f" {winner} was not retrained here."
-    mark = sweep.summary.iloc[sweep.labels.index(winner)]["mark"]
+    index = sweep.labels.index(winner)
+    if index in sweep.dropped:
+        return text + (f" The race dropped {winner} after round "
+                       f"{sweep.dropped[index].round}.")
+    mark = sweep.summary.iloc[index]["mark"]
     if mark == "tie":
         text += (f" The two cannot be told apart ({PROCEDURE_NAME}), so {winner} "
                  "may still be as good.")
@@ -323,19 +370,23 @@ def describe_sweep(sweep: Sweep) -> str:
     """What was run: parameter, values, seeds, budget, and where it stands."""
     definition = sweep.data.definition
     seeds = int(sweep.trials["seed"].nunique()) if len(sweep.trials) else 0
+    each = f"{seeds} seeds each"
+    if sweep.race is not None:  # a dropped value has fewer: the race's rule is in the verdict
+        each = f"at most {sweep.race.rules.seeds} seeds each, raced"
     steps = definition.get("steps")
     budget = f", {steps:,} environment steps per run" if isinstance(steps, int) else ""
     if sweep.kind == StudyKind.CONFIRM:
         source = definition.get("source")
         origin = f" from {source}" if source else ""
-        return (f"Confirmation of {len(sweep.values)} configurations{origin} on {seeds} fresh "
-                f"seeds each{budget}. Status: {sweep.status()}.")
+        fresh = each.replace(" seeds each", " fresh seeds each")
+        return (f"Confirmation of {len(sweep.values)} configurations{origin} on {fresh}"
+                f"{budget}. Status: {sweep.status()}.")
     if not sweep.parameter:
         return f"Single training run, {seeds} seed(s){budget}. Status: {sweep.status()}."
     inputs = sweep.data.ledger.attrs.inputs or []
     taken = "; ".join(f"{i['setting']} = {value_label(i['value'])}, selected in {i['study']}"
                       f" ({i['rule']})" for i in inputs)
-    return (f"Sweep of {sweep.parameter} over {len(sweep.values)} values, {seeds} seeds each"
+    return (f"Sweep of {sweep.parameter} over {len(sweep.values)} values, {each}"
             f"{budget}. Status: {sweep.status()}."
             + (f" Settings from earlier studies: {taken}." if taken else ""))
 
@@ -383,6 +434,8 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
                 caption = CAPTIONS[stem]
                 if stem == "time_to_threshold":
                     caption += f" {threshold_text(sweep)}"
+                if stem in DASHED_FIGURES and sweep.dropped:
+                    caption += DASHED_CAPTION
                 images.append(Image(f"{rel}/{path.name}", stem.replace("_", " "), caption))
     else:
         report.notes.append("no complete run yet: no figures")
@@ -405,7 +458,7 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
     coverage = few_seeds_note(sweep)
     summary_md.write_text(blocks_to_markdown(
         [Heading(f"{sweep.data.name}: summary", 1), said, *winner, described, *arms, *details,
-         Text(metric_notes(sweep.bootstrap, sweep.min_seeds)),
+         Text(metric_notes(sweep.bootstrap, sweep.min_seeds, sweep.race is not None)),
          *([Text(coverage)] if coverage else [])]), encoding="utf-8")
     report.files += tables + [summary_md]
     report.blocks = section + images

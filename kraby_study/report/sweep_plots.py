@@ -4,7 +4,8 @@ value, and the best value's probability of improvement over each other value.
 
 Lines are means over the complete seeds of a value; bands and error bars are the 95 %
 Hall skewness-corrected t intervals of those means (Hall 1992), except the probability of
-improvement's, which are Newcombe score-type intervals (see :mod:`kraby_study.stats`).
+improvement's, which are Newcombe score-type intervals (see :mod:`kraby_study.stats`). In a
+raced study, the curves of the values the race dropped are dashed.
 """
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ LATE_FRACTION = 0.25
 """The zoomed panel shows the last quarter of training."""
 REWARD_LABEL = "mean episode reward"
 BAND_NOTE = "line: mean over seeds\nband: 95 % Hall skewness-corrected\nt interval (n >= 2)"
+DROPPED_STYLE = "--"
+"""The line style of a value the race dropped (its curve ends with its last seeds' steps)."""
+DROPPED_NOTE = "dashed: dropped by the race"
 
 
 def _title(sweep: Sweep, what: str) -> str:
@@ -48,7 +52,9 @@ def _title(sweep: Sweep, what: str) -> str:
 def _draw_bands(ax: Axes, sweep: Sweep, x: str) -> None:
     for vi, group in sweep.bands.groupby("vi", sort=True):
         colour = sweep.colours[int(vi)]
-        ax.plot(group[x], group["mean"], color=colour, label=legend_label(sweep, int(vi)))
+        style = DROPPED_STYLE if int(vi) in sweep.dropped else "-"
+        ax.plot(group[x], group["mean"], color=colour, linestyle=style,
+                label=legend_label(sweep, int(vi)))
         ax.fill_between(group[x], group["low"], group["high"], color=colour, alpha=0.18,
                         linewidth=0)
 
@@ -56,11 +62,12 @@ def _draw_bands(ax: Axes, sweep: Sweep, x: str) -> None:
 def _legend(fig: Figure, ax: Axes, sweep: Sweep, below: list[int] | None = None) -> None:
     title = f"{sweep.name} (seeds)" if sweep.parameter else "seeds"
     handles, labels = ax.get_legend_handles_labels()
+    note = BAND_NOTE + (f"\n{DROPPED_NOTE}" if sweep.dropped else "")
     if below:
         handles.append(Line2D([], [], linestyle=""))
         labels.append("below the zoom (b):\n" + ", ".join(sweep.labels[vi] for vi in below))
     ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
-              frameon=False, title=f"{title}\n{BAND_NOTE}", alignment="left")
+              frameon=False, title=f"{title}\n{note}", alignment="left")
 
 
 def late_limits(bands: pd.DataFrame, start: float) -> tuple[float, float, list[int]]:

@@ -4,18 +4,25 @@ metrics, per curve point, and the study's verdict.
 Figures and metrics draw from the complete runs only; failed runs are counted and listed, runs
 still to come are counted as pending, and nothing is dropped without a trace. A confirm study
 is a sweep whose values are the labels of the configurations it retrains (in the order given).
+
+In a raced study (:mod:`kraby_study.race`) the values the race dropped are never best, tied,
+selected or any answer of the verdict: they are shown as worse, with the round and the adjusted
+p of the look that dropped them, and the survivors are compared on all their seeds.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from kraby_study.comparison import MIN_SEEDS, compare_with_best
+from kraby_study.answers.raced import StudyRace, race_of
+from kraby_study.comparison import MIN_SEEDS, compare_with_best, evidence
+from kraby_study.race import Drop
 from kraby_study.records import (
     Outcome,
     SelectRule,
@@ -44,9 +51,12 @@ from kraby_study.stats import (
     p_improvement,
     p_improvement_interval,
     verdict,
+    welch_p,
 )
 
 SINGLE_LABEL = "all seeds"
+DROPPED_PREFIX = "dropped by the race"
+"""How the summary's note of a value the race dropped begins."""
 TRIAL_COLUMNS = ["number", "key", "seed", "vi", "value", "outcome", "final_score",
                  "wall_time", "env_steps", "failure", "model_path"]
 SEED_COLUMNS = ["vi", "seed", "number", "final_score", "first_reward", "auc",
@@ -78,6 +88,8 @@ class Sweep:
             seed of the study (NaN without curves).
         bootstrap: The report option ``report.bootstrap`` (no interval bootstraps any more).
         verdict: The study's verdict (:func:`kraby_study.stats.verdict`).
+        race: A raced study's race, its dropped values by index in ``values``; None for a
+            study that did not race.
     """
 
     data: StudyData
@@ -101,6 +113,12 @@ class Sweep:
     rule: str = SelectRule.FINAL_SCORE
     """The study's selection rule; the summary's ``selected`` column marks the value it
     selects once no run is pending."""
+    race: StudyRace | None = None
+
+    @property
+    def dropped(self) -> dict[int, Drop]:
+        """The values the race dropped, by index in ``values`` (empty without a race)."""
+        return self.race.dropped if self.race is not None else {}
 
     @property
     def kind(self) -> StudyKind:
@@ -152,7 +170,9 @@ def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.Data
             if state == Outcome.COMPLETE and trial.value is not None else np.nan,
             "wall_time": attrs.get("wall_time", np.nan) if state != Outcome.PENDING else np.nan,
             "env_steps": attrs.get("env_steps", np.nan) if state != Outcome.PENDING else np.nan,
-            "failure": attrs.get("failure", "") if state == Outcome.FAILED else "",
+            # A sweep's pruned run is a raced value's retry, withdrawn: its reason says so.
+            "failure": (attrs.get("failure", "")
+                        if state in (Outcome.FAILED, Outcome.PRUNED) else ""),
             "model_path": attrs.get("model_path"),
         })
     frame = pd.DataFrame(rows, columns=TRIAL_COLUMNS)
@@ -181,26 +201,55 @@ def left_out_note(n: int, min_seeds: int) -> str:
             f"= {min_seeds}")
 
 
+def dropped_note(drop: Drop, look_alpha: float) -> str:
+    """Why a value the race dropped is shown as worse: the look that dropped it."""
+    return (f"{DROPPED_PREFIX} after round {drop.round}, adjusted p {_p_short(drop.p)}, at the "
+            f"race's per-look alpha {look_alpha:.3g}")
+
+
+def _p_short(p: float) -> str:
+    return "< 0.001" if p < 0.001 else f"{p:.3f}"
+
+
+def note_part(note: str, prefix: str) -> str | None:
+    """The part of a summary note that begins with ``prefix`` (notes join parts with '; ')."""
+    return next((part for part in str(note or "").split("; ") if part.startswith(prefix)),
+                None)
+
+
 def summarise(trials: pd.DataFrame, labels: list[str],
-              bootstrap: int = BOOTSTRAP_REPETITIONS, min_seeds: int = MIN_SEEDS) -> pd.DataFrame:
-    """One row per value: run counts; the complete seeds' final score (mean, sd, Hall interval;
-    IQM with its trimmed-t interval; IQR raw and rescaled to be comparable across n) and
-    training time; the raw two-sided Welch p-value against the best value (``p_vs_best``) and
-    the adjusted p of the closed Holm-Welch step-down (``p_holm``,
-    :func:`kraby_study.comparison.compare_with_best`); the probability that the best value
-    beats this one, with its Newcombe score-type interval; a mark: ``best``, ``tie`` (adjusted
-    p >= 0.05: not significantly worse than the best) or empty; and a note naming why a value
-    with fewer than ``min_seeds`` complete seeds is left out. The curve metrics are added by
+              bootstrap: int = BOOTSTRAP_REPETITIONS, min_seeds: int = MIN_SEEDS,
+              dropped: Mapping[int, Drop] | None = None,
+              look_alpha: float = math.nan) -> pd.DataFrame:
+    """One row per value: run counts; the round after which a race dropped it
+    (``dropped_at``, empty for a survivor and in a study that did not race); the complete
+    seeds' final score (mean, sd, Hall interval; IQM with its trimmed-t interval; IQR raw and
+    rescaled to be comparable across n) and training time; the raw two-sided Welch p-value
+    against the best value (``p_vs_best``) and the adjusted p of the closed Holm-Welch
+    step-down (``p_holm``, :func:`kraby_study.comparison.compare_with_best`); the probability
+    that the best value beats this one, with its Newcombe score-type interval; a mark:
+    ``best``, ``tie`` (adjusted p >= 0.05: not significantly worse than the best) or empty;
+    and a note naming why a value with fewer than ``min_seeds`` complete seeds is left out, or
+    which look of the race dropped it. The curve metrics are added by
     :func:`add_curve_metrics`.
+
+    ``dropped`` (by value index) are the values a race dropped, at per-look level
+    ``look_alpha``: they are left out of the comparison (never best or tied, ``p_holm``
+    empty), which the survivors make on all their seeds.
     """
+    dropped = dict(dropped or {})
     done = trials[trials["outcome"] == Outcome.COMPLETE]
     score = describe(done, "vi", "final_score")
     time = describe(done, "vi", "wall_time")
     counts = pd.crosstab(trials["vi"], trials["outcome"])
     scores = _finals(done)
-    comparison = compare_with_best(scores, min_seeds=min_seeds)
+    survivors = {vi: finals for vi, finals in scores.items() if vi not in dropped}
+    comparison = compare_with_best(survivors, min_seeds=min_seeds)
     best = comparison.best
-    _, pvalues = compare_to_best(scores, min_seeds=min_seeds)
+    _, pvalues = compare_to_best(survivors, min_seeds=min_seeds)
+    if best is not None:  # for information, as for any value: no mark uses it
+        pvalues.update({vi: welch_p(scores[best], scores[vi]) for vi in dropped if vi in scores})
+    _, _, left_out = evidence(scores, min_seeds)
     raw = [pvalues.get(vi, np.nan) for vi in range(len(labels))]
     adjusted = [comparison.p_adjusted.get(vi, np.nan) for vi in range(len(labels))]
     rows = []
@@ -218,12 +267,17 @@ def summarise(trials: pd.DataFrame, labels: list[str],
         else:
             improvement = p_improvement(scores[best], finals)
             improvement_low, improvement_high = p_improvement_interval(scores[best], finals)
+        drop = dropped.get(vi)
+        notes = [dropped_note(drop, look_alpha)] if drop is not None else []
+        if vi in left_out:
+            notes.append(left_out_note(len(finals), comparison.min_seeds))
         rows.append({
             "value": label,
             "complete": int(count.get(Outcome.COMPLETE, 0)),
             "failed": int(count.get(Outcome.FAILED, 0)),
             "pruned": int(count.get(Outcome.PRUNED, 0)),
             "pending": int(count.get(Outcome.PENDING, 0)),
+            "dropped_at": drop.round if drop is not None else None,
             "final_mean": s["mean"] if s is not None else np.nan,
             "final_sd": s["sd"] if s is not None else np.nan,
             "final_low": s["low"] if s is not None else np.nan,
@@ -244,10 +298,12 @@ def summarise(trials: pd.DataFrame, labels: list[str],
             "p_improvement_low": improvement_low,
             "p_improvement_high": improvement_high,
             "mark": mark,
-            "note": (left_out_note(len(finals), comparison.min_seeds)
-                     if vi in comparison.left_out else ""),
+            "note": "; ".join(notes),
         })
-    return pd.DataFrame(rows)
+    frame = pd.DataFrame(rows)
+    if not frame.empty:  # one schema, raced or not: an empty cell where nothing was dropped
+        frame["dropped_at"] = frame["dropped_at"].astype("Int64")
+    return frame
 
 
 def first_points(curves: pd.DataFrame) -> pd.DataFrame:
@@ -346,16 +402,19 @@ def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame) -> pd.DataFram
 
 
 def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
-                  min_seeds: int = MIN_SEEDS) -> Verdict:
+                  min_seeds: int = MIN_SEEDS, dropped: Collection[int] = ()) -> Verdict:
     """The verdict of :func:`kraby_study.stats.verdict` from the summary rows and the seeds'
     final scores. The fastest is by the restricted mean seconds (a seed that never reached the
     threshold counts at its run's end); the rescaled IQR (``final_iqr_unbiased``) decides the
-    most repeatable."""
-    final = {int(vi): group["final_score"].tolist() for vi, group in seeds.groupby("vi")}
-    return verdict(final, auc_means=summary["auc_mean"].to_dict(),
-                   seconds=summary["seconds_to_threshold"].to_dict(),
-                   iqrs=summary["final_iqr_unbiased"].to_dict(),
-                   p_holm=summary["p_holm"].to_dict(), min_seeds=min_seeds)
+    most repeatable. Values a race dropped (``dropped``, by index) are no answer."""
+    final = {int(vi): group["final_score"].tolist() for vi, group in seeds.groupby("vi")
+             if int(vi) not in dropped}
+
+    def kept(column: str) -> dict[int, float]:
+        return {vi: v for vi, v in summary[column].to_dict().items() if vi not in dropped}
+
+    return verdict(final, auc_means=kept("auc_mean"), seconds=kept("seconds_to_threshold"),
+                   iqrs=kept("final_iqr_unbiased"), p_holm=kept("p_holm"), min_seeds=min_seeds)
 
 
 def arms_frame(sweep: Sweep) -> pd.DataFrame:
@@ -414,9 +473,13 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     if (trials["vi"] < 0).any():  # a run whose value cannot be read: show it, do not drop it
         values, labels = values + ["?"], labels + ["?"]
         trials.loc[trials["vi"] < 0, "vi"] = len(values) - 1
+    # The race's dropped values by their index here (the report's order), matched by value.
+    race = race_of(definition, data.trials, values) if data.kind.swept else None
+    dropped = race.dropped if race is not None else {}
+    look_alpha = race.rules.look_alpha if race is not None else math.nan
     complete = trials[trials["outcome"] == Outcome.COMPLETE][["vi", "seed", "number"]]
     curves = data.curves.merge(complete, on="number", how="inner")
-    summary = summarise(trials, labels, bootstrap, min_seeds)
+    summary = summarise(trials, labels, bootstrap, min_seeds, dropped, look_alpha)
     threshold, is_default, untrained = study_threshold(curves, summary, chosen)
     seeds = seed_metrics(trials, curves, threshold)
     summary = add_curve_metrics(summary, seeds)
@@ -426,18 +489,24 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
                  labels=labels, colours=colours, trials=trials, curves=curves,
                  bands=curve_bands(curves), summary=summary, seeds=seeds, threshold=threshold,
                  threshold_default=is_default, untrained=untrained, bootstrap=bootstrap,
-                 verdict=study_verdict(summary, seeds, min_seeds), min_seeds=min_seeds)
-    chosen = (selected_index(data.trials, data.curves, name, values, sweep.rule, min_seeds)
+                 verdict=study_verdict(summary, seeds, min_seeds, list(dropped)),
+                 min_seeds=min_seeds, race=race)
+    chosen = (selected_index(data.trials, data.curves, name, values, sweep.rule, min_seeds,
+                             dropped=list(dropped))
               if name and sweep.finished else None)
     sweep.summary["selected"] = [vi == chosen for vi in sweep.summary.index]
     return sweep
 
 
 def legend_label(sweep: Sweep, vi: int) -> str:
-    """A value as the legends write it: its label and the seeds behind its mean."""
+    """A value as the legends write it: its label and the seeds behind its mean (and, for a
+    value the race dropped, the round after which it was)."""
     row = sweep.summary.iloc[vi]
     text = f"{row['value']}  (n={row['complete']}"
     for name in (Outcome.FAILED, Outcome.PRUNED):
         if row[name]:
             text += f", {row[name]} {name}"
-    return text + ")"
+    text += ")"
+    if vi in sweep.dropped:  # a second line: the legends sit beside the axes
+        text += f"\ndropped after round {sweep.dropped[vi].round}"
+    return text

@@ -105,12 +105,14 @@ def run_campaign(campaign: Campaign, run_stage: RunStage, stream: TextIO) -> int
         summary, counts = run_stage(cfg, plan)
         if summary.interrupted:
             return 130
-        left = len(plan.specs) - counts.ended
-        if left:
+        # A raced stage plans the runs its race still wants, not every value's every seed.
+        runs = counts.planned if plan.racing else len(plan.specs)
+        left = runs - counts.ended
+        if left > 0:
             print(f"campaign {campaign.name}: stage {plan.name} has {left} run(s) left; rerun "
                   "the same command to continue", file=stream)
             return 1
-        print(f"stage {stage.number}/{total} {plan.name}: {counts.complete}/{len(plan.specs)} "
+        print(f"stage {stage.number}/{total} {plan.name}: {counts.complete}/{runs} "
               f"complete, {counts.failed} failed; selected {selected_text(cfg, stage)}",
               file=stream, flush=True)
     print(f"campaign {campaign.name}: {total}/{total} stages finished; `kraby-study best "
