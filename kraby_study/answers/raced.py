@@ -81,12 +81,12 @@ def race_of(definition: Mapping[str, Any], trials: list[FrozenTrial],
     """The race of a stored study with its dropped values mapped onto ``values`` (matched by
     :func:`kraby_study.records.value_key`, not by position); None for a study that did not
     race. A dropped value not in ``values`` is left out."""
-    rules = RaceRules.of(dict(definition))
-    if rules is None:
+    state = study_race(definition, trials)
+    if state is None:
         return None
+    rules = state.rules
     planned = list(definition["values"])
     runs = ended_runs(latest_by_key(trials), list(rules.round_seeds))
-    state = race(list(range(len(planned))), runs, rules)
     index = {value_key(v): i for i, v in enumerate(values)}
     dropped = {index[value_key(planned[v])]: drop for v, drop in state.dropped.items()
                if value_key(planned[v]) in index}
