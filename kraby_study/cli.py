@@ -108,8 +108,10 @@ SEARCH_FLAGS = [
          "(default ppo_search)", "NAME"),
     Flag("--sampler", "search.sampler", "default tpe (seeded), as search.sampler=...",
          choices=("tpe", "random")),
-    Flag("--pruner", "search.pruner", "stops bad trials at env-step checkpoints, as "
-         "search.pruner=... (default median)", choices=("median", "hyperband", "none")),
+    Flag("--pruner", "search.pruner", "stops bad trials: median and hyperband at env-step "
+         "checkpoints, wilcoxon after whole seeds (races a trial's seeds against the best "
+         "trial's), as search.pruner=... (default median)",
+         choices=("median", "hyperband", "wilcoxon", "none")),
     Flag("--seed", "search.seed", "sampler seed, stored with the study, as search.seed=S "
          "(default 0)", "S", _whole),
 ]
@@ -387,7 +389,10 @@ def build_parser() -> argparse.ArgumentParser:
         "choose one); the score is the mean over its seeds. The pruner sees the mean reward at "
         "search.checkpoints equal env-step intervals of the first seed, then the mean score "
         "after each further seed; it stops no trial in the first search.warmup (half) of the "
-        "first seed.\n\n" + EPILOG)
+        "first seed. --pruner wilcoxon sees each seed's final score instead, and stops a "
+        "trial's remaining seeds once its finished ones are worse than the best trial's same "
+        "seeds by a one-sided Wilcoxon signed-rank test, p < search.wilcoxon_p (0.1: from its "
+        "4th seed on, so budget.seeds=5 or more; budget=full has 10).\n\n" + EPILOG)
     parsers["confirm"].add_argument(
         "--baseline", action="append", type=_baseline, metavar="ppo=NAME",
         help="add a ppo config's settings as one more configuration (repeatable), e.g. "

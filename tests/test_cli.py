@@ -11,6 +11,7 @@ from conftest import TINY, file_digest, run_cli, sqlite_url
 
 from kraby_study.cli import build_parser
 from kraby_study.config.compose import compose_config
+from kraby_study.plan.space import PRUNERS
 
 
 @pytest.fixture(scope="module")
@@ -114,3 +115,13 @@ def test_a_report_folder_that_cannot_be_written_is_one_line(
     err = _one_line_error(capsys, "report", "--storage", sqlite_url(one_study), "--out",
                           "/proc/kraby-reports")
     assert "report folder" in err
+
+
+def test_optuna_help_offers_the_wilcoxon_pruner(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["optuna", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "{median,hyperband,wilcoxon,none}" in text
+    assert "search.wilcoxon_p" in text and "budget.seeds=5 or more" in text
+    # Every pruner the flag offers is one the search accepts.
+    assert set(PRUNERS) == {"median", "hyperband", "wilcoxon", "none"}
