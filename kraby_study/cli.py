@@ -421,6 +421,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Overrides may come after flags (optuna --trials 5 budget=quick): argparse leaves them over.
     args, extras = parser.parse_known_args(argv)
     unknown = [e for e in extras if e.startswith("-")]
+    if args.command == "optuna" and any(e.partition("=")[0] == "--racing" for e in unknown):
+        parser.error("--racing races a sweep's seeds; a search races its trials' seeds with "
+                     "--pruner wilcoxon")
     if unknown:
         parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     args.overrides = list(args.overrides) + extras

@@ -117,6 +117,18 @@ def test_a_report_folder_that_cannot_be_written_is_one_line(
     assert "report folder" in err
 
 
+@pytest.mark.parametrize("argv", [["--racing"], ["--racing=true"],
+                                  ["--trials", "3", "--racing", "budget=smoke"]])
+def test_optuna_refuses_racing_in_one_line_naming_the_wilcoxon_pruner(
+        workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
+    with pytest.raises(SystemExit) as caught:
+        run_cli("optuna", *argv)
+    assert caught.value.code == 2
+    err = capsys.readouterr().err
+    assert "--pruner wilcoxon" in err and err.count("\n") == 1
+    assert not (workdir / "studies").exists()
+
+
 def test_optuna_help_offers_the_wilcoxon_pruner(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         build_parser().parse_args(["optuna", "--help"])
