@@ -108,8 +108,10 @@ SEARCH_FLAGS = [
          "(default ppo_search)", "NAME"),
     Flag("--sampler", "search.sampler", "default tpe (seeded), as search.sampler=...",
          choices=("tpe", "random")),
-    Flag("--pruner", "search.pruner", "stops bad trials at env-step checkpoints, as "
-         "search.pruner=... (default median)", choices=("median", "hyperband", "none")),
+    Flag("--pruner", "search.pruner", "stops bad trials: median and hyperband at env-step "
+         "checkpoints, wilcoxon after whole seeds (races a trial's seeds against the best "
+         "trial's), as search.pruner=... (default median)",
+         choices=("median", "hyperband", "wilcoxon", "none")),
     Flag("--seed", "search.seed", "sampler seed, stored with the study, as search.seed=S "
          "(default 0)", "S", _whole),
 ]
@@ -394,16 +396,16 @@ def build_parser() -> argparse.ArgumentParser:
         "choose one); the score is the mean over its seeds. The pruner sees the mean reward at "
         "search.checkpoints equal env-step intervals of the first seed, then the mean score "
         "after each further seed; it stops no trial in the first search.warmup (half) of the "
-        "first seed.\n\n" + EPILOG)
+        "first seed. --pruner wilcoxon sees each seed's final score instead, and stops a "
+        "trial's remaining seeds once its finished ones are worse than the best trial's same "
+        "seeds by a one-sided Wilcoxon signed-rank test, p < search.wilcoxon_p (0.1: from its "
+        "4th seed on, so budget.seeds=5 or more; budget=full has 10).\n\n" + EPILOG)
     for name in ("run", "confirm"):
         parsers[name].add_argument(
             "--racing", action="store_true",
             help="run seeds in rounds and stop the values significantly worse than the best "
             "(as racing.enabled=true; racing.min_seeds, default 3, and racing.alpha, default "
             "0.05, tune it); budget.seeds (confirm: --seeds) is the most any value gets")
-    parsers["optuna"].add_argument(
-        "--racing", action="store_true",
-        help="not for searches: a search races its seeds with --pruner wilcoxon")
     parsers["confirm"].add_argument(
         "--baseline", action="append", type=_baseline, metavar="ppo=NAME",
         help="add a ppo config's settings as one more configuration (repeatable), e.g. "
@@ -432,6 +434,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Overrides may come after flags (optuna --trials 5 budget=quick): argparse leaves them over.
     args, extras = parser.parse_known_args(argv)
     unknown = [e for e in extras if e.startswith("-")]
+    if args.command == "optuna" and any(e.partition("=")[0] == "--racing" for e in unknown):
+        parser.error("--racing races a sweep's seeds; a search races its trials' seeds with "
+                     "--pruner wilcoxon")
     if unknown:
         parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     args.overrides = list(args.overrides) + extras

@@ -11,6 +11,7 @@ from conftest import TINY, file_digest, run_cli, sqlite_url
 
 from kraby_study.cli import build_parser
 from kraby_study.config.compose import compose_config
+from kraby_study.plan.space import PRUNERS
 
 
 @pytest.fixture(scope="module")
@@ -130,3 +131,25 @@ def test_a_report_setting_out_of_range_is_one_line(
                           str(workdir / "r"), setting)
     assert message in err
     assert file_digest(one_study) == before and not (workdir / "r").exists()
+
+
+@pytest.mark.parametrize("argv", [["--racing"], ["--racing=true"],
+                                  ["--trials", "3", "--racing", "budget=smoke"]])
+def test_optuna_refuses_racing_in_one_line_naming_the_wilcoxon_pruner(
+        workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
+    with pytest.raises(SystemExit) as caught:
+        run_cli("optuna", *argv)
+    assert caught.value.code == 2
+    err = capsys.readouterr().err
+    assert "--pruner wilcoxon" in err and err.count("\n") == 1
+    assert not (workdir / "studies").exists()
+
+
+def test_optuna_help_offers_the_wilcoxon_pruner(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["optuna", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "{median,hyperband,wilcoxon,none}" in text
+    assert "search.wilcoxon_p" in text and "budget.seeds=5 or more" in text
+    # Every pruner the flag offers is one the search accepts.
+    assert set(PRUNERS) == {"median", "hyperband", "wilcoxon", "none"}

@@ -280,7 +280,8 @@ def test_bad_racing_input_is_one_line_and_writes_nothing(
 
 def test_racing_on_a_search_or_a_train_run_is_refused(
         workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert run_cli("optuna", "--racing", "--trials", "1", *TINY) == 2
+    # --racing itself is refused by the parser (tests/test_cli.py); its key=value form here.
+    assert run_cli("optuna", "racing.enabled=true", "--trials", "1", *TINY) == 2
     err = capsys.readouterr().err
     assert "--pruner wilcoxon" in err and len(err.strip().splitlines()) == 1
     assert run_cli("train", "racing.enabled=true", *TINY) == 2

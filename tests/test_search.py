@@ -220,6 +220,11 @@ def test_best_of_a_sweep_writes_the_best_value(workdir: Path,
     (["search.pruner_startup_trials=-1"], "pruner_startup_trials"),
     (["search.warmup=1"], "search.warmup"),
     (["search.warmup=-0.25"], "search.warmup"),
+    (["budget=quick", "--pruner", "wilcoxon"], "budget.seeds=3 at search.wilcoxon_p=0.1"),
+    (["budget.seeds=4", "--pruner", "wilcoxon"], "budget.seeds=5 or more"),
+    (["budget.seeds=1", "--pruner", "wilcoxon"], "budget.seeds=1 never leaves any to stop"),
+    (["search.wilcoxon_p=0"], "search.wilcoxon_p"),
+    (["search.wilcoxon_p=1", "--pruner", "wilcoxon"], "search.wilcoxon_p"),
 ])
 def test_bad_search_input_is_refused_before_anything_runs(
         workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str],
@@ -270,3 +275,99 @@ def test_evaluation_is_deterministic_for_a_model(tmp_path: Path) -> None:
     first = evaluate(model, settings["env"], 4)
     assert first == evaluate(model, settings["env"], 4)
     assert -2.0 < first < 0
+
+
+# The wilcoxon pruner races a trial's seeds: a trial's seed scores are constructed here (the
+# training is faked), by the delta its configuration draws, seed by seed (5 seeds).
+RACE_SPACE = """\
+name: race
+sampler: random
+pruner: wilcoxon
+params:
+  delta: {path: env.delta, type: categorical, choices: [0.0, 0.5, 1.0]}
+"""
+SEED_SCORES = {
+    0.0: [-0.10, -0.12, -0.11, -0.09, -0.13],  # the best (mean -0.11)
+    1.0: [-0.30, -0.33, -0.29, -0.35, -0.31],  # worse on every seed: p = 1/2^4 after 4 seeds
+    # Worse on average and on 3 of its first 4 seeds (by 0.04, 0.02, 0.03; better by 0.01 on
+    # the third): p = 2/16 = 0.125 after 4 seeds, not below 0.1, so it runs every seed.
+    0.5: [-0.14, -0.14, -0.10, -0.12, -0.12],
+}
+
+
+def test_wilcoxon_pruner_stops_the_seeds_of_a_trial_worse_on_the_same_seeds(
+        workdir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from kraby_study.records import TrialAttrs
+    from kraby_study.run import trial as trial_module
+    from kraby_study.run.sampling import distributions, make_sampler
+    from kraby_study.run.trial import run_trial
+
+    def learn(spec: object, seed: int, recorder: object, shards: int) -> object:
+        return trial_module._Seed(env_steps=spec.steps)  # type: ignore[attr-defined]
+
+    def score(spec: object, run: object) -> None:
+        delta = spec.settings["env"]["delta"]  # type: ignore[attr-defined]
+        index = len(trained[spec.key])  # type: ignore[attr-defined]
+        run.score = run.train_reward = SEED_SCORES[delta][index]  # type: ignore[attr-defined]
+        trained[spec.key].append(run.score)  # type: ignore[attr-defined]
+
+    trained: dict[str, list[float]] = {}
+    monkeypatch.setattr(trial_module, "_learn", learn)
+    monkeypatch.setattr(trial_module, "_score", score)
+    (workdir / "conf" / "search").mkdir(parents=True)
+    (workdir / "conf" / "search" / "race.yaml").write_text(RACE_SPACE)
+    cfg = compose_config(["search=race", "budget=smoke", "budget.steps=1000", "budget.seeds=5",
+                          "save_models=false", f"storage=sqlite:///{workdir}/k.db"])
+    validate_search(cfg)
+    with opened(cfg.storage) as store:
+        ledger = store.define("race", StudyAttrs(kind="search"), sampler=make_sampler(cfg),
+                              pruner=make_pruner(cfg))
+        for delta in (0.0, 1.0, 0.5):
+            ledger.queue({"delta": delta}, TrialAttrs())
+        source = SearchSource(ledger, cfg)
+        assert distributions(cfg).keys() == {"delta"}
+        for _ in SEED_SCORES:
+            claimed = source.next_trial()
+            assert claimed is not None
+            number, spec = claimed
+            assert spec.seed_scores and spec.checkpoint_every is None
+            trained[spec.key] = []
+            result = run_trial(spec, lambda step, value, n=number: source.checkpoint(
+                n, step, value))
+            ledger.record(number, result)
+        best, worse, kept = sorted(ledger.trials(), key=lambda t: t.number)
+    steps = [1000, 2000, 3000, 4000, 5000]
+    # Each seed's own score at the env steps of its end, the last seed's too.
+    assert best.state == TrialState.COMPLETE
+    assert best.intermediate_values == dict(zip(steps, SEED_SCORES[0.0], strict=True))
+    assert best.value == pytest.approx(-0.11)
+    # Stopped after its 4th seed, the first at which p can fall below 0.1 (not after 2 or 3).
+    assert worse.state == TrialState.PRUNED
+    assert worse.user_attrs["pruned_at"] == 4000 and worse.user_attrs["env_steps"] == 4000
+    assert worse.intermediate_values == dict(zip(steps[:4], SEED_SCORES[1.0][:4],
+                                                 strict=True))
+    # Worse on average but not significantly: it ran all its seeds and has its score.
+    assert kept.state == TrialState.COMPLETE and kept.user_attrs["env_steps"] == 5000
+    assert kept.value == pytest.approx(sum(SEED_SCORES[0.5]) / 5)
+    assert len(kept.intermediate_values) == 5
+
+
+def test_a_wilcoxon_search_reports_whole_seeds_only(spaces: Path) -> None:
+    assert run_cli("optuna", "--trials", "1", "search=tiny", "--pruner", "wilcoxon",
+                   "--workers", "1", *TINY, "budget.seeds=5") == 0
+    trial = load(spaces / "studies" / "kraby.db", "tiny").trials[0]
+    assert trial.state == TrialState.COMPLETE
+    # No checkpoint within a seed: one value per seed, at the env steps of its end.
+    assert set(trial.intermediate_values) == {512, 1024, 1536, 2048, 2560}
+    assert trial.value == pytest.approx(sum(trial.intermediate_values.values()) / 5)
+
+
+def test_the_wilcoxon_threshold_is_in_the_definition_of_wilcoxon_searches_only() -> None:
+    from kraby_study.plan.space import search_definition, wilcoxon_seeds
+
+    assert "wilcoxon_p" not in search_definition(compose_config([]))["search"]
+    racing = compose_config(["search.pruner=wilcoxon", "budget.seeds=5"])
+    assert search_definition(racing)["search"]["wilcoxon_p"] == 0.1
+    pruner = make_pruner(racing)
+    assert isinstance(pruner, optuna.pruners.WilcoxonPruner)
+    assert [wilcoxon_seeds(p) for p in (0.3, 0.25, 0.1, 0.05, 0.01)] == [2, 3, 4, 5, 7]

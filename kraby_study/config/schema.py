@@ -125,20 +125,29 @@ class SearchConfig:
     sampler: str = "tpe"
     """tpe or random."""
     pruner: str = "median"
-    """median, hyperband or none."""
+    """median, hyperband, wilcoxon or none. median and hyperband judge env-step checkpoints;
+    wilcoxon races a trial's seeds: it sees each seed's final score and stops the remaining
+    seeds once they are significantly worse than the best trial's same seeds."""
     seed: int = 0
     """Seed of the sampler, stored with the study."""
     startup_trials: int = 5
     """Trials sampled at random before TPE starts."""
     pruner_startup_trials: int = 3
     """Complete trials the median pruner waits for: it compares with their values."""
+    wilcoxon_p: float = 0.1
+    """The wilcoxon pruner's p threshold: a trial's remaining seeds are stopped when the
+    one-sided Wilcoxon signed-rank test of its finished seeds against the best trial's same
+    seeds gives p below it. With n seeds p is at least 1/2^n, so 0.1 acts from the 4th seed
+    on and needs budget.seeds >= 5 (see docs/benchmarks.md, Pruning)."""
     warmup: float = 0.5
     """Fraction of the first seed during which no trial is pruned: the first updates' reward
-    says little about a configuration (it is mostly the untrained policy's)."""
+    says little about a configuration (it is mostly the untrained policy's). Not read by the
+    wilcoxon pruner, which sees whole seeds only."""
     checkpoints: int = 4
     """Intervals of equal env steps in a trial's first seed; the mean reward of each but the
     last is an intermediate value (the pruner's steps), as is the mean score after each seed
-    but the last."""
+    but the last. With the wilcoxon pruner the intermediate values are each seed's own score
+    instead, at the env steps of the seed's end, and nothing within a seed."""
     objective: str = "final_reward"
     """final_reward: mean episode reward over the last 10 % of training; evaluation: mean
     reward of the deterministic policy on a fixed set of targets (reset options)."""

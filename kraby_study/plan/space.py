@@ -16,7 +16,7 @@ from kraby_study.plan.settings import resolved_settings, with_value
 from kraby_study.records import value_key
 
 SAMPLERS = ("tpe", "random")
-PRUNERS = ("median", "hyperband", "none")
+PRUNERS = ("median", "hyperband", "wilcoxon", "none")
 OBJECTIVES = ("final_reward", "evaluation")
 NMINIBATCHES = "ppo.nminibatches"
 
@@ -43,6 +43,10 @@ def validate_search(cfg: DictConfig) -> None:
     if not 0 <= float(search.warmup) < 1:
         _fail(f"search.warmup must be in [0, 1) (a fraction of the first seed), "
               f"got {search.warmup}")
+    if not 0 < float(search.wilcoxon_p) < 1:
+        _fail(f"search.wilcoxon_p must be in (0, 1) (a p threshold), got {search.wilcoxon_p}")
+    if search.pruner == "wilcoxon":
+        _validate_wilcoxon(int(cfg.budget.seeds), float(search.wilcoxon_p))
     if not search.params:
         _fail("search.params is empty: the space needs at least one parameter")
     paths = [str(p.path) for p in search.params.values()]
@@ -51,6 +55,37 @@ def validate_search(cfg: DictConfig) -> None:
     for name, param in search.params.items():
         _validate_param(cfg, str(name), param)
     _validate_batches(cfg)
+
+
+def wilcoxon_seeds(p: float) -> int:
+    """Finished seeds the wilcoxon pruner needs before it can stop a trial at threshold ``p``.
+
+    The one-sided Wilcoxon signed-rank test of n paired seeds gives at best p = 1/2^n (every
+    seed worse than the best trial's), so fewer than the least n with 1/2^n < p can never
+    prune; Optuna's pruner also never prunes on fewer than 2 pairs. 0.1 needs 4.
+    """
+    n = 2
+    while 0.5 ** n >= p:
+        n += 1
+    return n
+
+
+def _validate_wilcoxon(seeds: int, p: float) -> None:
+    """Refuse a wilcoxon search that could never stop a trial: the pruner may act after any
+    seed but the last, so a trial needs ``wilcoxon_seeds(p) + 1`` seeds."""
+    needed = wilcoxon_seeds(p)
+    if seeds - 1 >= needed:
+        return
+    if seeds < 3:
+        _fail(f"the wilcoxon pruner stops a trial's remaining seeds once at least 2 finished "
+              f"ones are worse than the best trial's, and budget.seeds={seeds} never leaves "
+              f"any to stop: give budget.seeds={needed + 1} or more (search.wilcoxon_p="
+              f"{p:g}), or use --pruner median")
+    least = f"1/2^{seeds - 1} = {0.5 ** (seeds - 1):.3g}"
+    _fail(f"the wilcoxon pruner cannot stop a trial of budget.seeds={seeds} at "
+          f"search.wilcoxon_p={p:g}: the signed-rank test on the {seeds - 1} seeds before the "
+          f"last gives p >= {least}; give budget.seeds={needed + 1} or more, or "
+          f"search.wilcoxon_p above {least}")
 
 
 def _validate_param(cfg: DictConfig, name: str, param: DictConfig) -> None:
@@ -142,6 +177,10 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
     search = to_container(cfg.search)
     search.pop("trials")
     search.pop("name")
+    if search["pruner"] != "wilcoxon":
+        # Read by the wilcoxon pruner only: other searches keep the definition (and the
+        # fingerprint) they had before the setting existed.
+        search.pop("wilcoxon_p", None)
     settings = resolved_settings(cfg)
     return {"kind": "search", "search": search, "settings": settings,
             "steps": int(cfg.budget.steps), "seeds": int(cfg.budget.seeds),

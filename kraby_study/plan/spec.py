@@ -33,6 +33,9 @@ class TrialSpec:
     """Where to save the final model (SB3 zip), or None."""
     checkpoint_every: int | None = None
     """Report progress to a pruner every this many environment steps (searches only)."""
+    seed_scores: bool = False
+    """Report each seed's own score, the last seed's too, at the env steps of the seed's end,
+    and nothing within a seed (searches with the wilcoxon pruner, which pairs seeds)."""
     seeds: int = 1
     """Training runs, with seeds seed, seed + 1, ...; the score is their mean (searches)."""
     objective: str = "final_reward"
@@ -41,6 +44,11 @@ class TrialSpec:
     """Fixed targets of the evaluation objective."""
     label: str = ""
     """How progress lines name the run, e.g. 'clip_range=0.2 seed 1'."""
+
+    @property
+    def reports(self) -> bool:
+        """Whether the run reports intermediate values to a pruner (searches only)."""
+        return bool(self.checkpoint_every) or self.seed_scores
 
 
 @dataclass(frozen=True)

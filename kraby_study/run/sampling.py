@@ -5,6 +5,8 @@ The space itself is declared and checked in :mod:`kraby_study.plan.space`, which
 
 from __future__ import annotations
 
+import warnings
+
 import optuna
 from omegaconf import DictConfig
 from optuna.distributions import (
@@ -15,7 +17,7 @@ from optuna.distributions import (
 )
 
 from kraby_study.config.validate import to_container
-from kraby_study.plan.space import warmup_steps
+from kraby_study.plan.space import warmup_steps, wilcoxon_seeds
 
 
 def distributions(cfg: DictConfig) -> dict[str, BaseDistribution]:
@@ -41,7 +43,23 @@ def make_sampler(cfg: DictConfig) -> optuna.samplers.BaseSampler:
 
 
 def make_pruner(cfg: DictConfig) -> optuna.pruners.BasePruner:
-    """The pruner of a search; its steps are env steps."""
+    """The pruner of a search; its steps are env steps.
+
+    The wilcoxon pruner sees one value per seed, the seed's own score at the env steps of its
+    end, so the same seed has the same step in every trial; it pairs a trial's seeds with the
+    best trial's and prunes when the one-sided signed-rank test gives p < search.wilcoxon_p
+    (and the trial's mean is below the best's). Its startup is the test's own: no fewer
+    seeds than can reach that p (4 at 0.1), so a tie-corrected approximation cannot act
+    sooner. It waits for no complete trials beyond the best one.
+    """
+    if cfg.search.pruner == "wilcoxon":
+        p = float(cfg.search.wilcoxon_p)
+        # Experimental in Optuna (since 3.6): its warning at construction would only alarm
+        # users; store/store.py silences the same warning for heartbeats.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+            return optuna.pruners.WilcoxonPruner(p_threshold=p,
+                                                 n_startup_steps=wilcoxon_seeds(p))
     warmup = warmup_steps(cfg)
     if cfg.search.pruner == "median":
         return optuna.pruners.MedianPruner(n_startup_trials=int(cfg.search.pruner_startup_trials),

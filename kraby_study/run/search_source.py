@@ -15,6 +15,7 @@ from kraby_study.plan.space import (
     checkpoint_every,
     fitted_params,
     search_definition,
+    wilcoxon_seeds,
 )
 from kraby_study.plan.spec import TrialSpec, fingerprint
 from kraby_study.records import (
@@ -84,18 +85,30 @@ class SearchSource(StudySource):
 
     def _spec(self, key: str, trial_cfg: DictConfig, params: dict[str, Any]) -> TrialSpec:
         cfg = self.cfg
+        # The wilcoxon pruner pairs seeds: it sees each seed's score, nothing within a seed.
+        seed_scores = cfg.search.pruner == "wilcoxon"
         return TrialSpec(
             study=self.ledger.name, key=key, seed=int(cfg.seed),
             steps=int(cfg.budget.steps), curve_every=int(cfg.budget.curve_every),
             settings=resolved_settings(trial_cfg),
             model_path=model_path(cfg, self.ledger.name, key),
-            checkpoint_every=checkpoint_every(cfg), seeds=int(cfg.budget.seeds),
+            checkpoint_every=None if seed_scores else checkpoint_every(cfg),
+            seed_scores=seed_scores, seeds=int(cfg.budget.seeds),
             objective=str(cfg.search.objective), eval_episodes=int(cfg.search.eval_episodes),
             label=short_label(params, key))
 
     def checkpoint(self, number: int, step: int, value: float) -> bool:
         """Report an intermediate value to the pruner; False stops the trial."""
         return self.ledger.checkpoint(number, step, value)
+
+
+def pruner_label(cfg: DictConfig) -> str:
+    """The pruner as the start line names it; the wilcoxon pruner with its threshold."""
+    if cfg.search.pruner == "wilcoxon":
+        p = float(cfg.search.wilcoxon_p)
+        return (f"wilcoxon pruner (a trial's seeds against the best's, p < {p:g}, from "
+                f"{wilcoxon_seeds(p)} seeds)")
+    return f"{cfg.search.pruner} pruner"
 
 
 def warm_start(ledger: StudyLedger, cfg: DictConfig,
@@ -137,7 +150,7 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
     slots = max(1, min(workers, left))
     print(f"search {ledger.name}: {source.total} trials, {done} done, {left} to run on "
           f"{slots} worker(s); {cfg.budget.seeds} seed(s) x {cfg.budget.steps:,} steps each, "
-          f"{cfg.search.sampler} sampler, {cfg.search.pruner} pruner", file=stream, flush=True)
+          f"{cfg.search.sampler} sampler, {pruner_label(cfg)}", file=stream, flush=True)
     progress = Progress(ledger.name, source.total, done, stream, live)
     summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream), slots, progress,
                          executor, heartbeat_seconds=float(cfg.heartbeat_interval))

@@ -126,6 +126,9 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
     seeds so far; steps count across seeds. So a pruner compares trials at equal experience, and
     can stop a bad configuration during or after its first seed. (Within later seeds a learning
     curve starts again from scratch and would compare with the others' first-seed curves.)
+    With ``seed_scores`` (the wilcoxon pruner) they are instead each seed's own score at the
+    env steps of its end, every seed's, so a complete trial holds all its seeds for later trials
+    to be paired with; a stop after the last seed has nothing left to save and is not taken.
     ``shards`` sets how many processes step the legs: speed only, the result is the same.
     """
     from kraby_study.run.callback import EpisodeRecorder
@@ -134,8 +137,9 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
     t0 = time.perf_counter()
     runs: list[_Seed] = []
     for index in range(spec.seeds):
+        within = spec.checkpoint_every if index == 0 and not spec.seed_scores else None
         recorder = EpisodeRecorder(spec.steps, offset=index * spec.steps,
-                                   checkpoint_every=spec.checkpoint_every if index == 0 else None,
+                                   checkpoint_every=within,
                                    on_checkpoint=on_checkpoint, on_progress=on_progress)
         run = _learn(spec, spec.seed + index, recorder, shards)
         runs.append(run)
@@ -143,13 +147,26 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
             _score(spec, run)
         if run.failure is not None or run.pruned_at is not None:
             break
-        if spec.checkpoint_every and index + 1 < spec.seeds:
-            step = (index + 1) * spec.steps
-            value = float(np.mean([r.score for r in runs]))
-            if on_checkpoint is not None and not on_checkpoint(step, value):
-                run.pruned_at = step
-                break
+        if on_checkpoint is not None and _stopped_after(spec, runs, on_checkpoint):
+            break
     return _result(spec, runs, started, time.perf_counter() - t0)
+
+
+def _stopped_after(spec: TrialSpec, runs: list[_Seed], on_checkpoint: CheckpointHook) -> bool:
+    """Report the intermediate value at the end of the latest seed, if there is one; True
+    when the pruner stops the trial there (never after the last seed)."""
+    step = len(runs) * spec.steps
+    last = len(runs) == spec.seeds
+    if spec.seed_scores:
+        go_on = on_checkpoint(step, float(runs[-1].score))  # type: ignore[arg-type]
+    elif spec.checkpoint_every and not last:
+        go_on = on_checkpoint(step, float(np.mean([r.score for r in runs])))
+    else:
+        return False
+    if go_on or last:
+        return False
+    runs[-1].pruned_at = step
+    return True
 
 
 def _result(spec: TrialSpec, runs: list[_Seed], started: str, seconds: float) -> TrialResult:

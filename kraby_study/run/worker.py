@@ -29,7 +29,7 @@ def attempt(spec: TrialSpec, shards: int, checkpoint: CheckpointHook | None,
     from kraby_study.run.trial import run_trial
 
     try:
-        return run_trial(spec, checkpoint if spec.checkpoint_every else None, progress,
+        return run_trial(spec, checkpoint if spec.reports else None, progress,
                          shards=shards)
     except Exception as err:
         last = traceback.format_exception_only(type(err), err)[-1].strip()
