@@ -353,3 +353,18 @@ def test_summary_intervals_are_bootstrap_t_from_five_seeds() -> None:
     assert (metrics.loc[1, "auc_low"], metrics.loc[1, "auc_high"]) == pytest.approx(
         hall_bounds(aucs[1])[1:], rel=1e-9)
 
+
+def test_few_seeds_note_prints_the_measured_coverage(report: ReportIndex) -> None:
+    # learning_rate has values of 4, 4, 1 and 3 complete seeds: the summary's notes give the
+    # measured coverage (kraby_study/coverage.csv) of every interval at n = 3 and n = 4.
+    from kraby_study.coverage import coverage_table
+
+    text = (report.out / "learning_rate" / "summary.md").read_text()
+    table = coverage_table()
+    mean_rows = table[table["interval"].str.startswith("mean: Hall's t below 5 seeds")]
+    assert set(mean_rows["n"]) >= {2, 3, 4, 5, 10}
+    for n in (3, 4):
+        assert f"At n = {n} (at least 20,000 simulations)" in text
+        for row in mean_rows[mean_rows["n"] == n].itertuples(index=False):
+            assert f"{row.coverage:.3f} {row.distribution}" in text
+    assert "At n = 1 " not in text and "At n = 5 " not in text
