@@ -40,7 +40,7 @@ def coverage_note(ns: Iterable[int]) -> str | None:
     for n, at_n in rows.groupby("n", sort=True):
         cells = []
         for interval, group in at_n.groupby("interval", sort=False):
-            found = ", ".join(f"{r.coverage:.2f} {r.distribution}"
+            found = ", ".join(f"{r.coverage:.3f} {r.distribution}"
                               for r in group.itertuples(index=False))
             cells.append(f"{interval} {found}")
         simulations = int(at_n["simulations"].min())

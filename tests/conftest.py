@@ -205,3 +205,29 @@ def hall_bounds(values: list[float], level: float = 0.95) -> tuple[float, float,
         return real[0] if len(real) == 1 else min(real, key=lambda r: abs(r - v))
 
     return mean, mean - solve(q) * se, mean - solve(-q) * se
+
+
+def bootstrap_t_reference(values: list[float], level: float = 0.95,
+                          resamples: int = 2000) -> tuple[float, float]:
+    """The bootstrap-t interval of a mean, slowly: the package's resamples of the sorted sample
+    (``stats._resample_plan``), each resample's t = (mean* - mean) / (sd* / sqrt(n)) computed
+    one at a time on the raw values with ``np.std(ddof=1)`` (+-inf, or 0 on the mean, when the
+    resample has one value), then the interval [mean - t_hi se, mean - t_lo se] from
+    ``np.quantile`` at (1 -+ level) / 2."""
+    import numpy as np
+
+    from kraby_study.stats import BOOTSTRAP_SEED, _resample_plan
+
+    x = np.sort(np.asarray(values, dtype=float))
+    n, mean = len(x), float(np.mean(x))
+    ts = []
+    for row in _resample_plan(x, resamples, BOOTSTRAP_SEED):
+        draw = x[row]
+        if len(set(draw.tolist())) == 1:
+            gap = float(draw[0]) - mean
+            ts.append(0.0 if gap == 0 else math.copysign(math.inf, gap))
+        else:
+            ts.append((float(np.mean(draw)) - mean) / (float(np.std(draw, ddof=1)) / math.sqrt(n)))
+    t_low, t_high = np.quantile(np.array(ts), [(1 - level) / 2, (1 + level) / 2])
+    se = float(np.std(x, ddof=1)) / math.sqrt(n)
+    return mean - float(t_high) * se, mean - float(t_low) * se

@@ -197,6 +197,7 @@ def test_summary_numbers_equal_a_hand_computation(sweep_report: ReportIndex) -> 
     text = (out / "ent_coef" / "summary.md").read_text()
     assert "ent_coef: 0.1 best final score (mean 5" in text
     assert "Welch's t-test" in text and "95 % Hall skewness-corrected t interval" in text
+    assert "studentised bootstrap (bootstrap-t) interval (2,000 resamples" in text
 
 
 def test_statistics_edge_cases() -> None:

@@ -23,7 +23,8 @@ from kraby_study.store.store import Store
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 NEW_FIGURES = ["sample_efficiency", "time_to_threshold", "improvement"]
 BOOTSTRAP = 1000
-"""report.bootstrap of the fixture's report: still accepted, though no interval bootstraps."""
+"""report.bootstrap of the fixture's report: resamples of the bootstrap-t interval of a mean
+(every value here has fewer than 5 seeds, so Hall's interval is printed)."""
 STEPS = (100, 200, 300, 400)
 
 # learning_rate: final scores per value; 0.01 is the best (mean 5.5).
@@ -252,7 +253,8 @@ def test_holm_ties_and_probability_of_improvement(report: ReportIndex) -> None:
     text = (report.out / "learning_rate" / "summary.md").read_text()
     assert "closed Holm-Welch step-down, alpha 0.05" in text and "P(best > value)" in text
     assert text.count("95 % Newcombe score-type interval (Newcombe 2006, method 5)") == 1
-    assert "resamples" not in text and "BCa" not in text  # nothing bootstraps any more
+    assert "BCa" not in text  # P(improvement) and the IQM do not bootstrap any more
+    assert "bootstrap-t) interval (1,000 resamples" in text  # report.bootstrap
     assert "no correction for multiple comparisons" not in report.markdown.read_text()
 
 
@@ -319,3 +321,50 @@ def test_threshold_option_changes_reach(store_url: str, report: ReportIndex,
     assert summary.loc[0.1, "reached"] == 0
     assert "mean episode reward >= 1, set by the report's option report.threshold" in (
         index.out / "learning_rate" / "summary.md").read_text()
+
+
+def test_summary_intervals_are_bootstrap_t_from_five_seeds() -> None:
+    # Value "six": 6 complete seeds (right-skewed scores, times and AUCs): the bootstrap-t
+    # interval with report.bootstrap resamples. Value "three": 3 seeds, Hall's interval.
+    from kraby_study.report.sweep_tables import SEED_COLUMNS, add_curve_metrics, summarise
+    from kraby_study.stats import bootstrap_t_interval
+
+    finals = {0: [1.0, 1.5, 2.0, 2.5, 3.0, 9.0], 1: [2.0, 4.0, 9.0]}
+    times = {0: [10.0, 11.0, 12.0, 13.0, 15.0, 30.0], 1: [20.0, 20.0, 26.0]}
+    trials = pd.DataFrame(
+        [(10 * vi + i, f"k{vi}{i}", i, vi, vi, Outcome.COMPLETE, score,
+          times[vi][i], 1000.0, "", None)
+         for vi, scores in finals.items() for i, score in enumerate(scores)],
+        columns=["number", "key", "seed", "vi", "value", "outcome", "final_score",
+                 "wall_time", "env_steps", "failure", "model_path"])
+    summary = summarise(trials, ["six", "three"], bootstrap=500)
+    for column, samples in (("final", finals), ("time", times)):
+        assert (summary.loc[0, f"{column}_low"], summary.loc[0, f"{column}_high"]) == (
+            pytest.approx(bootstrap_t_interval(samples[0], resamples=500), rel=1e-12))
+        assert (summary.loc[1, f"{column}_low"], summary.loc[1, f"{column}_high"]) == (
+            pytest.approx(hall_bounds(samples[1])[1:], rel=1e-9))
+    aucs = {0: [0.5, 0.7, 0.6, 0.8, 0.9, 3.0], 1: [1.0, 2.0, 4.0]}
+    seeds = pd.DataFrame([(vi, i, 10 * vi + i, finals[vi][i], 0.0, a, np.nan, np.nan, 400.0,
+                           10.0) for vi, values in aucs.items() for i, a in enumerate(values)],
+                         columns=SEED_COLUMNS)
+    metrics = add_curve_metrics(summary, seeds, bootstrap=500)
+    assert (metrics.loc[0, "auc_low"], metrics.loc[0, "auc_high"]) == pytest.approx(
+        bootstrap_t_interval(aucs[0], resamples=500), rel=1e-12)
+    assert (metrics.loc[1, "auc_low"], metrics.loc[1, "auc_high"]) == pytest.approx(
+        hall_bounds(aucs[1])[1:], rel=1e-9)
+
+
+def test_few_seeds_note_prints_the_measured_coverage(report: ReportIndex) -> None:
+    # learning_rate has values of 4, 4, 1 and 3 complete seeds: the summary's notes give the
+    # measured coverage (kraby_study/coverage.csv) of every interval at n = 3 and n = 4.
+    from kraby_study.coverage import coverage_table
+
+    text = (report.out / "learning_rate" / "summary.md").read_text()
+    table = coverage_table()
+    mean_rows = table[table["interval"].str.startswith("mean: Hall's t below 5 seeds")]
+    assert set(mean_rows["n"]) >= {2, 3, 4, 5, 10}
+    for n in (3, 4):
+        assert f"At n = {n} (at least 20,000 simulations)" in text
+        for row in mean_rows[mean_rows["n"] == n].itertuples(index=False):
+            assert f"{row.coverage:.3f} {row.distribution}" in text
+    assert "At n = 1 " not in text and "At n = 5 " not in text

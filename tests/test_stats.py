@@ -8,17 +8,19 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import hall_bounds, newcombe_bounds
+from conftest import bootstrap_t_reference, hall_bounds, newcombe_bounds
 from scipy import stats
 
 from kraby_study.comparison import holm
 from kraby_study.stats import (
     ALPHA,
+    BAND_NAME,
     HOLM_NAME,
     INTERVAL_NAME,
     IQM_INTERVAL_NAME,
     Verdict,
     auc,
+    bootstrap_t_interval,
     compare_to_best,
     default_threshold,
     describe,
@@ -86,7 +88,10 @@ def test_iqm_interval_edge_cases_without_warnings() -> None:
 
 def test_interval_names_name_the_method_and_the_procedure() -> None:
     assert IQM_INTERVAL_NAME.startswith("95 % Tukey-McLaughlin trimmed-t interval")
-    assert INTERVAL_NAME.startswith("95 % Hall skewness-corrected t interval of the mean")
+    assert INTERVAL_NAME.startswith("95 % interval of the mean over seeds: from 5 seeds on, the "
+                                    "equal-tailed studentised bootstrap (bootstrap-t)")
+    assert "2,000 resamples" in INTERVAL_NAME and "Hall's skewness-corrected t" in INTERVAL_NAME
+    assert BAND_NAME.startswith("95 % Hall skewness-corrected t interval of the mean")
     assert "closed Holm step-down" in HOLM_NAME and "alpha = 0.05" in HOLM_NAME
 
 
@@ -163,11 +168,20 @@ def test_mean_interval_is_halls_on_a_hand_worked_skewed_sample() -> None:
     assert t_low < low < mean < t_high < high
 
 
+def _hall(x: list[float], level: float = 0.95) -> tuple[float, float, float]:
+    """Hall's interval through the package's closed form, at any n."""
+    mean = float(np.mean(x))
+    low, high = hall_interval(mean, float(np.std(x, ddof=1)), len(x), sample_skewness(x), level)
+    return mean, float(low), float(high)
+
+
 @pytest.mark.parametrize("x", [SPREAD, [0.1, 0.5, 0.2, 3.0, 0.3], [-5.0, 0.0, 0.2, 0.1, 0.3, -0.1],
                                [1e6 + 1.0, 1e6 + 1.5, 1e6 + 7.0]])
 def test_hall_interval_against_the_cubic_roots(x: list[float]) -> None:
-    assert mean_interval(x) == pytest.approx(hall_bounds(x), rel=1e-9)
-    assert mean_interval(x, level=0.8) == pytest.approx(hall_bounds(x, level=0.8), rel=1e-9)
+    assert _hall(x) == pytest.approx(hall_bounds(x), rel=1e-9)
+    assert _hall(x, level=0.8) == pytest.approx(hall_bounds(x, level=0.8), rel=1e-9)
+    if len(x) < 5:  # the summary's interval below 5 seeds
+        assert mean_interval(x) == pytest.approx(hall_bounds(x), rel=1e-9)
 
 
 def test_hall_interval_reduces_to_scipys_t_interval_without_skewness() -> None:
@@ -200,23 +214,119 @@ def test_hall_interval_edge_cases_without_warnings() -> None:
 
 
 def test_describe_gives_the_same_interval_as_mean_interval() -> None:
-    # describe (final score, training time) and mean_interval (AUC, the benchmark) print one
-    # interval; NaN values are skipped as mean_interval would never see them.
+    # describe with a bootstrap (final score, training time) and mean_interval (AUC, the
+    # benchmark) print one interval; NaN values are skipped as mean_interval would never see
+    # them. Without a bootstrap (the learning-curve bands), Hall's interval at every n.
     import pandas as pd
 
     groups = {0: [1.0, 2.0, 3.0, 10.0], 1: [5.0, 5.0, 5.0], 2: [7.0], 3: [1.0, 2.0],
-              4: SPREAD}
-    frame = pd.DataFrame([(g, v) for g, vs in groups.items() for v in vs] + [(3, math.nan)],
-                         columns=["g", "v"])
-    described = describe(frame, "g", "v")
+              4: SPREAD, 5: [0.1, 0.5, 0.2, 3.0, 0.3]}
+    frame = pd.DataFrame([(g, v) for g, vs in groups.items() for v in vs]
+                         + [(3, math.nan), (5, math.nan)], columns=["g", "v"])
+    summarised = describe(frame, "g", "v", bootstrap=2000)
+    bands = describe(frame, "g", "v")
     for g, values in groups.items():
-        mean, low, high = mean_interval(values)
-        row = described.loc[g]
-        assert row["n"] == len(values) and row["mean"] == pytest.approx(mean)
+        mean, low, high = mean_interval(values, resamples=2000)
+        for described in (summarised, bands):
+            row = described.loc[g]
+            assert row["n"] == len(values) and row["mean"] == pytest.approx(mean)
         if len(values) < 2:
-            assert math.isnan(row["low"]) and math.isnan(row["high"])
-        else:
-            assert (row["low"], row["high"]) == pytest.approx((low, high), rel=1e-12)
+            assert nan_pair((summarised.loc[g, "low"], summarised.loc[g, "high"]))
+            assert nan_pair((bands.loc[g, "low"], bands.loc[g, "high"]))
+            continue
+        row = summarised.loc[g]
+        assert (row["low"], row["high"]) == pytest.approx((low, high), rel=1e-12)
+        hall = (5.0, 5.0) if g == 1 else hall_bounds(values)[1:]
+        assert (bands.loc[g, "low"], bands.loc[g, "high"]) == pytest.approx(hall, rel=1e-9)
+    # From 5 values on, the summary's interval is the bootstrap-t, not Hall's.
+    for g in (4, 5):
+        assert (summarised.loc[g, "low"], summarised.loc[g, "high"]) == pytest.approx(
+            bootstrap_t_interval(groups[g]), rel=1e-12)
+        assert summarised.loc[g, "high"] != pytest.approx(bands.loc[g, "high"], rel=1e-3)
+
+
+# The bootstrap-t interval of a mean, from 5 values on ------------------------------------------
+
+
+SKEWED = [1.0, 2.0, 3.0, 4.0, 20.0]
+"""Five values with one far above: right-skewed (mean 6, sd 7.906)."""
+
+
+def test_bootstrap_t_interval_against_a_slow_reference() -> None:
+    # The same resamples, each resample's t computed one at a time with np.std (ddof 1), the
+    # flat ones set to +-inf by hand, and np.quantile's linear interpolation.
+    for x in (SKEWED, SPREAD, [0.1, 0.5, 0.2, 3.0, 0.3, 0.2], [1e6 + 1.0, 1e6 + 1.5, 1e6 + 7.0,
+                                                                1e6 + 2.0, 1e6 + 2.5]):
+        assert bootstrap_t_interval(x) == pytest.approx(bootstrap_t_reference(x), rel=1e-9)
+        assert bootstrap_t_interval(x, level=0.8, resamples=300) == pytest.approx(
+            bootstrap_t_reference(x, level=0.8, resamples=300), rel=1e-9)
+
+
+def test_bootstrap_t_interval_converges_to_the_exact_bootstrap() -> None:
+    # Five values have 5^5 = 3,125 equally likely ordered resamples: the exact ("ideal")
+    # bootstrap-t interval enumerates them all. 400,000 resamples land within 1 % of it.
+    x = np.array(SKEWED)
+    grid = np.array(np.meshgrid(*[range(5)] * 5, indexing="ij")).reshape(5, -1).T
+    draws = x[grid]
+    spread = draws.std(axis=1, ddof=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (draws.mean(axis=1) - x.mean()) / (spread / math.sqrt(5))
+    t[spread == 0] = np.copysign(np.inf, draws[spread == 0, 0] - x.mean())
+    t_low, t_high = np.quantile(t, [0.025, 0.975])
+    se = x.std(ddof=1) / math.sqrt(5)
+    exact = (x.mean() - t_high * se, x.mean() - t_low * se)
+    assert bootstrap_t_interval(x, resamples=400_000) == pytest.approx(exact, rel=0.01)
+    # Right skew: T* has a long lower tail, so the interval reaches further above the mean than
+    # below, and above the Student-t interval's upper bound (6 + 2.776 * 3.536 = 15.82).
+    low, high = bootstrap_t_interval(x)
+    t_half = stats.t.ppf(0.975, 4) * se
+    assert high - 6.0 > 6.0 - low and high > 6.0 + t_half
+
+
+def test_bootstrap_t_interval_is_symmetric_on_symmetric_data() -> None:
+    # Antithetic resamples: on a sample symmetric about its mean the T* are symmetric, and so
+    # is the interval, to rounding.
+    for x in ([1.0, 2.0, 3.0, 4.0, 5.0], [0.0, 2.0, 3.0, 4.5, 5.0, 5.0, 5.5, 7.0, 8.0, 10.0]):
+        mean = float(np.mean(x))
+        low, high = bootstrap_t_interval(x)
+        assert high - mean == pytest.approx(mean - low, rel=1e-12)
+        # Wider than the Student-t interval at 5 values (the t of a resample has heavier tails).
+        if len(x) == 5:
+            assert high - mean > stats.t.ppf(0.975, 4) * stats.sem(x)
+
+
+def test_bootstrap_t_interval_is_deterministic_and_order_free() -> None:
+    first = bootstrap_t_interval(SPREAD)
+    assert bootstrap_t_interval(SPREAD) == first
+    assert bootstrap_t_interval(list(reversed(SPREAD))) == first
+    assert bootstrap_t_interval(sorted(SPREAD)) == first
+    # Another seed: other resamples, nearly the same interval.
+    other = bootstrap_t_interval(SPREAD, seed=1)
+    assert other != first and other == pytest.approx(first, rel=0.05)
+    assert mean_interval(SPREAD)[1:] == first
+
+
+def test_bootstrap_t_interval_edge_cases_without_warnings() -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert nan_pair(bootstrap_t_interval([]))
+        assert nan_pair(bootstrap_t_interval([4.0]))
+        assert bootstrap_t_interval([2.5] * 6) == (2.5, 2.5)
+        assert bootstrap_t_interval([0.1] * 7) == (0.1, 0.1)  # np.std may give 1e-17 here
+        assert mean_interval([0.1] * 7) == pytest.approx((0.1, 0.1, 0.1))
+        # Three tied values of 5: a resample of the three alone, (3/5)^5 = 7.8 % of them, has
+        # no spread and T* = -inf, more than the 2.5 % tail: the upper bound is infinite.
+        low, high = bootstrap_t_interval([1.0, 1.0, 1.0, 2.0, 3.0])
+        assert math.isfinite(low) and high == math.inf
+        # The summary then gives Hall's interval.
+        assert mean_interval([1.0, 1.0, 1.0, 2.0, 3.0]) == pytest.approx(
+            hall_bounds([1.0, 1.0, 1.0, 2.0, 3.0]), rel=1e-9)
+        # A flat resample on the mean (all 2s of [1, 2, 2, 2, 3]) has T* = 0, not NaN.
+        low, high = bootstrap_t_interval([1.0, 2.0, 2.0, 2.0, 3.0])
+        assert math.isfinite(low) and math.isfinite(high) and low < 2.0 < high
+        # Below 5 values the bootstrap-t is erratic: with 3, a ninth of resamples are flat.
+        assert bootstrap_t_interval([1.0, 2.0, 4.0]) == (-math.inf, math.inf)
+        assert mean_interval([1.0, 2.0, 4.0]) == pytest.approx(hall_bounds([1.0, 2.0, 4.0]))
 
 
 # Comparisons -------------------------------------------------------------------------------------

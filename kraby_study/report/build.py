@@ -29,7 +29,7 @@ from kraby_study.report.load import StudyData, check_format, load_study, select_
 from kraby_study.report.search_tables import build_search
 from kraby_study.report.study_report import ReportIndex, StudyReport
 from kraby_study.report.sweep_tables import build_sweep, option
-from kraby_study.stats import BOOTSTRAP_REPETITIONS, HOLM_NAME, INTERVAL_NAME
+from kraby_study.stats import BAND_NAME, BOOTSTRAP_REPETITIONS, HOLM_NAME, interval_name
 from kraby_study.store.store import opened_for_reading
 from kraby_study.store.url import shown_url, sqlite_path
 
@@ -136,7 +136,8 @@ def index_blocks(url: str, reports: list[StudyReport],
              " reported."),
         Text("Final score: mean episode reward over the last 10 % of a run's training "
              "(reward = minus the squared tip-target distance in m^2, summed over the episode). "
-             f"Intervals and bands: {INTERVAL_NAME}, unless named otherwise. Values marked "
+             f"Intervals of a mean: {interval_name(bootstrap)}. Learning-curve bands: "
+             f"{BAND_NAME}. Other intervals are named where they are shown. Values marked "
              f"'\u2248 best': {HOLM_NAME}. Figures use "
              "complete runs only; failed runs are listed."),
     ]

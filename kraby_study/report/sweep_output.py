@@ -23,10 +23,12 @@ from kraby_study.report.sweep_tables import Sweep, arms_frame, note_part
 from kraby_study.selection import RULE_TEXT
 from kraby_study.stats import (
     AUC_NAME,
+    BAND_NAME,
     HOLM_NAME,
-    INTERVAL_NAME,
     PROCEDURE_NAME,
+    SHORT_INTERVAL_NAME,
     TEST_NAME,
+    interval_name,
     iqm_interval_name,
     p_improvement_name,
 )
@@ -34,23 +36,23 @@ from kraby_study.stats import (
 MARK_TEXT = {"best": "best", "tie": "\u2248 best", "": ""}
 CAPTIONS = {
     "learning_curves": "Mean episode reward against environment steps, mean over seeds with its "
-                       "95 % Hall skewness-corrected t interval; (b) zooms on the last quarter "
-                       "of training.",
+                       "95 % Hall skewness-corrected t interval at every n (a cheap interval: "
+                       "the curves have hundreds of points); (b) zooms on the last quarter of "
+                       "training.",
     "final_score": "Final score (mean episode reward over the last 10 % of training) of every "
-                   "seed; mean and 95 % Hall skewness-corrected t interval beside them. "
+                   f"seed; mean and {SHORT_INTERVAL_NAME} beside them. "
                    "Shaded: the best mean, and the "
                    f"values not significantly worse than it ({PROCEDURE_NAME}).",
     "wallclock": "Mean episode reward against wall-clock time since the start of training.",
-    "training_time": ("Training time of every run, with mean and 95 % Hall "
-                      "skewness-corrected t interval."),
+    "training_time": f"Training time of every run, with mean and {SHORT_INTERVAL_NAME}.",
     "sample_efficiency": "Sample efficiency (AUC: the mean of a seed's binned mean episode "
                          "rewards over the whole run, the normalised area under its learning "
-                         "curve) of every seed; mean and 95 % Hall skewness-corrected t "
-                         "interval beside them.",
+                         f"curve) of every seed; mean and {SHORT_INTERVAL_NAME} beside "
+                         "them.",
     "time_to_threshold": "Environment steps (a) and seconds (b) until a seed's learning curve "
                          "first reached the threshold, for every seed that reached it; beside "
-                         "them the mean over those seeds with its 95 % Hall skewness-corrected "
-                         "t interval. k/N: seeds that reached it of the value's complete "
+                         f"them the mean over those seeds with its {SHORT_INTERVAL_NAME}. "
+                         "k/N: seeds that reached it of the value's complete "
                          "seeds; 'none reached' marks values where none did.",
     "improvement": "Probability of improvement P(best > value) of the best value over each "
                    "other value: the share of pairs of seeds (one of each) where the best "
@@ -157,13 +159,14 @@ def threshold_text(sweep: Sweep) -> str:
 
 def metric_notes(bootstrap: int, min_seeds: int = 2, raced: bool = False) -> str:
     """What every interval and test of a sweep's summary is, each named once, for values needing
-    ``min_seeds`` complete seeds (``bootstrap``, the report option's resamples, is no longer
-    used by any interval); ``raced``: what a dropped value's row shows."""
+    ``min_seeds`` complete seeds (``bootstrap``: the report option's resamples of the bootstrap-t
+    interval of a mean); ``raced``: what a dropped value's row shows."""
     race = (" Raced: a value the race dropped is never best, tied, selected or any answer of "
             "the verdict; its adjusted p is that of the race's look that dropped it, at the "
             "race's per-look alpha (the rule is in the verdict), and the survivors are "
             "compared on all their seeds." if raced else "")
-    return (f"Final score, training time and AUC intervals: {INTERVAL_NAME}. IQM: "
+    return (f"Final score, training time and AUC intervals: {interval_name(bootstrap)}. "
+            f"Learning-curve bands: {BAND_NAME}, at every n. IQM: "
             f"{iqm_interval_name()}. {AUC_NAME[0].upper()}{AUC_NAME[1:]}. Steps and "
             "seconds to threshold: restricted mean over the seeds with a curve, a seed that "
             "never reached the threshold counted at its curve's last point (a lower bound of "

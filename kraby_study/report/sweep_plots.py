@@ -2,9 +2,11 @@
 wall-clock time, training time, final score, sample efficiency and time to threshold against the
 value, and the best value's probability of improvement over each other value.
 
-Lines are means over the complete seeds of a value; bands and error bars are the 95 %
-Hall skewness-corrected t intervals of those means (Hall 1992), except the probability of
-improvement's, which are Newcombe score-type intervals (see :mod:`kraby_study.stats`). In a
+Lines are means over the complete seeds of a value. Error bars are the 95 % intervals of those
+means (:func:`kraby_study.stats.mean_interval`: the bootstrap-t interval from 5 seeds on, Hall's
+skewness-corrected t interval below), except the probability of improvement's, which are
+Newcombe score-type intervals. The learning-curve bands, hundreds of points a value, are Hall's
+intervals at every n (see :mod:`kraby_study.stats`). In a
 raced study, the curves of the values the race dropped are dashed.
 """
 
@@ -31,7 +33,7 @@ from kraby_study.report.style import (
     save,
 )
 from kraby_study.report.sweep_tables import Sweep, legend_label
-from kraby_study.stats import mean_interval
+from kraby_study.stats import SHORT_INTERVAL_NAME, mean_interval
 
 LATE_FRACTION = 0.25
 """The zoomed panel shows the last quarter of training."""
@@ -182,7 +184,7 @@ def _legend_entries(extra: list[Line2D | Patch]) -> list[Line2D | Patch]:
     return [Line2D([], [], marker="o", linestyle="", color=MUTED, alpha=0.55, markersize=5,
                    label="one seed"),
             Line2D([], [], marker="o", linestyle="-", color=MUTED, markeredgecolor="black",
-                   markersize=7, label="mean, 95 % Hall skewness-corrected t interval"), *extra]
+                   markersize=7, label=f"mean, {SHORT_INTERVAL_NAME}"), *extra]
 
 
 def training_time(sweep: Sweep, path: Path) -> Path:
@@ -251,7 +253,7 @@ def _threshold_text(sweep: Sweep) -> str:
 
 def time_to_threshold(sweep: Sweep, path: Path) -> Path:
     """Env steps (a) and seconds (b) until each seed's curve first reached the threshold:
-    every seed that reached it, the mean over those seeds with its Hall interval, and how many of
+    every seed that reached it, the mean over those seeds with its interval, and how many of
     the complete seeds reached it; values where none did are marked."""
     fig, axes = new_figure(WIDE, ncols=2)
     seeds = sweep.seeds
@@ -263,7 +265,7 @@ def time_to_threshold(sweep: Sweep, path: Path) -> Path:
         _seed_points(ax, sweep, reached, column)
         for vi, row in sweep.summary.iterrows():
             values = reached.loc[reached["vi"] == vi, column].to_numpy()
-            mean, low, high = mean_interval(values)
+            mean, low, high = mean_interval(values, resamples=sweep.bootstrap)
             _mean_mark(ax, sweep, int(vi), mean, low, high)
             if row["complete"] == 0:
                 continue
@@ -290,7 +292,7 @@ def time_to_threshold(sweep: Sweep, path: Path) -> Path:
                             "reached the threshold"))
     handles = _legend_entries(extra)
     handles[0].set_label("one seed that reached the threshold")
-    handles[1].set_label("mean over those seeds, 95 % Hall skewness-corrected t interval")
+    handles[1].set_label(f"mean over those seeds, {SHORT_INTERVAL_NAME}")
     fig.legend(handles=handles, loc="outside lower center", ncols=2, frameon=False)
     fig.suptitle(_title(sweep, f"time to threshold, {_threshold_text(sweep)}"))
     return save(fig, path)

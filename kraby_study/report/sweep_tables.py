@@ -86,7 +86,8 @@ class Sweep:
             :func:`study_threshold`), False when the report's options set it.
         untrained: The untrained policy's reward: the mean first-bin reward of every complete
             seed of the study (NaN without curves).
-        bootstrap: The report option ``report.bootstrap`` (no interval bootstraps any more).
+        bootstrap: The report option ``report.bootstrap``: resamples of the bootstrap-t
+            interval of a mean (:func:`kraby_study.stats.mean_interval`).
         verdict: The study's verdict (:func:`kraby_study.stats.verdict`).
         race: A raced study's race, its dropped values by index in ``values``; None for a
             study that did not race.
@@ -182,8 +183,9 @@ def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.Data
 
 
 def curve_bands(curves: pd.DataFrame) -> pd.DataFrame:
-    """Mean reward and its Hall skewness-corrected t interval over seeds
-    (:func:`kraby_study.stats.describe`), per value and step (vectorised)."""
+    """Mean reward and its Hall skewness-corrected t interval over seeds, at every n
+    (:func:`kraby_study.stats.describe` without a bootstrap), per value and step (vectorised):
+    hundreds of intervals a value, where a bootstrap each would cost seconds."""
     if curves.empty:
         return pd.DataFrame(columns=["vi", "step", "n", "mean", "sd", "low", "high", "wall_time"])
     grouped = describe(curves, ["vi", "step"], "mean_reward")
@@ -223,14 +225,15 @@ def summarise(trials: pd.DataFrame, labels: list[str],
               look_alpha: float = math.nan) -> pd.DataFrame:
     """One row per value: run counts; the round after which a race dropped it
     (``dropped_at``, empty for a survivor and in a study that did not race); the complete
-    seeds' final score (mean, sd, Hall interval; IQM with its trimmed-t interval; IQR raw and
-    rescaled to be comparable across n) and training time; the raw two-sided Welch p-value
-    against the best value (``p_vs_best``) and the adjusted p of the closed Holm-Welch
-    step-down (``p_holm``, :func:`kraby_study.comparison.compare_with_best`); the probability
-    that the best value beats this one, with its Newcombe score-type interval; a mark:
-    ``best``, ``tie`` (adjusted p >= 0.05: not significantly worse than the best) or empty;
-    and a note naming why a value with fewer than ``min_seeds`` complete seeds is left out, or
-    which look of the race dropped it. The curve metrics are added by
+    seeds' final score (mean, sd, interval of the mean, :func:`kraby_study.stats.mean_interval`
+    with ``bootstrap`` resamples; IQM with its trimmed-t interval; IQR raw and rescaled to be
+    comparable across n) and training time; the raw two-sided Welch p-value against the best
+    value (``p_vs_best``) and the adjusted p of the closed Holm-Welch step-down (``p_holm``,
+    :func:`kraby_study.comparison.compare_with_best`); the probability that the best value
+    beats this one, with its Newcombe score-type interval; a mark: ``best``, ``tie`` (adjusted
+    p >= 0.05: not significantly worse than the best) or empty; and a note naming why a value
+    with fewer than ``min_seeds`` complete seeds is left out, or which look of the race dropped
+    it. The curve metrics are added by
     :func:`add_curve_metrics`.
 
     ``dropped`` (by value index) are the values a race dropped, at per-look level
@@ -239,8 +242,8 @@ def summarise(trials: pd.DataFrame, labels: list[str],
     """
     dropped = dict(dropped or {})
     done = trials[trials["outcome"] == Outcome.COMPLETE]
-    score = describe(done, "vi", "final_score")
-    time = describe(done, "vi", "wall_time")
+    score = describe(done, "vi", "final_score", bootstrap=bootstrap)
+    time = describe(done, "vi", "wall_time", bootstrap=bootstrap)
     counts = pd.crosstab(trials["vi"], trials["outcome"])
     scores = _finals(done)
     survivors = {vi: finals for vi, finals in scores.items() if vi not in dropped}
@@ -365,9 +368,11 @@ def seed_metrics(trials: pd.DataFrame, curves: pd.DataFrame, threshold: float) -
     return frame
 
 
-def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame) -> pd.DataFrame:
+def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame,
+                      bootstrap: int = BOOTSTRAP_REPETITIONS) -> pd.DataFrame:
     """The summary with the curve metrics of each value's complete seeds: AUC (mean and
-    Hall interval over the seeds with a curve), env steps and seconds to the threshold and how
+    interval over the seeds with a curve, :func:`kraby_study.stats.mean_interval` with
+    ``bootstrap`` resamples), env steps and seconds to the threshold and how
     many seeds reached it.
 
     Steps and seconds to the threshold are restricted means over the seeds with a curve: a seed
@@ -382,7 +387,7 @@ def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame) -> pd.DataFram
     for vi in summary.index:
         group = groups.get(vi, seeds.iloc[:0])
         aucs = group["auc"].dropna().to_numpy()
-        mean, low, high = mean_interval(aucs)
+        mean, low, high = mean_interval(aucs, resamples=bootstrap)
         reached = group[group["steps_to_threshold"].notna()]
         curved = group[group["end_step"].notna()]
         columns["auc_mean"].append(mean)
@@ -419,7 +424,7 @@ def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
 
 def arms_frame(sweep: Sweep) -> pd.DataFrame:
     """A confirm study's configurations: label, origin, the source's own score, and the
-    confirmed final score (mean, Hall interval, IQM, trimmed-t interval, n)."""
+    confirmed final score (mean and its interval, IQM, trimmed-t interval, n)."""
     arms = {str(arm.get("label")): arm for arm in sweep.data.definition.get("arms") or []
             if isinstance(arm, dict)}
     rows = []
@@ -455,7 +460,8 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
 
     Args:
         data: The stored study.
-        options: The report's options (``bootstrap``: resamples, ``threshold``: reward to reach
+        options: The report's options (``bootstrap``: resamples of the bootstrap-t interval
+            of a mean, ``threshold``: reward to reach
             or None for the default, ``min_seeds``: fewest complete seeds of a value in any
             comparison); None for the defaults.
     """
@@ -482,7 +488,7 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     summary = summarise(trials, labels, bootstrap, min_seeds, dropped, look_alpha)
     threshold, is_default, untrained = study_threshold(curves, summary, chosen)
     seeds = seed_metrics(trials, curves, threshold)
-    summary = add_curve_metrics(summary, seeds)
+    summary = add_curve_metrics(summary, seeds, bootstrap)
     colours = value_colours(labels if data.kind == StudyKind.CONFIRM else values)
     sweep = Sweep(data=data, parameter=parameter, name=name or SINGLE_LABEL, values=values,
                  rule=study_rule(data),
