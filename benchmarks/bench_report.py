@@ -1,16 +1,21 @@
-"""Time ``write_report`` on a large synthetic store (a measurement, not a test).
+"""Time ``write_report`` and ``list`` on a large synthetic store (a measurement, not a test).
 
 The store holds sweeps of 10 values x 10 seeds plus one Optuna search, ``--trials`` trials in
 all, each with ``--points`` learning-curve points, written through Optuna and
 ``kraby_study.store`` like real runs (no training). Goal: under 30 s for 500 trials x 250 points.
+With ``--list N``, ``kraby-study list`` on the same store is timed N times in fresh processes
+(median; goal under 2 s at 5,000 trials), and with ``--baseline DIR`` the same command of
+another checkout beside it, interleaved, as ``bench_startup.py`` does.
 Usage::
 
     python benchmarks/bench_report.py [--trials 500] [--points 250] [--format png] [--keep DIR]
+        [--list N] [--baseline DIR]
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
 import sys
 import tempfile
 import time
@@ -22,8 +27,9 @@ import optuna
 from kraby_study.report import write_report
 from kraby_study.store.store import Store
 
+ROOT = Path(__file__).resolve().parents[1]
 # The synthetic stores are a test fixture (tests/synthetic.py), shared with this benchmark.
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(ROOT / "tests"))
 from synthetic import add_search, add_sweep, sweep_runs  # noqa: E402
 
 SWEEPS = [
@@ -59,6 +65,17 @@ def build_store(url: str, trials: int, points: int) -> int:
     return written
 
 
+def time_list(url: str, roots: list[Path], repeats: int, cwd: Path) -> dict[Path, list[float]]:
+    """Wall seconds of ``kraby-study list`` on the store, per checkout, in fresh processes."""
+    from bench_startup import timed  # the same fresh-process timing as the start-up table
+
+    seconds: dict[Path, list[float]] = {root: [] for root in roots}
+    for _ in range(repeats):  # interleaved, so load on the machine hits both alike
+        for root in roots:
+            seconds[root].append(timed(root, ["list", f"storage={url}"], cwd))
+    return seconds
+
+
 def main() -> None:
     """Build the store, report it, print the timings."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -67,6 +84,10 @@ def main() -> None:
     parser.add_argument("--format", default="png", choices=["png", "svg"])
     parser.add_argument("--keep", type=Path, default=None,
                         help="write the store and report here instead of a temporary folder")
+    parser.add_argument("--list", type=int, default=0, metavar="N",
+                        help="also time `kraby-study list` on the store N times (median)")
+    parser.add_argument("--baseline", type=Path, default=None,
+                        help="another checkout whose `list` is timed beside (with --list)")
     args = parser.parse_args()
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     with tempfile.TemporaryDirectory() as tmp:
@@ -79,10 +100,20 @@ def main() -> None:
         start = time.perf_counter()
         index = write_report(url, root / "report", fmt=args.format)
         seconds = time.perf_counter() - start
+        roots = [ROOT] + ([args.baseline.resolve()] if args.baseline else [])
+        listed = time_list(url, roots, args.list, root) if args.list else {}
     print(f"store: {trials} trials x {args.points} curve points, "
           f"{len(index.studies)} studies (built in {built:.1f} s)")
     print(f"write_report: {seconds:.2f} s for {len(index.files)} files "
           f"({'under' if seconds < 30 else 'OVER'} the 30 s goal)")
+    if listed:
+        this = statistics.median(listed[ROOT])
+        line = (f"list: {this:.2f} s, median of {args.list} fresh processes "
+                f"({'under' if this < 2 else 'OVER'} the 2 s goal)")
+        if args.baseline:
+            before = statistics.median(listed[roots[1]])
+            line += f"; baseline {before:.2f} s, ratio {this / before:.2f}"
+        print(line)
 
 
 if __name__ == "__main__":

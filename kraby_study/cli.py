@@ -19,6 +19,7 @@ from kraby_study.errors import ClusterLost, ConfigError, DatabaseLost, StoreErro
 if TYPE_CHECKING:
     from omegaconf import DictConfig
 
+    from kraby_study.answers.standing import StudyStanding
     from kraby_study.plan.spec import StudyPlan
     from kraby_study.records import Tally
     from kraby_study.run.executor import Executor
@@ -239,24 +240,31 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def cmd_list(args: argparse.Namespace) -> int:
     """The studies in the store with their progress."""
-    from kraby_study.answers.standing import study_standing
-    from kraby_study.store.store import opened
+    from kraby_study.answers.standing import store_standings
+    from kraby_study.config.storage import plain_storage
 
-    cfg = compose_config(flag_overrides(args, [STORAGE]))
-    with opened(cfg.storage, create=False, writer=False) as store:
-        names = store.study_names()
-        if not names:
-            print(f"no studies in {cfg.storage}")
-            return 0
-        rows = [study_standing(store.load(name)) for name in names]
+    overrides = flag_overrides(args, [STORAGE])
+    # A plain storage=URL (or none) needs no composed config: Hydra would cost a third of
+    # the command.
+    url = plain_storage(overrides) or str(compose_config(overrides).storage)
+    rows = store_standings(url)
+    if not rows:
+        print(f"no studies in {url}")
+        return 0
+    for line in standings_table(rows):
+        print(line)
+    return 0
+
+
+def standings_table(rows: Sequence[StudyStanding]) -> list[str]:
+    """``list``'s table: one line per study, columns padded to their widest cell."""
     header = ("study", "kind", "complete", "failed", "pruned", "running", "selected so far")
     table = [header] + [(p.name, p.kind.value, f"{p.tally.complete}/{p.tally.planned}",
                          str(p.tally.failed), str(p.tally.pruned), str(p.tally.running),
                          p.selected) for p in rows]
     widths = [max(len(row[i]) for row in table) for i in range(len(header))]
-    for row in table:
-        print("  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)))
-    return 0
+    return ["  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True))
+            for row in table]
 
 
 def cmd_optuna(args: argparse.Namespace) -> int:
@@ -315,7 +323,7 @@ def cmd_best(args: argparse.Namespace) -> int:
 
     from kraby_study.answers.campaign import campaign_selection
     from kraby_study.answers.selected import require_selection
-    from kraby_study.config.compose import USER_CONF_DIR
+    from kraby_study.config.conf_dirs import USER_CONF_DIR
     from kraby_study.config.ppo_file import write_ppo_config
     from kraby_study.store.store import opened
 

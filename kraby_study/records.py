@@ -11,7 +11,9 @@ Every study (a sweep, a search, a single training run) is an Optuna study. kraby
 
 A planned run may take several attempts (a worker died, a command was stopped): the attempt
 that counts is the latest one with the run's key (:func:`counted`). A trial's :class:`Outcome`
-reads its Optuna state and failure reason; an interrupted attempt is not a result.
+reads its Optuna state and failure reason; an interrupted attempt is not a result. The rules
+here read a trial through :class:`StoredTrial`: Optuna's FrozenTrial, or the light row
+``list`` reads straight from the tables (:mod:`kraby_study.store.rows`).
 """
 
 from __future__ import annotations
@@ -23,12 +25,43 @@ import re
 from collections.abc import Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from kraby_study.errors import ConfigError
 
-if TYPE_CHECKING:
-    from optuna.trial import FrozenTrial
+
+class StateName(Protocol):
+    """A trial's state, read by its name (Optuna's TrialState: WAITING, RUNNING, COMPLETE,
+    PRUNED, FAIL)."""
+
+    @property
+    def name(self) -> str: ...
+
+
+class StoredTrial(Protocol):
+    """What the rules below read of a stored trial: Optuna's FrozenTrial has it all, a light row
+    of :mod:`kraby_study.store.rows` the part ``list`` needs."""
+
+    @property
+    def number(self) -> int: ...
+
+    @property
+    def state(self) -> StateName: ...
+
+    @property
+    def value(self) -> float | None: ...
+
+    @property
+    def params(self) -> dict[str, Any]: ...
+
+    @property
+    def user_attrs(self) -> dict[str, Any]: ...
+
+    @property
+    def system_attrs(self) -> dict[str, Any]: ...
+
+
+T = TypeVar("T", bound=StoredTrial)
 
 
 class Outcome(StrEnum):
@@ -211,7 +244,7 @@ class TrialAttrs(TrialMeasures):
         return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
 
     @classmethod
-    def of(cls, trial: FrozenTrial) -> TrialAttrs:
+    def of(cls, trial: StoredTrial) -> TrialAttrs:
         """The attributes of a stored trial (unknown attributes ignored)."""
         names = {f.name for f in dataclasses.fields(cls)}
         return cls(**{k: v for k, v in trial.user_attrs.items() if k in names})
@@ -296,7 +329,7 @@ def search_key(number: int) -> str:
 # Outcomes and which trials count -----------------------------------------------------------------
 
 
-def outcome(trial: FrozenTrial) -> Outcome:
+def outcome(trial: StoredTrial) -> Outcome:
     """A trial's outcome; a failed attempt that was given back unfinished is pending."""
     # By name, so that this module loads no Optuna (optuna.trial.TrialState).
     state = trial.state.name
@@ -313,12 +346,12 @@ def outcome(trial: FrozenTrial) -> Outcome:
     return Outcome.PENDING
 
 
-def is_interrupted(trial: FrozenTrial) -> bool:
+def is_interrupted(trial: StoredTrial) -> bool:
     """A trial given back unfinished: its run is queued again, it is no result."""
     return trial.state.name == "FAIL" and outcome(trial) == Outcome.PENDING
 
 
-def counted(trials: Iterable[FrozenTrial]) -> list[FrozenTrial]:
+def counted(trials: Iterable[T]) -> list[T]:
     """The trials that make a study's result, in trial-number order.
 
     One attempt counts per planned run: the latest trial with its key. A trial without a key
@@ -334,7 +367,7 @@ def counted(trials: Iterable[FrozenTrial]) -> list[FrozenTrial]:
             latest[str(key)] = trial.number
     keep = set(latest.values())
 
-    def counts(trial: FrozenTrial) -> bool:
+    def counts(trial: T) -> bool:
         if trial.user_attrs.get("key") is not None:
             return trial.number in keep
         return trial.number not in replaced
@@ -342,7 +375,7 @@ def counted(trials: Iterable[FrozenTrial]) -> list[FrozenTrial]:
     return [t for t in ordered if counts(t)]
 
 
-def latest_by_key(trials: Iterable[FrozenTrial]) -> dict[str, FrozenTrial]:
+def latest_by_key(trials: Iterable[T]) -> dict[str, T]:
     """The counted trial of each key."""
     return {str(t.user_attrs["key"]): t for t in counted(trials)
             if t.user_attrs.get("key") is not None}
@@ -388,7 +421,7 @@ class Tally:
                 Outcome.PENDING.value: self.left}
 
 
-def tally(trials: Iterable[FrozenTrial], planned: int | None = None) -> Tally:
+def tally(trials: Iterable[StoredTrial], planned: int | None = None) -> Tally:
     """Outcome counts of the given (counted) trials, against ``planned`` runs (None: as many
     as there are trials)."""
     counts = {o: 0 for o in Outcome}
@@ -468,7 +501,7 @@ def best_group(scores: Mapping[K, Sequence[float]]) -> K | None:
     return best
 
 
-def swept_value(trial: FrozenTrial, name: str, planned: Sequence[Any]) -> Any:
+def swept_value(trial: StoredTrial, name: str, planned: Sequence[Any]) -> Any:
     """A sweep trial's value: its parameter, its queued parameter, or its key's value index."""
     if name in trial.params:
         return trial.params[name]
@@ -481,7 +514,7 @@ def swept_value(trial: FrozenTrial, name: str, planned: Sequence[Any]) -> Any:
     return None
 
 
-def best_trial(trials: Iterable[FrozenTrial], maximize: bool = True) -> FrozenTrial | None:
+def best_trial(trials: Iterable[T], maximize: bool = True) -> T | None:
     """The complete trial with the best value (a search's best); None when none is complete.
 
     kraby-study maximises; ``maximize=False`` serves foreign studies that minimise.

@@ -37,6 +37,7 @@ from kraby_study.comparison import (
 from kraby_study.records import (
     Outcome,
     SelectRule,
+    StoredTrial,
     TrialAttrs,
     best_group,
     ordered_values,
@@ -49,7 +50,6 @@ from kraby_study.stats import auc
 
 if TYPE_CHECKING:
     import pandas as pd
-    from optuna.trial import FrozenTrial
 
 RULE_TEXT = {
     SelectRule.FINAL_SCORE: "highest mean final score",
@@ -115,7 +115,7 @@ class Samples:
     seconds: dict[int, list[float]]
 
 
-def samples(trials: Sequence[FrozenTrial], curves: pd.DataFrame | None, name: str,
+def samples(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: str,
             values: Sequence[Any]) -> Samples:
     """The samples of a sweep's counted trials; ``curves`` holds their curve points (columns
     number, step, mean_reward), None when no AUC is needed. A trial whose value is not in
@@ -148,7 +148,7 @@ def samples(trials: Sequence[FrozenTrial], curves: pd.DataFrame | None, name: st
 
 
 def swept_values(kind: str, definition: Mapping[str, Any],
-                 trials: Sequence[FrozenTrial]) -> tuple[str, list[Any]]:
+                 trials: Sequence[StoredTrial]) -> tuple[str, list[Any]]:
     """A swept study's parameter name and its values in the order reports list them: the
     planned values and any other found, numbers ascending (a confirm study keeps its order)."""
     name = param_name(str(definition["parameter"]))
@@ -157,7 +157,7 @@ def swept_values(kind: str, definition: Mapping[str, Any],
     return name, ordered_values(planned, found, sort=kind != "confirm")
 
 
-def selected_index(trials: Sequence[FrozenTrial], curves: pd.DataFrame | None, name: str,
+def selected_index(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: str,
                    values: Sequence[Any], rule: str, min_seeds: int = MIN_SEEDS,
                    dropped: Collection[int] = ()) -> int | None:
     """Index in ``values`` of the value ``rule`` selects among the complete runs; None when

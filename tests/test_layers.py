@@ -122,11 +122,13 @@ def test_composing_and_planning_load_no_database_optuna_or_statistics(module: st
     assert loaded == "", f"importing {module} loads {loaded}"
 
 
-def test_reading_where_studies_stand_loads_no_pandas_or_scipy_stats() -> None:
+def test_reading_where_studies_stand_loads_no_optuna_hydra_pandas_or_scipy_stats() -> None:
     """``list`` reads every study's standing: the statistics stack loads only where a rule
-    tests (fastest_tied) or curves are read (auc, the report)."""
-    code = ("import sys, kraby_study.answers.standing, kraby_study.cli; "
-            "print(','.join(m for m in ('pandas', 'scipy.stats') if m in sys.modules))")
+    tests (fastest_tied) or curves are read (auc, the report); the store is read without
+    Optuna, and a plain storage URL without Hydra."""
+    code = ("import sys, kraby_study.answers.standing, kraby_study.config.storage, "
+            "kraby_study.cli; print(','.join(m for m in ('pandas', 'scipy.stats', 'optuna', "
+            "'hydra') if m in sys.modules))")
     loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             check=True).stdout.strip()
     assert loaded == "", f"answers.standing loads {loaded}"

@@ -7,11 +7,16 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from optuna.trial import FrozenTrial
-
 from kraby_study.plan.spec import RaceRules
 from kraby_study.race import Drop, Race, race
-from kraby_study.records import Outcome, latest_by_key, outcome, parse_sweep_key, value_key
+from kraby_study.records import (
+    Outcome,
+    StoredTrial,
+    latest_by_key,
+    outcome,
+    parse_sweep_key,
+    value_key,
+)
 
 
 def place(key: str, seeds: list[int]) -> tuple[int, int] | None:
@@ -22,7 +27,7 @@ def place(key: str, seeds: list[int]) -> tuple[int, int] | None:
     return parsed[0], seeds.index(parsed[1])
 
 
-def ended_runs(latest: Mapping[str, FrozenTrial], seeds: list[int]
+def ended_runs(latest: Mapping[str, StoredTrial], seeds: list[int]
                ) -> dict[int, dict[int, float]]:
     """Per value, its ended runs by seed index: the final score of a complete run, NaN for one
     that ended without a score (failed)."""
@@ -39,7 +44,7 @@ def ended_runs(latest: Mapping[str, FrozenTrial], seeds: list[int]
     return runs
 
 
-def study_race(definition: Mapping[str, Any], trials: list[FrozenTrial]) -> Race[int] | None:
+def study_race(definition: Mapping[str, Any], trials: Sequence[StoredTrial]) -> Race[int] | None:
     """The race of a stored study replayed on its runs (values by index); None for a study
     that did not race."""
     rules = RaceRules.of(dict(definition))
@@ -76,7 +81,7 @@ class StudyRace:
         return f"raced: {self.runs} of {self.fixed_runs} runs ({100 * self.share:.0f} %)"
 
 
-def race_of(definition: Mapping[str, Any], trials: list[FrozenTrial],
+def race_of(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
             values: Sequence[Any]) -> StudyRace | None:
     """The race of a stored study with its dropped values mapped onto ``values`` (matched by
     :func:`kraby_study.records.value_key`, not by position); None for a study that did not
@@ -95,7 +100,7 @@ def race_of(definition: Mapping[str, Any], trials: list[FrozenTrial],
                      over=state.over)
 
 
-def dropped_indices(definition: Mapping[str, Any], trials: list[FrozenTrial],
+def dropped_indices(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
                     values: Sequence[Any]) -> list[int]:
     """Indices in ``values`` of the values a stored study's race dropped (none for a study
     that did not race): the values no selection rule, best or tie may name."""

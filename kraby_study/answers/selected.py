@@ -7,10 +7,9 @@ under ``final_score`` the best value, under ``fastest_tied`` the fastest value t
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
-
-from optuna.trial import FrozenTrial
+from typing import TYPE_CHECKING, Any
 
 from kraby_study.answers.raced import dropped_indices
 from kraby_study.comparison import MIN_SEEDS
@@ -18,6 +17,8 @@ from kraby_study.errors import StoreError
 from kraby_study.records import (
     Outcome,
     SelectRule,
+    StoredTrial,
+    StudyAttrs,
     StudyKind,
     Tally,
     best_trial,
@@ -30,7 +31,14 @@ from kraby_study.records import (
     value_label,
 )
 from kraby_study.selection import selected_index, swept_values
-from kraby_study.store.ledger import StudyLedger
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from kraby_study.store.ledger import StudyLedger
+
+Curves = Callable[[list[int]], "pd.DataFrame"]
+"""Reads the learning curves of a study's trials by number (only the auc rule calls it)."""
 
 
 @dataclass(frozen=True)
@@ -55,19 +63,15 @@ def selection_of(ledger: StudyLedger) -> Selection | None:
     trials = counted(ledger.trials())
     if StudyKind.of(attrs.kind).swept:
         parameter = str(definition["parameter"])
-        chosen = sweep_selection(ledger)
+        chosen = selected_value(attrs, trials, ledger.curves)
         if chosen is None:
             return None
-        # A confirm study's values are already labels (t12, ppo=tuned, gamma=0.8).
-        label = (value_label(chosen.value) if attrs.kind == StudyKind.CONFIRM
-                 else f"{param_name(parameter)}={value_label(chosen.value)}")
-        seeds = len(chosen.trials)
-        rule = "" if chosen.rule == SelectRule.FINAL_SCORE else f", selected by {chosen.rule}"
         env_keys = ([parameter.split(".", 1)[1]] if parameter.startswith("env.")
                     else list(definition.get("env_keys", [])))
-        return Selection(short=f"{label} (mean {chosen.mean:.4g}, {seeds} seeds{rule})",
-                         description=f"{label} of {attrs.kind} {ledger.name!r}: mean final score "
-                                     f"{chosen.mean:.4g} over {seeds} seed(s){rule}",
+        return Selection(short=sweep_short(attrs, chosen),
+                         description=f"{value_text(attrs, chosen)} of {attrs.kind} "
+                                     f"{ledger.name!r}: mean final score {chosen.mean:.4g} over "
+                                     f"{len(chosen.trials)} seed(s){rule_text(chosen)}",
                          settings=chosen.trials[0].user_attrs.get("settings", {}),
                          env_keys=env_keys)
     trial = best_trial(trials, ledger.maximize)
@@ -76,10 +80,21 @@ def selection_of(ledger: StudyLedger) -> Selection | None:
     env_keys = searched_env_keys(definition)
     params = ", ".join(f"{k}={value_label(v)}" for k, v in trial.params.items())
     score = float(trial.value)  # type: ignore[arg-type]
-    return Selection(short=f"trial {trial.number} ({score:.4g})",
+    return Selection(short=trial_short(trial),
                      description=f"trial {trial.number} of {attrs.kind or 'study'} "
                                  f"{ledger.name!r}: score {score:.4g} ({params})",
                      settings=trial.user_attrs.get("settings", {}), env_keys=env_keys)
+
+
+def selected_short(attrs: StudyAttrs, trials: Sequence[StoredTrial], maximize: bool,
+                   curves: Curves) -> str:
+    """What a study selects so far, as ``list`` shows it (:attr:`Selection.short`), from its
+    counted trials; ``-`` when it selects nothing yet."""
+    if StudyKind.of(attrs.kind).swept:
+        chosen = selected_value(attrs, trials, curves)
+        return sweep_short(attrs, chosen) if chosen is not None else "-"
+    trial = best_trial(trials, maximize)
+    return trial_short(trial) if trial is not None else "-"
 
 
 @dataclass(frozen=True)
@@ -90,7 +105,7 @@ class SweepSelection:
     rule: str
     mean: float
     """Its mean final score."""
-    trials: list[FrozenTrial]
+    trials: list[StoredTrial]
     """Its complete counted trials."""
     tally: Tally
     """Outcomes of the study's counted trials, and the runs planned."""
@@ -105,15 +120,20 @@ def sweep_selection(ledger: StudyLedger) -> SweepSelection | None:
     """What a swept study's stored rule (:mod:`kraby_study.selection`) selects among its
     complete runs (of a raced study, among the race's survivors); None when none is
     complete."""
-    attrs = ledger.attrs
+    return selected_value(ledger.attrs, counted(ledger.trials()), ledger.curves)
+
+
+def selected_value(attrs: StudyAttrs, trials: Sequence[StoredTrial],
+                   curves: Curves) -> SweepSelection | None:
+    """What a swept study's stored rule selects among its counted trials; None when no value
+    can be selected yet."""
     rule = SelectRule.of(attrs.select)
-    trials = counted(ledger.trials())
     name, values = swept_values(str(attrs.kind), attrs.definition, trials)
     # Only the auc rule reads the curves.
-    curves = ledger.curves([t.number for t in trials]) if rule == SelectRule.AUC else None
+    frame = curves([t.number for t in trials]) if rule == SelectRule.AUC else None
     # A raced study selects among its survivors: a dropped value is never selected.
     dropped = dropped_indices(attrs.definition, trials, values)
-    index = selected_index(trials, curves, name, values, rule, dropped=dropped)
+    index = selected_index(trials, frame, name, values, rule, dropped=dropped)
     if index is None:
         return None
     key = value_key(values[index])
@@ -122,6 +142,30 @@ def sweep_selection(ledger: StudyLedger) -> SweepSelection | None:
     mean = sum(float(t.value) for t in done) / len(done)  # type: ignore[arg-type]
     return SweepSelection(value=values[index], rule=rule, mean=mean, trials=done,
                           tally=tally(trials, attrs.planned))
+
+
+def value_text(attrs: StudyAttrs, chosen: SweepSelection) -> str:
+    """A selected value as ``gamma=0.8``; a confirm study's values are already labels (t12,
+    ppo=tuned, gamma=0.8)."""
+    if attrs.kind == StudyKind.CONFIRM:
+        return value_label(chosen.value)
+    return f"{param_name(str(attrs.definition['parameter']))}={value_label(chosen.value)}"
+
+
+def rule_text(chosen: SweepSelection) -> str:
+    """``, selected by RULE`` for a rule other than the default; empty for final_score."""
+    return "" if chosen.rule == SelectRule.FINAL_SCORE else f", selected by {chosen.rule}"
+
+
+def sweep_short(attrs: StudyAttrs, chosen: SweepSelection) -> str:
+    """A sweep's selection in a few words: ``gamma=0.8 (mean -0.0123, 10 seeds)``."""
+    return (f"{value_text(attrs, chosen)} (mean {chosen.mean:.4g}, {len(chosen.trials)} seeds"
+            f"{rule_text(chosen)})")
+
+
+def trial_short(trial: StoredTrial) -> str:
+    """A search's best trial in a few words: ``trial 7 (-0.0123)``."""
+    return f"trial {trial.number} ({float(trial.value):.4g})"  # type: ignore[arg-type]
 
 
 def require_selection(ledger: StudyLedger) -> Selection:

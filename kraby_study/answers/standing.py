@@ -1,12 +1,24 @@
-"""Where a stored study stands: what ``list`` and the commands' closing lines print."""
+"""Where a stored study stands: what ``list`` and the commands' closing lines print.
+
+``list`` reads every study as light rows (:mod:`kraby_study.store.rows`), without Optuna; a
+command that holds a study's ledger reads it through Optuna. Both count and select with the
+same rules (:func:`kraby_study.records.counted`, :func:`kraby_study.records.tally`,
+:func:`kraby_study.answers.selected.selected_short`).
+"""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
+from typing import TYPE_CHECKING
 
-from kraby_study.answers.selected import selection_of
-from kraby_study.records import StudyKind, Tally, counted, tally
-from kraby_study.store.ledger import StudyLedger
+from kraby_study.answers.selected import Curves, selected_short
+from kraby_study.records import StoredTrial, StudyAttrs, StudyKind, Tally, counted, tally
+from kraby_study.store.rows import reading
+
+if TYPE_CHECKING:
+    from kraby_study.store.ledger import StudyLedger
 
 
 @dataclass(frozen=True)
@@ -23,9 +35,29 @@ class StudyStanding:
 
 
 def study_standing(ledger: StudyLedger) -> StudyStanding:
-    """Counts and the selection so far of a stored study."""
-    attrs = ledger.attrs
-    selection = selection_of(ledger)
-    return StudyStanding(name=ledger.name, kind=StudyKind.of(attrs.kind),
-                         tally=tally(counted(ledger.trials()), attrs.planned),
-                         selected=selection.short if selection else "-")
+    """Counts and the selection so far of a study a command holds."""
+    return standing(ledger.name, ledger.attrs, ledger.trials(), ledger.maximize, ledger.curves)
+
+
+def store_standings(url: str) -> list[StudyStanding]:
+    """Counts and the selection so far of every study in an existing store, in the order
+    Optuna lists them, read without Optuna (``list``); empty when it holds no study.
+
+    Raises:
+        ConfigError: The URL is not a supported database URL.
+        StoreError: No store there, or it cannot be read; one line.
+    """
+    with reading(url) as reader:
+        return [standing(study.name, study.attrs, study.trials, study.maximize,
+                         partial(reader.curves, study.name))
+                for study in reader.studies()]
+
+
+def standing(name: str, attrs: StudyAttrs, trials: Sequence[StoredTrial], maximize: bool,
+             curves: Curves) -> StudyStanding:
+    """A study's standing from all its trials (Optuna's or rows): counted, tallied against the
+    runs planned, and what its rule selects among them."""
+    kept = counted(trials)
+    return StudyStanding(name=name, kind=StudyKind.of(attrs.kind),
+                         tally=tally(kept, attrs.planned),
+                         selected=selected_short(attrs, kept, maximize, curves))

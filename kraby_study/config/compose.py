@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
-from pathlib import Path
 
 from hydra import compose, initialize_config_module
 from hydra.core.config_search_path import ConfigSearchPath
@@ -16,13 +15,10 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from kraby_study.config import winner
+from kraby_study.config.conf_dirs import CONFIG_MODULE, user_conf_dir
 from kraby_study.config.schema import register_schema
 from kraby_study.config.validate import validate
 from kraby_study.errors import ConfigError
-
-CONFIG_MODULE = "kraby_conf"
-USER_CONF_DIR = "conf"
-"""A folder of that name in the working directory extends the packaged tree (same groups)."""
 
 
 def _lines_of(err: BaseException) -> list[str]:
@@ -56,16 +52,6 @@ def _one_line(err: BaseException) -> str:
                 parts.append(line)
         current = current.__cause__ or current.__context__
     return re.sub(r"\s+", " ", "; ".join(parts) or type(err).__name__)
-
-
-def user_conf_dir(cwd: Path | None = None) -> Path | None:
-    """The working folder's ./conf/, unless it is missing or is the packaged tree itself (a
-    command run from an editable checkout)."""
-    user_dir = ((cwd or Path.cwd()) / USER_CONF_DIR).resolve()
-    if not user_dir.is_dir():
-        return None
-    packaged = Path(__import__(CONFIG_MODULE).__file__).resolve().parent
-    return None if user_dir == packaged else user_dir
 
 
 class UserConfFirst(SearchPathPlugin):

@@ -172,17 +172,6 @@ def backend_for(url: str, *, create: bool = True, writer: bool = True,
                            heartbeat_grace=heartbeat_grace)
 
 
-def reading_url(url: str) -> str | None:
-    """A URL that reads the database without creating or writing anything: a SQLite file
-    opened read-only (None when there is no file yet), or the server itself."""
-    path = sqlite_path(url)
-    if path is None:
-        return url
-    if not path.exists():
-        return None
-    return f"sqlite:///file:{path}?mode=ro&uri=true"
-
-
 @contextmanager
 def advisory_lock(engine: sa.Engine, key: int) -> Iterator[None]:
     """Hold a PostgreSQL session lock, shared by every command on the server, for a block."""

@@ -11,7 +11,6 @@ from contextlib import AbstractContextManager
 from typing import TYPE_CHECKING, Any
 
 import optuna
-import sqlalchemy as sa
 from optuna.distributions import BaseDistribution
 from optuna.storages import RDBStorage
 from optuna.trial import FrozenTrial, TrialState
@@ -27,7 +26,7 @@ from kraby_study.records import (
 )
 from kraby_study.store.attempts import requeue_stale
 from kraby_study.store.backend import LOCK_BASE, Backend
-from kraby_study.store.tables import CURVE_COLUMNS, curve_points
+from kraby_study.store.tables import curve_points, read_curves
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -93,26 +92,11 @@ class StudyLedger:
     def curves(self, numbers: Collection[int] | None = None) -> pd.DataFrame:
         """Learning-curve points (columns ``CURVE_COLUMNS``) of the given trials, or all, in one
         query, sorted by trial and step; empty for a plain Optuna store."""
-        # pandas is loaded here, by the commands that read curves (the report, the auc rule):
-        # list and most commands never need it, and it costs a quarter of a second.
-        import pandas as pd
-
         if numbers is None or any(n not in self._ids for n in numbers):
             self.trials()  # the ids of every trial, in one query
-        ids = {trial_id: number for number, trial_id in self._ids.items()}
-        query = (sa.select(curve_points.c.trial_id, curve_points.c.step,
-                           curve_points.c.mean_reward, curve_points.c.wall_time,
-                           curve_points.c.episodes)
-                 .where(curve_points.c.study_id == self._study_id))
+        numbers_of = {trial_id: number for number, trial_id in self._ids.items()}
         with self._storage.engine.connect() as connection:
-            if not sa.inspect(connection).has_table(curve_points.name):
-                return pd.DataFrame(columns=CURVE_COLUMNS)
-            frame = pd.read_sql(query, connection)
-        frame.insert(0, "number", frame.pop("trial_id").map(ids))
-        if numbers is not None:
-            frame = frame[frame["number"].isin(list(numbers))]
-        frame = frame.astype({"number": int})
-        return frame.sort_values(["number", "step"], kind="stable").reset_index(drop=True)
+            return read_curves(connection, self._study_id, numbers_of, numbers)
 
     # writing ---------------------------------------------------------------------------------
 

@@ -21,16 +21,10 @@ from optuna.storages import RDBStorage
 
 from kraby_study.errors import StoreError, first_line
 from kraby_study.records import StudyAttrs
-from kraby_study.store.backend import (
-    LOCK_BASE,
-    Backend,
-    backend_for,
-    check_store_file,
-    reading_url,
-)
+from kraby_study.store.backend import LOCK_BASE, Backend, backend_for, check_store_file
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.tables import metadata
-from kraby_study.store.url import check_url, sqlite_path
+from kraby_study.store.url import check_url, reading_url, sqlite_path
 
 # Heartbeats and stale-trial failing are marked experimental by Optuna; they are what several
 # machines on one study rely on, so the warning would only alarm users.

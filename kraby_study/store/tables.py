@@ -1,8 +1,15 @@
-"""The tables kraby-study keeps beside Optuna's, and the names it checks a store by."""
+"""The tables kraby-study keeps beside Optuna's, the names it checks a store by, and its curves
+read back."""
 
 from __future__ import annotations
 
+from collections.abc import Collection, Mapping
+from typing import TYPE_CHECKING
+
 import sqlalchemy as sa
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 OPTUNA_TABLES = ("studies", "trials", "version_info")
 """Tables every Optuna store has: a SQLite file without them is not a study store."""
@@ -22,3 +29,32 @@ curve_points = sa.Table(
     sa.Column("episodes", sa.Integer, nullable=False),
 )
 """One row per learning-curve bin per trial."""
+
+
+def read_curves(connection: sa.Connection, study_id: int, numbers_of: Mapping[int, int],
+                numbers: Collection[int] | None = None) -> pd.DataFrame:
+    """Learning-curve points (columns ``CURVE_COLUMNS``) of one study's trials, or of the given
+    trial numbers, in one query, sorted by trial and step; empty for a plain Optuna store.
+
+    Args:
+        connection: An open connection to the store.
+        study_id: Optuna's id of the study.
+        numbers_of: Trial number of each of the study's trial ids.
+        numbers: The trials wanted (None: all).
+    """
+    # pandas is loaded here, by the commands that read curves (the report, the auc rule):
+    # list and most commands never need it, and it costs a quarter of a second.
+    import pandas as pd
+
+    query = (sa.select(curve_points.c.trial_id, curve_points.c.step,
+                       curve_points.c.mean_reward, curve_points.c.wall_time,
+                       curve_points.c.episodes)
+             .where(curve_points.c.study_id == study_id))
+    if not sa.inspect(connection).has_table(curve_points.name):
+        return pd.DataFrame(columns=CURVE_COLUMNS)
+    frame = pd.read_sql(query, connection)
+    frame.insert(0, "number", frame.pop("trial_id").map(numbers_of))
+    if numbers is not None:
+        frame = frame[frame["number"].isin(list(numbers))]
+    frame = frame.astype({"number": int})
+    return frame.sort_values(["number", "step"], kind="stable").reset_index(drop=True)

@@ -92,6 +92,17 @@ def sqlite_path(url: str) -> Path | None:
     return Path(parsed.database)
 
 
+def reading_url(url: str) -> str | None:
+    """A URL that reads the database without creating or writing anything: a SQLite file
+    opened read-only (None when there is no file yet), or the server itself."""
+    path = sqlite_path(url)
+    if path is None:
+        return url
+    if not path.exists():
+        return None
+    return f"sqlite:///file:{path}?mode=ro&uri=true"
+
+
 def shown_url(url: str) -> str:
     """A database URL as commands and reports show it, any password hidden."""
     match = _URL.match(str(url))
