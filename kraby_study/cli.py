@@ -12,6 +12,7 @@ import dataclasses
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from kraby_study.errors import ClusterLost, ConfigError, DatabaseLost, StoreError, first_line
@@ -20,6 +21,7 @@ if TYPE_CHECKING:
     from omegaconf import DictConfig
 
     from kraby_study.answers.standing import StudyStanding
+    from kraby_study.plan.preview import Count
     from kraby_study.plan.spec import StudyPlan
     from kraby_study.records import Tally
     from kraby_study.run.executor import Executor
@@ -178,6 +180,27 @@ def run_options(cfg: DictConfig) -> dict[str, Any]:
             "retry_seconds": float(cfg.db_retry_seconds)}
 
 
+def dry_run(args: argparse.Namespace) -> bool:
+    """Whether the command only shows what it would do (``--dry-run`` or ``--cfg job``)."""
+    return bool(getattr(args, "dry_run", False) or getattr(args, "cfg", None))
+
+
+def print_preview(cfg: DictConfig, counts: Sequence[Count],
+                  notes: dict[str, list[str]] | None = None) -> int:
+    """A dry run's output: the composed config as YAML, the plan and the estimate."""
+    from omegaconf import OmegaConf
+
+    from kraby_study.answers.preview import preview_lines
+    from kraby_study.config.validate import cores
+
+    workers = (int(cfg.workers) if cfg.workers is not None
+               else cores() if str(cfg.executor) == "local" else None)
+    lines = preview_lines(str(cfg.storage), counts, workers, notes)
+    print(OmegaConf.to_yaml(cfg), end="")
+    print("\n".join(lines))
+    return 0
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     """Run a study's sweep: every value x seed, resumable."""
     from kraby_study.answers.winners import StoreWinners
@@ -189,8 +212,16 @@ def cmd_run(args: argparse.Namespace) -> int:
     with winners_from(lookup):
         cfg = compose_config(overrides)
     if cfg.campaign is not None:
+        if dry_run(args):
+            return preview_campaign(cfg, overrides)
         return run_campaign_command(cfg, overrides)
     plan = dataclasses.replace(expand_study(cfg), inputs=[i.stored() for i in lookup.inputs])
+    if dry_run(args):
+        from kraby_study.plan.preview import plan_count
+
+        return print_preview(cfg, [plan_count(plan)],
+                             {plan.name: [f"from other studies: {i.text()}"
+                                          for i in lookup.inputs]})
     # Loaded once the input is known to be good: a refused input answers at once.
     from kraby_study.run.executor import executor_for
     from kraby_study.run.study_run import closing_line
@@ -221,6 +252,19 @@ def run_campaign_command(cfg: DictConfig, overrides: Sequence[str]) -> int:
     with executor_for(cfg) as executor:
         return run_campaign(campaign, lambda stage_cfg, plan: run_stage(stage_cfg, plan, executor),
                             sys.stdout)
+
+
+def preview_campaign(cfg: DictConfig, overrides: Sequence[str]) -> int:
+    """``run campaign=NAME --dry-run``: each stage's trials, and its inputs from earlier
+    stages (named, not guessed, while those are not selected)."""
+    from kraby_study.answers.preview import campaign_preview
+    from kraby_study.plan.campaign import campaign_of
+
+    stages = campaign_preview(campaign_of(cfg, overrides))
+    return print_preview(cfg, [s.count for s in stages], {
+        s.count.study: [f"stage {s.stage.number}/{len(stages)} ({s.stage.parameter}, select "
+                        f"{s.stage.select})"] + [f"from earlier stages: {i}" for i in s.inputs]
+        for s in stages})
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -283,6 +327,10 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     validate_search(cfg)
     starts = [(f"ppo={name}", settings_with_ppo(name, overrides))
               for name in cfg.search.enqueue]
+    if dry_run(args):
+        from kraby_study.plan.preview import search_count
+
+        return print_preview(cfg, [search_count(cfg)])
     with executor_for(cfg) as executor, open_writer(cfg) as store:
         summary, ledger = run_search(store, cfg, executor, executor.workers(cfg.workers),
                                      sys.stdout, starts=starts)
@@ -299,16 +347,23 @@ def cmd_confirm(args: argparse.Namespace) -> int:
     from kraby_study.plan.confirm import baseline_arm, confirm_plan
     from kraby_study.run.executor import executor_for
     from kraby_study.run.study_run import closing_line, run_plan
-    from kraby_study.store.store import opened
+    from kraby_study.store.store import opened, opened_for_reading
 
     overrides = flag_overrides(args, CONFIRM_FLAGS)
     cfg = compose_config(with_default(overrides, "budget", "quick"))
     baselines = [baseline_arm(name, overrides) for name in cfg.confirm.baselines]
     source = None
     if cfg.confirm.study is not None:
-        with opened(cfg.storage, create=False, writer=False) as store:
+        # A dry run never opens a store that is not there (opening would create the file).
+        reader = opened_for_reading if dry_run(args) else partial(opened, create=False,
+                                                                   writer=False)
+        with reader(cfg.storage) as store:
             source = confirmed_study(store.load(str(cfg.confirm.study)), int(cfg.confirm.top))
     plan = confirm_plan(cfg, source, baselines)
+    if dry_run(args):
+        from kraby_study.plan.preview import plan_count
+
+        return print_preview(cfg, [plan_count(plan, arms="configurations")])
     with executor_for(cfg) as executor, open_writer(cfg) as store:
         summary, counts = run_plan(store, plan, executor, executor.workers(cfg.workers),
                                    sys.stdout, **run_options(cfg))
@@ -408,6 +463,15 @@ def build_parser() -> argparse.ArgumentParser:
         "trial's remaining seeds once its finished ones are worse than the best trial's same "
         "seeds by a one-sided Wilcoxon signed-rank test, p < search.wilcoxon_p (0.1: from its "
         "4th seed on, so budget.seeds=5 or more; budget=full has 10).\n\n" + EPILOG)
+    for name in ("run", "optuna", "confirm"):
+        parsers[name].add_argument(
+            "--dry-run", action="store_true",
+            help="compose and check as the real command, then print the config as YAML, the "
+            "plan (trials, env steps, how many the store already holds) and an estimate of "
+            "the wall time from the steps/s measured on this store; nothing is trained or "
+            "written")
+        parsers[name].add_argument("--cfg", choices=("job",),
+                                   help="--cfg job is Hydra's spelling of --dry-run")
     for name in ("run", "confirm"):
         parsers[name].add_argument(
             "--racing", action="store_true",

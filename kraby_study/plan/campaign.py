@@ -102,6 +102,13 @@ def _stage_file(name: str, number: int, study: str, overrides: Sequence[str]) ->
         raise ConfigError(f"campaign {name}, stage {number} ({study}): {err}") from None
 
 
+def stage_file(campaign: Campaign, stage: Stage) -> DictConfig:
+    """A stage's config with its earlier winners left unresolved: what it sweeps and how many
+    runs, known before those winners are (a dry run)."""
+    return _stage_file(campaign.name, stage.number, stage.study,
+                       stage_overrides(campaign, stage))
+
+
 def campaign_of(cfg: DictConfig, overrides: Sequence[str]) -> Campaign:
     """The campaign a config selects, every stage checked before anything runs.
 

@@ -35,9 +35,10 @@ from kraby_study.store.url import check_url, reading_url, sqlite_path
 if TYPE_CHECKING:
     import pandas as pd
 
-ROW_ATTRS = ("key", "retry_of", "failure", "wall_time")
-"""The trial attributes a row holds: what counting reads (key, retry_of, failure) and the
-fastest_tied rule's training time (wall_time)."""
+ROW_ATTRS = ("key", "retry_of", "failure", "wall_time", "env_steps")
+"""The trial attributes a row holds: what counting reads (key, retry_of, failure), the
+fastest_tied rule's training time (wall_time), and the env steps a dry run's estimate divides
+by that time (env_steps)."""
 SQLITE_PATIENCE = 60
 """Seconds a read waits while the writer holds the SQLite file (as the writer's own
 connection, :class:`kraby_study.store.backend.SqliteBackend`)."""

@@ -1,0 +1,181 @@
+"""What the store already holds of a planned command, and how long the rest should take
+(``--dry-run``); read without Optuna, and nothing is created or written.
+
+The rate is measured on the store itself: env steps over wall time of its complete trials (one
+worker each). Trials do not record the machine they ran on, so the rate is this store's, not
+necessarily this machine's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from kraby_study.answers.winners import StoreWinners, Unfinished
+from kraby_study.plan.campaign import Campaign, Stage, stage_config, stage_file
+from kraby_study.plan.preview import Count, plan_count, stage_count
+from kraby_study.plan.sweep import expand_study
+from kraby_study.records import Outcome, Tally, counted, outcome, tally
+from kraby_study.store.rows import reading
+from kraby_study.store.url import check_url, sqlite_path
+
+
+@dataclass(frozen=True)
+class Measured:
+    """Env steps and wall time summed over a store's complete trials."""
+
+    trials: int = 0
+    env_steps: int = 0
+    wall_time: float = 0.0
+
+    @property
+    def rate(self) -> float | None:
+        """Env steps per second of one worker; None with nothing measured."""
+        return self.env_steps / self.wall_time if self.trials and self.wall_time > 0 else None
+
+
+@dataclass(frozen=True)
+class Held:
+    """What a store holds for a dry run: each named study's tally, and its measured rate."""
+
+    tallies: dict[str, Tally] = field(default_factory=dict)
+    """Counted outcomes of the named studies that are stored (missing ones are absent)."""
+    measured: Measured = field(default_factory=Measured)
+
+
+def held(url: str, counts: Sequence[Count]) -> Held:
+    """The stored outcomes of the counted studies and the store's measured rate; a SQLite file
+    that is not there holds nothing (it is not created).
+
+    Raises:
+        ConfigError: The URL is not a supported database URL.
+        StoreError: The store cannot be read; one line.
+    """
+    check_url(url)
+    path = sqlite_path(url)
+    if path is not None and not path.is_file():
+        return Held()
+    planned = {c.study: c.trials for c in counts}
+    tallies: dict[str, Tally] = {}
+    trials, steps, seconds = 0, 0, 0.0
+    with reading(url) as reader:
+        for study in reader.studies():
+            kept = counted(study.trials)
+            if study.name in planned:
+                tallies[study.name] = tally(kept, planned[study.name])
+            for trial in kept:
+                attrs = trial.user_attrs
+                if (outcome(trial) is Outcome.COMPLETE and attrs.get("env_steps")
+                        and attrs.get("wall_time")):
+                    trials += 1
+                    steps += int(attrs["env_steps"])
+                    seconds += float(attrs["wall_time"])
+    return Held(tallies=tallies, measured=Measured(trials, steps, seconds))
+
+
+def count_lines(count: Count, stored: Tally | None) -> list[str]:
+    """A study's plan: its trials and env steps, and how many the store already holds."""
+    most = "at most " if count.at_most else ""
+    lines = [f"{count.study}: {most}{count.trials} trials ({count.shape}), "
+             f"{count.steps_per_trial:,} env steps each, {most}{count.env_steps:,} in all"
+             + (" (raced: values worse than the best stop early)" if count.at_most else "")]
+    if stored is None:
+        lines.append(f"  not in the store yet: 0 complete, {most}{count.trials} to run")
+    else:
+        lines.append(f"  in the store: {stored.complete} complete, {stored.failed} failed, "
+                     f"{stored.pruned} pruned; {most}{remaining_trials(count, stored)} to run")
+    return lines
+
+
+def remaining_trials(count: Count, stored: Tally | None) -> int:
+    """Trials still to run: those planned without an ended trial."""
+    return max(count.trials - (stored.ended if stored else 0), 0)
+
+
+def remaining_steps(counts: Sequence[Count], found: Held) -> int:
+    """Env steps still to train over every counted study."""
+    return sum(remaining_trials(c, found.tallies.get(c.study)) * c.steps_per_trial
+               for c in counts)
+
+
+def estimate_line(steps: int, measured: Measured, workers: int | None) -> str:
+    """``about 12 min at 5,100 env steps/s per worker x 2 workers, measured over 80 trials of
+    this store``, or why there is no estimate. ``workers`` None: not known before the command
+    runs (a Ray cluster's CPUs), the estimate is one worker's."""
+    rate = measured.rate
+    if rate is None:
+        return "no estimate: this store has no complete trial to measure steps/s from"
+    if steps == 0:
+        return "nothing left to run"
+    many = workers or 1
+    shown = (f"{many} worker{'s' if many != 1 else ''}" if workers
+             else "1 worker (the cluster's workers are not known before it is reached)")
+    return (f"about {duration(steps / (rate * many))} at {rate:,.0f} env steps/s per worker "
+            f"x {shown}, measured over {measured.trials} trial"
+            f"{'s' if measured.trials != 1 else ''} of this store")
+
+
+def duration(seconds: float) -> str:
+    """A rough length of time: '40 s', '12 min', '3.5 h'."""
+    if seconds < 60:
+        return f"{max(seconds, 1):.0f} s"
+    if seconds < 3600:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+@dataclass(frozen=True)
+class StagePreview:
+    """One campaign stage as a dry run sees it."""
+
+    stage: Stage
+    count: Count
+    inputs: list[str]
+    """Its settings from earlier stages: their selected values, or which stage decides each
+    one when that stage is not finished."""
+    known: bool
+    """Whether every earlier winner it takes is selected already."""
+
+
+def campaign_preview(campaign: Campaign) -> list[StagePreview]:
+    """Every stage's count and inputs; a stage whose earlier winners are not selected yet is
+    counted from its study file, its inputs named, not guessed.
+
+    Raises:
+        ConfigError or StoreError: A stage cannot be planned (as the real command would
+            refuse it); one line.
+    """
+    out = []
+    for stage in campaign.stages:
+        lookup = StoreWinners(names={s.study: s.name for s in campaign.before(stage)})
+        try:
+            plan = expand_study(stage_config(campaign, stage, lookup))
+        except Unfinished:
+            pending = [f"{s.parameter} from stage {s.number} ({s.study}), not selected yet"
+                       for s in campaign.before(stage) if s.parameter != stage.parameter]
+            out.append(StagePreview(stage, stage_count(stage_file(campaign, stage), stage.name),
+                                    pending, known=False))
+            continue
+        taken = [i.text() for i in lookup.inputs if i.setting != stage.parameter]
+        out.append(StagePreview(stage, plan_count(plan), taken, known=True))
+    return out
+
+
+def preview_lines(url: str, counts: Sequence[Count], workers: int | None,
+                  notes: dict[str, list[str]] | None = None) -> list[str]:
+    """A dry run's plan and estimate: each study's count and what the store holds of it (with
+    ``notes`` under it, e.g. a campaign stage's inputs), then the time the rest should take.
+
+    Raises:
+        ConfigError or StoreError: The store cannot be read; one line.
+    """
+    found = held(url, counts)
+    lines = ["plan (dry run: nothing is trained or written):"]
+    for count in counts:
+        lines += count_lines(count, found.tallies.get(count.study))
+        lines += [f"  {note}" for note in (notes or {}).get(count.study, [])]
+    if len(counts) > 1:
+        lines.append(f"in all: {sum(c.trials for c in counts)} trials, "
+                     f"{sum(c.env_steps for c in counts):,} env steps")
+    lines.append(estimate_line(remaining_steps(counts, found), found.measured, workers))
+    return lines

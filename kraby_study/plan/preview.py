@@ -1,0 +1,62 @@
+"""What a command would run, counted before it runs (``--dry-run``): trials and env steps.
+
+Pure: no store, no training. How much of it the store already holds is read in
+:mod:`kraby_study.answers.preview`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from omegaconf import DictConfig
+
+from kraby_study.config.validate import to_container
+from kraby_study.plan.spec import StudyPlan
+
+
+@dataclass(frozen=True)
+class Count:
+    """The runs of one study a command plans, and the env steps they train."""
+
+    study: str
+    """The study's name in the store."""
+    trials: int
+    """Trials planned (a raced plan: the most it runs)."""
+    steps_per_trial: int
+    """Env steps one trial trains (a search trial: every one of its seeds)."""
+    shape: str
+    """How the trials come about, e.g. '8 values x 10 seeds'."""
+    at_most: bool = False
+    """A raced plan: values worse than the best stop early, so fewer may run."""
+
+    @property
+    def env_steps(self) -> int:
+        """Env steps of every planned trial."""
+        return self.trials * self.steps_per_trial
+
+
+def plan_count(plan: StudyPlan, arms: str = "values") -> Count:
+    """A sweep's or confirm study's count: values (``arms``) x seeds."""
+    values = len(plan.values)
+    seeds = len(plan.specs) // values if values else 0
+    steps = plan.specs[0].steps if plan.specs else 0
+    return Count(study=plan.name, trials=len(plan.specs), steps_per_trial=steps,
+                 shape=f"{values} {arms} x {seeds} seeds", at_most=plan.racing is not None)
+
+
+def stage_count(cfg: DictConfig, name: str) -> Count:
+    """A campaign stage's count from its study file alone (its earlier winners unresolved):
+    values x seeds do not depend on them."""
+    values = len(to_container(cfg.study["values"]))
+    seeds = int(cfg.budget.seeds)
+    return Count(study=name, trials=values * seeds, steps_per_trial=int(cfg.budget.steps),
+                 shape=f"{values} values x {seeds} seeds", at_most=bool(cfg.racing.enabled))
+
+
+def search_count(cfg: DictConfig) -> Count:
+    """A search's count: ``search.trials`` trials of ``budget.seeds`` seeds each."""
+    seeds = int(cfg.budget.seeds)
+    return Count(study=str(cfg.search.name), trials=int(cfg.search.trials),
+                 steps_per_trial=seeds * int(cfg.budget.steps),
+                 shape=f"search.trials, each {seeds} seeds x {int(cfg.budget.steps):,} env "
+                       "steps")

@@ -1,0 +1,115 @@
+"""``--dry-run`` (and Hydra's spelling, ``--cfg job``): the composed config, the plan and an
+estimate, checked as the real command checks, and nothing written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from conftest import TINY, file_digest, run_cli, sqlite_url
+
+from kraby_study.answers.preview import Measured, estimate_line
+
+SWEEP = ["study=clip_range", "study.values=[0.1,0.2]", "budget.seeds=2", "workers=1", *TINY]
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A store holding a finished 2 values x 2 seeds smoke sweep."""
+    db = tmp_path_factory.mktemp("dry") / "k.db"
+    assert run_cli("run", *SWEEP, f"--storage={sqlite_url(db)}") == 0
+    return db
+
+
+def _nothing_written(workdir: Path) -> None:
+    assert not any(workdir.iterdir()), list(workdir.iterdir())
+
+
+@pytest.mark.parametrize("spelling", [["--dry-run"], ["--cfg", "job"]])
+def test_a_study_with_no_store_prints_its_config_and_plan_and_creates_nothing(
+        workdir: Path, capsys: pytest.CaptureFixture[str], spelling: list[str]) -> None:
+    assert run_cli("run", *SWEEP, *spelling) == 0
+    out = capsys.readouterr().out
+    assert "\nstudy:\n" in out and "parameter: ppo.clip_range" in out
+    assert "clip_range: 4 trials (2 values x 2 seeds), 512 env steps each, 2,048 in all" in out
+    assert "0 complete, 4 to run" in out
+    assert "no estimate: this store has no complete trial to measure steps/s from" in out
+    _nothing_written(workdir)
+
+
+def test_a_finished_study_counts_its_stored_runs_and_estimates_from_them(
+        workdir: Path, finished: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    before = file_digest(finished)
+    url = sqlite_url(finished)
+    capsys.readouterr()
+    assert run_cli("run", *SWEEP, "--storage", url, "--dry-run") == 0
+    out = capsys.readouterr().out
+    assert "in the store: 4 complete, 0 failed, 0 pruned; 0 to run" in out
+    assert "nothing left to run" in out
+    # A wider sweep of the same store: the rest estimated from the 4 measured trials.
+    assert run_cli("run", "study=gamma", *TINY, "budget.seeds=2", "workers=1", "--storage", url,
+                   "--dry-run") == 0
+    out = capsys.readouterr().out
+    assert "not in the store yet" in out
+    estimate = out.strip().splitlines()[-1]
+    assert estimate.startswith("about ") and "env steps/s per worker x 1 worker" in estimate
+    assert estimate.endswith("measured over 4 trials of this store")
+    assert file_digest(finished) == before
+    _nothing_written(workdir)
+
+
+def test_optuna_and_confirm_dry_runs(workdir: Path, finished: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    before = file_digest(finished)
+    url = sqlite_url(finished)
+    capsys.readouterr()
+    assert run_cli("optuna", "--trials", "6", "budget=smoke", "budget.steps=512",
+                   "budget.seeds=2", "--storage", url, "--workers", "2", "--dry-run") == 0
+    out = capsys.readouterr().out
+    assert "\nsearch:\n" in out
+    assert ("ppo_search: 6 trials (search.trials, each 2 seeds x 512 env steps), 1,024 env "
+            "steps each, 6,144 in all") in out
+    assert "x 2 workers, measured over 4 trials" in out
+    assert run_cli("confirm", "--study-name", "clip_range", "--top", "2", "--seeds", "3",
+                   "--storage", url,
+                   "--baseline", "ppo=tuned", "--cfg", "job", "--racing") == 0
+    out = capsys.readouterr().out
+    assert "clip_range-confirm: at most 9 trials (3 configurations x 3 seeds)" in out
+    assert file_digest(finished) == before
+    _nothing_written(workdir)
+
+
+@pytest.mark.parametrize("args", [["run", "study=clip_range", "ppo.n_epochs=0", "--dry-run"],
+                                  ["confirm", "--study-name", "nowhere", "--dry-run"],
+                                  ["optuna", "--trials", "0", "--cfg", "job"]])
+def test_bad_input_is_still_refused_in_one_line(
+        workdir: Path, capsys: pytest.CaptureFixture[str], args: list[str]) -> None:
+    try:
+        code = run_cli(*args)
+    except SystemExit as stop:  # refused by the argument parser
+        code = int(stop.code or 0)
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "error:" in err
+    _nothing_written(workdir)
+
+
+def test_a_campaign_names_the_inputs_its_earlier_stages_will_decide(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("run", "campaign=documented", "--dry-run") == 0
+    out = capsys.readouterr().out
+    assert "\ncampaign:\n" in out
+    assert "documented-observation: 40 trials (4 values x 10 seeds)" in out
+    assert "stage 2/9 (ppo.batch_size, select final_score)" in out
+    assert "from earlier stages: env.observation from stage 1 (observation), not selected yet" \
+        in out
+    assert "in all: 540 trials" in out
+    _nothing_written(workdir)
+
+
+def test_the_estimate_reads_as_documented() -> None:
+    measured = Measured(trials=80, env_steps=5_100 * 1_000, wall_time=1_000.0)
+    assert estimate_line(12 * 60 * 5_100 * 2, measured, 2) == (
+        "about 12 min at 5,100 env steps/s per worker x 2 workers, measured over 80 trials of "
+        "this store")
+    assert estimate_line(100, Measured(), 2).startswith("no estimate:")
