@@ -37,6 +37,15 @@ def test_a_study_with_no_store_prints_its_config_and_plan_and_creates_nothing(
     _nothing_written(workdir)
 
 
+def test_an_empty_store_file_reads_as_no_store(workdir: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    empty = workdir / "empty.db"
+    empty.touch()
+    assert run_cli("run", *SWEEP, "--storage", sqlite_url(empty), "--dry-run") == 0
+    assert "not in the store yet: 0 complete, 4 to run" in capsys.readouterr().out
+    assert empty.stat().st_size == 0
+
+
 def test_a_finished_study_counts_its_stored_runs_and_estimates_from_them(
         workdir: Path, finished: Path, capsys: pytest.CaptureFixture[str]) -> None:
     before = file_digest(finished)

@@ -16,8 +16,7 @@ from kraby_study.plan.campaign import Campaign, Stage, stage_config, stage_file
 from kraby_study.plan.preview import Count, plan_count, stage_count
 from kraby_study.plan.sweep import expand_study
 from kraby_study.records import Outcome, Tally, counted, outcome, tally
-from kraby_study.store.rows import reading
-from kraby_study.store.url import check_url, sqlite_path
+from kraby_study.store.rows import has_store, reading
 
 
 @dataclass(frozen=True)
@@ -44,16 +43,14 @@ class Held:
 
 
 def held(url: str, counts: Sequence[Count]) -> Held:
-    """The stored outcomes of the counted studies and the store's measured rate; a SQLite file
-    that is not there holds nothing (it is not created).
+    """The stored outcomes of the counted studies and the store's measured rate; a store not
+    made yet (no SQLite file, or no tables) holds nothing, and is not created.
 
     Raises:
         ConfigError: The URL is not a supported database URL.
         StoreError: The store cannot be read; one line.
     """
-    check_url(url)
-    path = sqlite_path(url)
-    if path is not None and not path.is_file():
+    if not has_store(url):
         return Held()
     planned = {c.study: c.trials for c in counts}
     tallies: dict[str, Tally] = {}

@@ -266,6 +266,28 @@ def _external(value: float, distribution: dict[str, Any]) -> Any:
     return value
 
 
+def has_store(url: str) -> bool:
+    """Whether Optuna's tables are at ``url``, read without creating or writing anything: False
+    for a SQLite file not there yet or without them, and for a database without them.
+
+    Raises:
+        ConfigError: The URL is not a supported database URL.
+        StoreError: The database cannot be reached; one line.
+    """
+    check_url(url)
+    reading = reading_url(url)
+    if reading is None:
+        return False
+    engine = sa.create_engine(reading, poolclass=sa.pool.NullPool)
+    try:
+        with engine.connect() as connection:
+            return sa.inspect(connection).has_table(_version_info.name)
+    except sa.exc.SQLAlchemyError as err:
+        raise StoreError(f"cannot open the store {url}: {first_line(err)}") from None
+    finally:
+        engine.dispose()
+
+
 @contextmanager
 def reading(url: str) -> Iterator[StoreReader]:
     """An existing store opened for reading without Optuna, closed on exit."""
