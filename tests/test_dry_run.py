@@ -63,6 +63,11 @@ def test_a_finished_study_counts_its_stored_runs_and_estimates_from_them(
     estimate = out.strip().splitlines()[-1]
     assert estimate.startswith("about ") and "env steps/s per worker x 1 worker" in estimate
     assert estimate.endswith("measured over 4 trials of this store")
+    # Another definition under the stored name is refused, as the real command refuses it.
+    assert run_cli("run", *SWEEP, "study.values=[0.1,0.3]", "--storage", url,
+                   "--dry-run") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "was defined differently" in err
     assert file_digest(finished) == before
     _nothing_written(workdir)
 

@@ -10,13 +10,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from kraby_study.answers.winners import StoreWinners, Unfinished
 from kraby_study.plan.campaign import Campaign, Stage, stage_config, stage_file
 from kraby_study.plan.preview import Count, plan_count, stage_count
+from kraby_study.plan.spec import fingerprint
 from kraby_study.plan.sweep import expand_study
-from kraby_study.records import Outcome, Tally, counted, outcome, tally
+from kraby_study.records import Outcome, StudyAttrs, Tally, counted, outcome, tally
 from kraby_study.store.rows import has_store, reading
+from kraby_study.store.url import shown_url
 
 
 @dataclass(frozen=True)
@@ -48,17 +51,20 @@ def held(url: str, counts: Sequence[Count]) -> Held:
 
     Raises:
         ConfigError: The URL is not a supported database URL.
-        StoreError: The store cannot be read; one line.
+        StoreError: The store cannot be read, or holds a counted study under another definition
+            (as the real command would refuse it); one line.
     """
     if not has_store(url):
         return Held()
     planned = {c.study: c.trials for c in counts}
+    definitions = {c.study: c.definition for c in counts}
     tallies: dict[str, Tally] = {}
     trials, steps, seconds = 0, 0, 0.0
     with reading(url) as reader:
         for study in reader.studies():
             kept = counted(study.trials)
             if study.name in planned:
+                check_definition(url, study.name, study.attrs, definitions.get(study.name))
                 tallies[study.name] = tally(kept, planned[study.name])
             for trial in kept:
                 attrs = trial.user_attrs
@@ -68,6 +74,18 @@ def held(url: str, counts: Sequence[Count]) -> Held:
                     steps += int(attrs["env_steps"])
                     seconds += float(attrs["wall_time"])
     return Held(tallies=tallies, measured=Measured(trials, steps, seconds))
+
+
+def check_definition(url: str, name: str, stored: StudyAttrs,
+                     definition: dict[str, Any] | None) -> None:
+    """Refuse, as the real command would, a study stored under ``name`` with another
+    definition (nothing to check while the definition is not known)."""
+    if definition is None:
+        return
+    from kraby_study.store.store import check_same_definition  # loads Optuna: only here
+
+    check_same_definition(name, shown_url(url), stored,
+                          StudyAttrs(definition=definition, fingerprint=fingerprint(definition)))
 
 
 def count_lines(count: Count, stored: Tally | None) -> list[str]:

@@ -7,10 +7,12 @@ Pure: no store, no training. How much of it the store already holds is read in
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from omegaconf import DictConfig
 
 from kraby_study.config.validate import to_container
+from kraby_study.plan.space import search_definition
 from kraby_study.plan.spec import StudyPlan
 
 
@@ -28,6 +30,9 @@ class Count:
     """How the trials come about, e.g. '8 values x 10 seeds'."""
     at_most: bool = False
     """A raced plan: values worse than the best stop early, so fewer may run."""
+    definition: dict[str, Any] | None = None
+    """The definition the command would store (and check against a stored study of the same
+    name); None when not known yet (a campaign stage waiting for earlier winners)."""
 
     @property
     def env_steps(self) -> int:
@@ -41,7 +46,8 @@ def plan_count(plan: StudyPlan, arms: str = "values") -> Count:
     seeds = len(plan.specs) // values if values else 0
     steps = plan.specs[0].steps if plan.specs else 0
     return Count(study=plan.name, trials=len(plan.specs), steps_per_trial=steps,
-                 shape=f"{values} {arms} x {seeds} seeds", at_most=plan.racing is not None)
+                 shape=f"{values} {arms} x {seeds} seeds", at_most=plan.racing is not None,
+                 definition=plan.definition)
 
 
 def stage_count(cfg: DictConfig, name: str) -> Count:
@@ -59,4 +65,4 @@ def search_count(cfg: DictConfig) -> Count:
     return Count(study=str(cfg.search.name), trials=int(cfg.search.trials),
                  steps_per_trial=seeds * int(cfg.budget.steps),
                  shape=f"search.trials, each {seeds} seeds x {int(cfg.budget.steps):,} env "
-                       "steps")
+                       "steps", definition=search_definition(cfg))
