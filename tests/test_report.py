@@ -522,3 +522,16 @@ def test_a_raced_confirm_study_compares_its_surviving_configurations(tmp_path: P
             "score on 5 fresh seeds. The race dropped t12 after round 3.") in text
     assert "raced: 13 of 15 runs (87 %)" in text
     assert "on at most 5 fresh seeds each, raced" in text
+
+
+def test_a_wilcoxon_search_captions_its_intermediate_values_as_seed_scores() -> None:
+    from types import SimpleNamespace
+
+    from kraby_study.report.search_output import CAPTIONS, SEED_SCORES_CAPTION, caption
+
+    def search(pruner: str) -> SimpleNamespace:
+        return SimpleNamespace(data=SimpleNamespace(definition={"search": {"pruner": pruner}}))
+
+    assert caption(search("wilcoxon"), "intermediate") == SEED_SCORES_CAPTION
+    assert caption(search("median"), "intermediate") == CAPTIONS["intermediate"]
+    assert caption(search("wilcoxon"), "history") == CAPTIONS["history"]

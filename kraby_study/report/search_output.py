@@ -30,6 +30,16 @@ CAPTIONS = {
                     "stopped them (x).",
     "parallel": "Every complete trial as a line through its parameters and its objective.",
 }
+SEED_SCORES_CAPTION = ("Each seed's final score, at the env steps where that seed ends (the "
+                       "wilcoxon pruner compares them with the best trial's same seeds); "
+                       "pruned trials stop after the seed where the pruner stopped them (x).")
+
+
+def caption(search: Search, stem: str) -> str:
+    """A figure's caption; the intermediate values of a wilcoxon search are seed scores."""
+    if stem == "intermediate" and search_plots.seed_scores(search):
+        return SEED_SCORES_CAPTION
+    return CAPTIONS[stem]
 
 
 def _cell(value: Any) -> str:
@@ -110,7 +120,7 @@ def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyRepor
         for stem, draw in figures:
             path = draw(search, folder / f"{stem}.{fmt}")
             report.files.append(path)
-            images.append(Image(f"{rel}/{path.name}", TITLES[stem], CAPTIONS[stem]))
+            images.append(Image(f"{rel}/{path.name}", TITLES[stem], caption(search, stem)))
     tables = _tables(search, folder)
     kind = "Optuna search" if search.data.kind == StudyKind.SEARCH else "Optuna study"
     direction = "maximised" if search.maximize else "minimised"

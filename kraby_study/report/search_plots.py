@@ -168,13 +168,20 @@ def intermediate(search: Search, path: Path) -> Path:
     if search.data.kind == StudyKind.SEARCH:
         ax.set_xlabel("environment steps")
         ax.xaxis.set_major_formatter(STEPS_FORMATTER)
-        ax.set_ylabel("mean episode reward at checkpoint")
+        ax.set_ylabel("final score of each seed" if seed_scores(search)
+                      else "mean episode reward at checkpoint")
     else:
         ax.set_xlabel("step")
         ax.set_ylabel("intermediate value")
     ax.legend(handles=handles, loc="best", frameon=False)
     fig.suptitle(_title(search, "intermediate values"))
     return save(fig, path)
+
+
+def seed_scores(search: Search) -> bool:
+    """Whether a search's intermediate values are its seeds' scores (the wilcoxon pruner's),
+    not rewards at checkpoints within the first seed."""
+    return search.data.definition.get("search", {}).get("pruner") == "wilcoxon"
 
 
 def _normalised(search: Search, name: str, values: list[object]) -> tuple[np.ndarray, list[str]]:
