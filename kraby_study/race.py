@@ -64,8 +64,7 @@ class Race(Generic[K]):
     def wanted(self, value: K, index: int) -> bool:
         """Whether seed ``index`` (from 0) of ``value`` is still to be run: the value is in the
         race and the race is not over. A run already made is kept either way."""
-        return (value not in self.dropped and index < self.rules.seeds
-                and not (len(self.survivors) <= 1))
+        return value not in self.dropped and index < self.rules.seeds and not self.over
 
 
 def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: RaceRules

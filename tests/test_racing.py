@@ -31,7 +31,7 @@ from conftest import (
 )
 from optuna.trial import TrialState
 
-from kraby_study.answers.raced import study_race
+from kraby_study.answers.raced import race_of
 from kraby_study.comparison import compare_with_best
 from kraby_study.config.compose import compose_config
 from kraby_study.plan.spec import RaceRules, TrialSpec
@@ -230,7 +230,8 @@ def test_a_raced_sweep_drops_what_the_procedure_says_and_never_runs_its_later_se
     # The replay from the store agrees with what was stored.
     with opened(sqlite_url(workdir / "r.db")) as store:
         ledger = store.load("fake")
-        replay = study_race(ledger.attrs.definition, ledger.trials())
+        definition = ledger.attrs.definition
+        replay = race_of(definition, ledger.trials(), definition["values"])
     assert replay is not None and {v: d.round for v, d in replay.dropped.items()} == {2: 3}
 
 
@@ -313,7 +314,7 @@ def _race_consistent(url: str, name: str) -> dict[str, Any]:
     latest = latest_by_key(trials)
     complete = [t.user_attrs["key"] for t in trials if t.state == TrialState.COMPLETE]
     assert len(complete) == len(set(complete)), complete
-    replay = study_race(attrs.definition, trials)
+    replay = race_of(attrs.definition, trials, attrs.definition["values"])
     assert replay is not None and replay.over
     stored = attrs.race or {}
     assert {v: d.round for v, d in replay.dropped.items()} == {

@@ -44,14 +44,12 @@ def ended_runs(latest: Mapping[str, StoredTrial], seeds: list[int]
     return runs
 
 
-def study_race(definition: Mapping[str, Any], trials: Sequence[StoredTrial]) -> Race[int] | None:
-    """The race of a stored study replayed on its runs (values by index); None for a study
-    that did not race."""
-    rules = RaceRules.of(dict(definition))
-    if rules is None:
-        return None
-    runs = ended_runs(latest_by_key(trials), list(rules.round_seeds))
-    return race(list(range(len(definition["values"]))), runs, rules)
+def replay(rules: RaceRules, values: int, latest: Mapping[str, StoredTrial]
+           ) -> tuple[Race[int], dict[int, dict[int, float]]]:
+    """The race of ``values`` values (by index) replayed on the latest attempt of each run, and
+    the ended runs it read (:func:`ended_runs`)."""
+    runs = ended_runs(latest, list(rules.round_seeds))
+    return race(list(range(values)), runs, rules), runs
 
 
 @dataclass(frozen=True)
@@ -86,12 +84,11 @@ def race_of(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
     """The race of a stored study with its dropped values mapped onto ``values`` (matched by
     :func:`kraby_study.records.value_key`, not by position); None for a study that did not
     race. A dropped value not in ``values`` is left out."""
-    state = study_race(definition, trials)
-    if state is None:
+    rules = RaceRules.of(dict(definition))
+    if rules is None:
         return None
-    rules = state.rules
     planned = list(definition["values"])
-    runs = ended_runs(latest_by_key(trials), list(rules.round_seeds))
+    state, runs = replay(rules, len(planned), latest_by_key(trials))
     index = {value_key(v): i for i, v in enumerate(values)}
     dropped = {index[value_key(planned[v])]: drop for v, drop in state.dropped.items()
                if value_key(planned[v]) in index}

@@ -13,21 +13,18 @@ and counted. After every recorded run the race is replayed and stored on the stu
 from __future__ import annotations
 
 import math
-from typing import TextIO
 
 from optuna.trial import FrozenTrial
 
-from kraby_study.answers.raced import ended_runs, place, race_record
+from kraby_study.answers.raced import place, race_record, replay
 from kraby_study.plan.spec import RaceRules, StudyPlan, TrialSpec
-from kraby_study.race import Race, race
+from kraby_study.race import Race
 from kraby_study.records import (
-    Outcome,
     StudyAttrs,
     TrialAttrs,
     TrialResult,
     is_interrupted,
     latest_by_key,
-    outcome,
 )
 from kraby_study.run.plan_source import PlanSource
 from kraby_study.store.ledger import StudyLedger
@@ -49,10 +46,10 @@ class RaceSource(PlanSource):
             assert where is not None, spec.key
             self.place[spec.key] = where
 
-    def standing(self, latest: dict[str, FrozenTrial]) -> Race[int]:
-        """The race replayed on the latest attempt of each run."""
-        runs = ended_runs(latest, list(self.rules.round_seeds))
-        return race(list(range(len(self.plan.values))), runs, self.rules)
+    def standing(self, latest: dict[str, FrozenTrial]
+                 ) -> tuple[Race[int], dict[int, dict[int, float]]]:
+        """The race replayed on the latest attempt of each run, and the ended runs it read."""
+        return replay(self.rules, len(self.plan.values), latest)
 
     def queue_missing(self) -> int:
         """Store where the race stands; nothing is queued ahead (see :meth:`next_trial`)."""
@@ -64,10 +61,10 @@ class RaceSource(PlanSource):
         """Queue and claim the run the race wants next; None when it wants none now."""
         with self.ledger.plan_lock():
             latest = latest_by_key(self.ledger.trials())
-            state = self.standing(latest)
+            state, runs = self.standing(latest)
             if state.over:
                 return None
-            for key in self._wanted_order(state, latest):
+            for key in self._wanted_order(state, runs, latest):
                 trial = latest.get(key)
                 spec = self.specs[key]
                 if trial is None or is_interrupted(trial):
@@ -80,10 +77,11 @@ class RaceSource(PlanSource):
                     return claimed.number, spec
         return None
 
-    def _wanted_order(self, state: Race[int], latest: dict[str, FrozenTrial]) -> list[str]:
+    def _wanted_order(self, state: Race[int], runs: dict[int, dict[int, float]],
+                      latest: dict[str, FrozenTrial]) -> list[str]:
         """Runs the race wants that nobody runs or ran: lowest seed index first, then the
         best-standing value (highest mean of its complete runs), then the study's order."""
-        means = standing_means(self.place, latest)
+        means = standing_means(runs)
 
         def free(key: str) -> bool:
             trial = latest.get(key)
@@ -103,29 +101,22 @@ class RaceSource(PlanSource):
 
     def _store_race(self) -> None:
         latest = latest_by_key(self.ledger.trials())
-        state = self.standing(latest)
+        state, runs = self.standing(latest)
         for key, (value, index) in self.place.items():
             trial = latest.get(key)
             if (trial is not None and trial.state.name == "WAITING"
-                    and not (state.wanted(value, index) and not state.over)):
+                    and not state.wanted(value, index)):
                 self.ledger.withdraw(trial.number, WITHDRAWN)
-        runs = ended_runs({k: t for k, t in latest.items() if k in self.place},
-                          list(self.rules.round_seeds))
         wanted = sum(1 for key, (value, index) in self.place.items()
-                     if key not in latest and state.wanted(value, index) and not state.over)
+                     if key not in latest and state.wanted(value, index))
         self.ledger.update(StudyAttrs(planned=len(latest) + wanted,
                                       race=race_record(self.plan.values, state, runs)))
 
 
-def standing_means(place: dict[str, tuple[int, int]], latest: dict[str, FrozenTrial]
-                   ) -> dict[int, float]:
-    """Mean final score of each value's complete runs, by value index."""
-    scores: dict[int, list[float]] = {}
-    for key, (value, _) in place.items():
-        trial = latest.get(key)
-        if trial is not None and outcome(trial) == Outcome.COMPLETE and trial.value is not None:
-            scores.setdefault(value, []).append(float(trial.value))
-    return {v: math.fsum(s) / len(s) for v, s in scores.items()}
+def standing_means(runs: dict[int, dict[int, float]]) -> dict[int, float]:
+    """Mean final score of each value's complete runs (:func:`ended_runs`), by value index."""
+    scores = {v: [x for x in by_seed.values() if not math.isnan(x)] for v, by_seed in runs.items()}
+    return {v: math.fsum(s) / len(s) for v, s in scores.items() if s}
 
 
 def race_line(ledger: StudyLedger) -> str:
@@ -139,7 +130,3 @@ def race_line(ledger: StudyLedger) -> str:
             f"round(s) decided, dropped: {', '.join(dropped) if dropped else 'none'}"
             + ("; the race is over" if stored.get("over") else ""))
 
-
-def print_race(ledger: StudyLedger, stream: TextIO) -> None:
-    """Print :func:`race_line`."""
-    print(race_line(ledger), file=stream, flush=True)
