@@ -266,6 +266,23 @@ def _external(value: float, distribution: dict[str, Any]) -> Any:
     return value
 
 
+@contextmanager
+def read_only(url: str) -> Iterator[sa.Connection | None]:
+    """A connection through the backend's read-only URL, which never creates or writes
+    anything; None when there is nothing to read (a SQLite file not there yet). Errors of the
+    database are the caller's to name."""
+    reading = reading_url(url)
+    if reading is None:
+        yield None
+        return
+    engine = sa.create_engine(reading, poolclass=sa.pool.NullPool)
+    try:
+        with engine.connect() as connection:
+            yield connection
+    finally:
+        engine.dispose()
+
+
 def has_store(url: str) -> bool:
     """Whether Optuna's tables are at ``url``, read without creating or writing anything: False
     for a SQLite file not there yet or without them, and for a database without them.
@@ -275,17 +292,12 @@ def has_store(url: str) -> bool:
         StoreError: The database cannot be reached; one line.
     """
     check_url(url)
-    reading = reading_url(url)
-    if reading is None:
-        return False
-    engine = sa.create_engine(reading, poolclass=sa.pool.NullPool)
     try:
-        with engine.connect() as connection:
-            return sa.inspect(connection).has_table(_version_info.name)
+        with read_only(url) as connection:
+            return connection is not None and sa.inspect(connection).has_table(
+                _version_info.name)
     except sa.exc.SQLAlchemyError as err:
         raise StoreError(f"cannot open the store {url}: {first_line(err)}") from None
-    finally:
-        engine.dispose()
 
 
 @contextmanager

@@ -23,8 +23,9 @@ from kraby_study.errors import StoreError, first_line
 from kraby_study.records import StudyAttrs
 from kraby_study.store.backend import LOCK_BASE, Backend, backend_for, check_store_file
 from kraby_study.store.ledger import StudyLedger
+from kraby_study.store.rows import read_only
 from kraby_study.store.tables import metadata
-from kraby_study.store.url import check_url, reading_url, sqlite_path
+from kraby_study.store.url import check_url, sqlite_path
 
 # Heartbeats and stale-trial failing are marked experimental by Optuna; they are what several
 # machines on one study rely on, so the warning would only alarm users.
@@ -149,21 +150,15 @@ def study_exists(url: str, name: str) -> bool:
     command still creating them: this reads through the backend's read-only URL, and on SQLite
     any error there (no file or table yet) reads as no study.
     """
-    reading = reading_url(url)
-    if reading is None:
-        return False
-    engine = sa.create_engine(reading, poolclass=sa.pool.NullPool)
     try:
-        with engine.connect() as conn:
-            return sa.inspect(conn).has_table("studies") and conn.execute(
+        with read_only(url) as conn:
+            return conn is not None and sa.inspect(conn).has_table("studies") and conn.execute(
                 sa.text("SELECT 1 FROM studies WHERE study_name = :n"), {"n": name}
             ).first() is not None
     except sa.exc.DBAPIError:
         if sqlite_path(url) is None:
             raise
         return False
-    finally:
-        engine.dispose()
 
 
 @contextmanager
