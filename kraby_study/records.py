@@ -188,6 +188,10 @@ class TrialMeasures:
     """Env steps it actually trained, over all its seeds (fewer when pruned or failed)."""
     wall_time: float | None = None
     """Seconds it took, from the first env step to the end of the last seed."""
+    cpu_time: float | None = None
+    """CPU seconds it used, user and system, over all its seeds: the worker process's and those
+    of the processes that stepped its legs. Unlike wall_time, other work on the machine moves
+    it little."""
     started: str | None = None
     """When it started (UTC, ISO 8601)."""
     ended: str | None = None

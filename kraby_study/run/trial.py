@@ -6,6 +6,7 @@ A trial never touches the database; the runner records what it returns.
 from __future__ import annotations
 
 import math
+import resource
 import time
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -25,6 +26,13 @@ if TYPE_CHECKING:
 
 def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def cpu_seconds() -> float:
+    """CPU seconds (user + system) used so far by this process and its ended children."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def _has_nan(model: Any) -> bool:
@@ -135,6 +143,7 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
 
     started = _now()
     t0 = time.perf_counter()
+    cpu0 = cpu_seconds()
     runs: list[_Seed] = []
     for index in range(spec.seeds):
         within = spec.checkpoint_every if index == 0 and not spec.seed_scores else None
@@ -149,7 +158,7 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
             break
         if on_checkpoint is not None and _stopped_after(spec, runs, on_checkpoint):
             break
-    return _result(spec, runs, started, time.perf_counter() - t0)
+    return _result(spec, runs, started, time.perf_counter() - t0, cpu_seconds() - cpu0)
 
 
 def _stopped_after(spec: TrialSpec, runs: list[_Seed], on_checkpoint: CheckpointHook) -> bool:
@@ -169,14 +178,15 @@ def _stopped_after(spec: TrialSpec, runs: list[_Seed], on_checkpoint: Checkpoint
     return True
 
 
-def _result(spec: TrialSpec, runs: list[_Seed], started: str, seconds: float) -> TrialResult:
+def _result(spec: TrialSpec, runs: list[_Seed], started: str, seconds: float,
+            cpu: float) -> TrialResult:
     """The trial's result from its seeds; the best seed's model is saved if asked."""
     last = runs[-1]
     result = TrialResult(
         outcome=Outcome.COMPLETE,
         curve=mean_curve([bin_curve(r.episodes, spec.curve_every) for r in runs]),
-        env_steps=sum(r.env_steps for r in runs), wall_time=seconds, started=started,
-        ended=_now())
+        env_steps=sum(r.env_steps for r in runs), wall_time=seconds, cpu_time=cpu,
+        started=started, ended=_now())
     if last.failure is not None:
         result.outcome, result.failure = Outcome.FAILED, last.failure
     elif last.pruned_at is not None:
