@@ -117,9 +117,9 @@ def test_a_trial_of_three_seeds_reports_its_first_seed_then_each_seed_score(
     # Every 128 steps of the first seed but its end, then after seeds 1 and 2 (not the last).
     assert {512, 1024} <= steps <= {128, 256, 384, 512, 1024}
     assert trial.user_attrs["env_steps"] == 3 * 512
-    # CPU seconds of the whole trial: positive, and at most the wall time of one busy core
-    # plus the little the worker spends outside training.
-    assert 0 < trial.user_attrs["cpu_time"] <= trial.user_attrs["wall_time"] * 1.5 + 1
+    # CPU seconds of the whole trial: positive, and at most the wall time of the worker and
+    # its leg-stepping processes (shards) all busy, plus the little spent outside training.
+    assert 0 < trial.user_attrs["cpu_time"] <= trial.user_attrs["wall_time"] * 3 + 1
     assert all(-2.0 < v < 0.0 for v in trial.intermediate_values.values())
 
 
