@@ -16,6 +16,7 @@ from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from kraby_study.errors import ClusterLost, ConfigError, DatabaseLost, StoreError, first_line
+from kraby_study.run.provenance import note_command
 
 if TYPE_CHECKING:
     from omegaconf import DictConfig
@@ -512,6 +513,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if unknown:
         parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     args.overrides = list(args.overrides) + extras
+    note_command(sys.argv[1:] if argv is None else argv)
     try:
         return int(args.func(args))
     except (ConfigError, StoreError) as err:

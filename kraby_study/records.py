@@ -19,6 +19,7 @@ here read a trial through :class:`StoredTrial`: Optuna's FrozenTrial, or the lig
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 import re
@@ -242,6 +243,9 @@ class TrialAttrs(TrialMeasures):
     """Where its final model (SB3 zip) is saved, if models are kept."""
     retry_of: int | None = None
     """Number of the interrupted trial this attempt replaces."""
+    provenance: str | None = None
+    """Key of what made it (:func:`provenance_key`): the record itself is stored once per study
+    under ``kraby_provenance:<key>``."""
 
     def stored(self) -> dict[str, Any]:
         """The attributes to store: every field that is set."""
@@ -526,3 +530,21 @@ def best_trial(trials: Iterable[T], maximize: bool = True) -> T | None:
     done = [t for t in trials if outcome(t) == Outcome.COMPLETE and t.value is not None]
     pick = max if maximize else min
     return pick(done, key=lambda t: float(t.value), default=None)  # type: ignore[arg-type]
+
+
+PROVENANCE_PREFIX = "kraby_provenance:"
+"""A study attribute named ``kraby_provenance:<key>`` holds one distinct provenance record."""
+
+
+def provenance_key(facts: Mapping[str, str]) -> str:
+    """A short hash naming a provenance record: equal records share it, and a trial from
+    another machine, version or command gets another."""
+    text = json.dumps(dict(facts), sort_keys=True)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:12]
+
+
+def trial_seeds(trial: StoredTrial, per_trial: int = 1) -> list[int]:
+    """The seeds a trial trained: its seed and the next ``per_trial - 1`` (a search trial
+    trains several one after another); none when it has no seed stored."""
+    seed = trial.user_attrs.get("seed")
+    return [] if seed is None else [int(seed) + i for i in range(per_trial)]

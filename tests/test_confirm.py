@@ -106,6 +106,12 @@ def test_confirm_retrains_the_top_configurations_on_fresh_seeds(
     assert run_cli(*args) == 0
     assert "0 to run" in capsys.readouterr().out
     assert len(load(db, "tiny-confirm").trials) == len(labels) * 2
+    # Its reproducibility page keeps the test seeds apart from the search's tuning seeds.
+    assert run_cli("report", "--study-name", "tiny-confirm", "--no-policy") == 0
+    page = (folder / "reports" / "tiny-confirm" / "reproducibility.md").read_text()
+    assert "Test seeds (fresh seeds of this confirm study): 2-3 (2 seeds)." in page
+    assert "Tuning seeds (of the source study 'tiny'): 0-1 (2 seeds)." in page
+    assert "Test and tuning seeds are disjoint." in page
     # best writes the confirmed winner's settings.
     assert run_cli("best", "--study-name", "tiny-confirm", "--name", "confirmed") == 0
     assert "confirm 'tiny-confirm'" in capsys.readouterr().out

@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
+from importlib import metadata
 from pathlib import Path
 
 import pytest
@@ -26,6 +28,7 @@ from conftest import (
 )
 from optuna.trial import TrialState
 
+from kraby_study.records import PROVENANCE_PREFIX
 from kraby_study.store.store import opened
 
 pytest.importorskip("ray")
@@ -150,6 +153,13 @@ def test_a_ray_sweep_gives_the_local_executors_exact_scores(workdir: Path) -> No
     assert proc.returncode == 0, out
     local, on_ray = scores(workdir / "local.db", "gamma"), scores(workdir / "ray.db", "gamma")
     assert len(local) == 4 and on_ray == local  # bit for bit: scores and every curve point
+    # Each Ray trial stores what made it, as its actor saw it (here the same machine).
+    study = load(workdir / "ray.db", "gamma")
+    made = [study.user_attrs[PROVENANCE_PREFIX + t.user_attrs["provenance"]]
+            for t in study.trials]
+    assert {r["hostname"] for r in made} == {socket.gethostname()}
+    assert {r["torch"] for r in made} == {metadata.version("torch")}
+    assert all("executor=ray" in r["command"] for r in made)
     assert not local_ray_processes(before)  # the command stopped its own Ray instance
 
 

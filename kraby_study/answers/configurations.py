@@ -15,6 +15,7 @@ from kraby_study.records import (
     param_name,
     search_key,
     swept_value,
+    trial_seeds,
     value_key,
     value_label,
 )
@@ -37,13 +38,12 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
     if attrs.kind == StudyKind.SEARCH:
         arms = _search_arms(ledger.name, done)
         per_trial = int(definition.get("seeds", 1))
-        used = {int(t.user_attrs["seed"]) + i for t in trials if "seed" in t.user_attrs
-                for i in range(per_trial)}
+        used = {seed for t in trials for seed in trial_seeds(t, per_trial)}
         env_keys = searched_env_keys(definition)
     elif attrs.kind == StudyKind.SWEEP:
         arms = _sweep_arms(ledger.name, str(definition["parameter"]),
                            list(definition.get("values", [])), done)
-        used = {int(t.user_attrs["seed"]) for t in trials if "seed" in t.user_attrs}
+        used = {seed for t in trials for seed in trial_seeds(t)}
         parameter = str(definition["parameter"])
         env_keys = [parameter.split(".", 1)[1]] if parameter.startswith("env.") else []
     else:

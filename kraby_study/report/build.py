@@ -26,6 +26,7 @@ from kraby_study.report.document import (
     to_markdown,
 )
 from kraby_study.report.load import StudyData, check_format, load_study, select_studies
+from kraby_study.report.reproducibility import write_reproducibility
 from kraby_study.report.search_tables import build_search
 from kraby_study.report.study_report import ReportIndex, StudyReport
 from kraby_study.report.sweep_tables import build_sweep, option
@@ -114,6 +115,9 @@ def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
         candidates = search_output.policy_candidates(search)
     if policy and (data.kind != StudyKind.OPTUNA or candidates):
         add_policy(report, candidates, url, rel)
+    record = write_reproducibility(data, folder)
+    report.files.append(record)
+    report.blocks.append(Links("How it was made", [(record.name, f"{rel}/{record.name}")]))
     if report.notes:
         report.blocks.insert(min(2, len(report.blocks)),
                              Text("Note: " + "; ".join(report.notes) + "."))

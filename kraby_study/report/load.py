@@ -6,14 +6,14 @@ empty or foreign file before anything could create a database at a wrong path.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import pandas as pd
 from optuna.trial import FrozenTrial
 
 from kraby_study.errors import ConfigError, StoreError
-from kraby_study.records import StudyKind, Tally, counted, tally
+from kraby_study.records import StudyKind, Tally, counted, tally, trial_seeds
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
 
@@ -34,6 +34,9 @@ class StudyData:
             mean_reward, wall_time, episodes``.
         planned: Planned number of runs (or trials), if the store says.
         replaced: Attempts that a later attempt superseded (not results).
+        provenance: What made its trials: each distinct provenance record, by key.
+        source_seeds: A confirm study's source's seeds (the tuning seeds), None when it has
+            no source or the source is not in the store.
     """
 
     name: str
@@ -44,6 +47,8 @@ class StudyData:
     curves: pd.DataFrame
     planned: int | None = None
     replaced: int = 0
+    provenance: dict[str, dict[str, str]] = field(default_factory=dict)
+    source_seeds: list[int] | None = None
 
     @property
     def tally(self) -> Tally:
@@ -78,7 +83,19 @@ def load_study(store: Store, name: str) -> StudyData:
     curves = ledger.curves([t.number for t in trials])
     return StudyData(name=name, kind=kind, ledger=ledger, definition=dict(attrs.definition),
                      trials=trials, curves=curves, planned=attrs.planned,
-                     replaced=len(every) - len(trials))
+                     replaced=len(every) - len(trials), provenance=ledger.provenances(),
+                     source_seeds=_source_seeds(store, kind, attrs.definition))
+
+
+def _source_seeds(store: Store, kind: StudyKind, definition: dict[str, Any]) -> list[int] | None:
+    """The seeds a confirm study's source trained (its tuning seeds), if it is in the store."""
+    source = definition.get("source")
+    if kind != StudyKind.CONFIRM or not source or source not in store.study_names():
+        return None
+    ledger = store.load(str(source))
+    attrs = ledger.attrs
+    per_trial = int(attrs.definition.get("seeds", 1)) if attrs.kind == StudyKind.SEARCH else 1
+    return sorted({seed for t in counted(ledger.trials()) for seed in trial_seeds(t, per_trial)})
 
 
 def check_format(fmt: str) -> str:

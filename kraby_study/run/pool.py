@@ -28,9 +28,10 @@ class _Slot:
 
 @dataclass(frozen=True)
 class Event:
-    """Something a worker said or did: progress, checkpoint, result or died.
+    """Something a worker said or did: started, progress, checkpoint, result or died.
 
-    The payload is the step (progress), (step, value) (checkpoint), the TrialResult (result),
+    The payload is the machine's facts (started: :func:`kraby_study.run.provenance.
+    machine_facts`), the step (progress), (step, value) (checkpoint), the TrialResult (result),
     or (spec, why) (died: why the worker is gone, e.g. ``exit code -9``).
     """
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import signal
 import threading
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TextIO
 
@@ -32,6 +33,9 @@ class TrialSource(Protocol):
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
         """Claim the next trial to run, or None when there is nothing left to start."""
+
+    def started(self, number: int, machine: Mapping[str, str]) -> None:
+        """Note that a trial started on a machine (its facts: hostname, CPU, versions)."""
 
     def checkpoint(self, number: int, step: int, value: float) -> bool:
         """Record an intermediate value; False prunes the trial."""
@@ -147,6 +151,9 @@ class _Run:
             self.submit(*claimed)
         return True
 
+    def on_started(self, event: Event, spec: TrialSpec) -> None:
+        self.source.started(event.number, event.payload)
+
     def on_progress(self, event: Event, spec: TrialSpec) -> None:
         self.progress.step(spec.label, int(event.payload))
 
@@ -196,8 +203,8 @@ def run_trials(source: TrialSource, workers: int, progress: Progress, executor: 
     """
     pool = executor.pool(workers)
     run = _Run(source, pool, progress)
-    handlers = {"progress": run.on_progress, "checkpoint": run.on_checkpoint,
-                "result": run.on_result, "died": run.on_died}
+    handlers = {"started": run.on_started, "progress": run.on_progress,
+                "checkpoint": run.on_checkpoint, "result": run.on_result, "died": run.on_died}
     last_beat = 0.0
     next_claim = 0.0
     ctrl_c = _CtrlC()

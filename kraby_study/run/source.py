@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import TextIO
 
 from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.records import TrialResult, counted
+from kraby_study.run.provenance import command_facts
 from kraby_study.store.ledger import StudyLedger
 
 UNFINISHED = (TrialState.RUNNING, TrialState.WAITING)
@@ -18,6 +20,11 @@ class StudySource:
 
     def __init__(self, ledger: StudyLedger) -> None:
         self.ledger = ledger
+
+    def started(self, number: int, machine: Mapping[str, str]) -> None:
+        """Store what makes a trial that just started: the machine training it (as its worker
+        says) and this command."""
+        self.ledger.note_provenance(number, {**machine, **command_facts()})
 
     def record(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
         """Store a finished trial."""

@@ -41,6 +41,8 @@ def serve(conn: Connection, shards: int) -> None:
     """Runs trials until the pool sends None or goes away."""
     import torch
 
+    from kraby_study.run.provenance import machine_facts
+
     torch.set_num_threads(1)
     while True:
         try:
@@ -58,6 +60,7 @@ def serve(conn: Connection, shards: int) -> None:
             conn.send(("checkpoint", number, step, value))
             return bool(conn.recv())
 
+        conn.send(("started", number, machine_facts()))
         result = attempt(spec, shards, checkpoint, progress)
         try:
             conn.send(("result", number, result))

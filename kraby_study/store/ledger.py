@@ -16,6 +16,7 @@ from optuna.storages import RDBStorage
 from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.records import (
+    PROVENANCE_PREFIX,
     CurvePoint,
     Failure,
     Outcome,
@@ -23,6 +24,7 @@ from kraby_study.records import (
     TrialAttrs,
     TrialResult,
     failure,
+    provenance_key,
 )
 from kraby_study.store.attempts import requeue_stale
 from kraby_study.store.backend import LOCK_BASE, Backend
@@ -41,6 +43,7 @@ class StudyLedger:
         self._backend = backend
         self._study_id = self._storage.get_study_id_from_name(study.study_name)
         self._ids: dict[int, int] = {}
+        self._provenance_keys: set[str] = set()
 
     # the study -------------------------------------------------------------------------------
 
@@ -140,6 +143,22 @@ class StudyLedger:
         trial_id = self._id(number)
         for key, value in attrs.stored().items():
             self._storage.set_trial_user_attr(trial_id, key, value)
+
+    def note_provenance(self, number: int, facts: Mapping[str, str]) -> str:
+        """Store what made a trial: the record once per study (``kraby_provenance:<key>``), its key
+        on the trial. Returns the key."""
+        key = provenance_key(facts)
+        if key not in self._provenance_keys:
+            self._study.set_user_attr(PROVENANCE_PREFIX + key, dict(facts))
+            self._provenance_keys.add(key)
+        self.set_attrs(number, TrialAttrs(provenance=key))
+        return key
+
+    def provenances(self) -> dict[str, dict[str, str]]:
+        """Every provenance record stored on the study, by key."""
+        return {name[len(PROVENANCE_PREFIX):]: dict(value)
+                for name, value in self._study.user_attrs.items()
+                if name.startswith(PROVENANCE_PREFIX) and isinstance(value, dict)}
 
     def refuse(self, number: int, reason: str) -> None:
         """Fail a trial that cannot run (a sampled configuration the rules refuse)."""

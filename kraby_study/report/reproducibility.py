@@ -1,0 +1,217 @@
+"""``<study>/reproducibility.md``: how a study's numbers were made, checklist by checklist.
+
+It follows the reporting checklist of Eimer et al. (ICML 2023) for hyperparameter studies in RL:
+the tuning seeds apart from the test seeds, what was compared (values or search space), the
+budget in env steps and CPU seconds, the hardware, and the package and code versions. Each
+trial stores what made it (:mod:`kraby_study.run.provenance`); where the trials of one study
+differ in a field that can move the numbers, a warning names the field and counts each value.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from kraby_study.records import (
+    Outcome,
+    StoredTrial,
+    StudyKind,
+    TrialAttrs,
+    outcome,
+    trial_seeds,
+)
+from kraby_study.report.document import Block, Heading, Items, Table, Text, to_markdown
+from kraby_study.report.load import StudyData
+from kraby_study.run.provenance import PACKAGES
+
+FILE = "reproducibility.md"
+
+HARDWARE = ("cpu", "cores", "platform", "hostname")
+SOFTWARE = ("kraby_study", "python", *PACKAGES, "git_commit", "git_dirty")
+CHECKED = ("cpu", "cores", "platform", "kraby_study", "python", *PACKAGES, "git_commit",
+           "git_dirty")
+"""Fields that can move a trial's numbers: trials that differ in one are warned about (the
+hostname, the folder and the command line may differ freely)."""
+
+
+def seed_text(seeds: Iterable[int]) -> str:
+    """Seeds as ranges, e.g. ``0-9, 12 (11 seeds)``; ``none`` when there are none."""
+    ordered = sorted(set(seeds))
+    if not ordered:
+        return "none"
+    parts: list[str] = []
+    start = prev = ordered[0]
+    for seed in [*ordered[1:], None]:
+        if seed is not None and seed == prev + 1:
+            prev = seed
+            continue
+        parts.append(str(start) if start == prev else f"{start}-{prev}")
+        if seed is not None:
+            start = prev = seed
+    return f"{', '.join(parts)} ({len(ordered)} seed{'s' if len(ordered) != 1 else ''})"
+
+
+def started(trials: Sequence[StoredTrial]) -> list[StoredTrial]:
+    """The trials that ran (complete, failed or pruned): those provenance describes."""
+    return [t for t in trials if outcome(t) != Outcome.PENDING]
+
+
+def field_counts(trials: Sequence[StoredTrial], records: dict[str, dict[str, str]],
+                 name: str) -> Counter[str]:
+    """How many trials have each value of one provenance field (``not recorded`` for trials
+    without a record)."""
+    counts: Counter[str] = Counter()
+    for trial in trials:
+        record = records.get(str(trial.user_attrs.get("provenance")))
+        counts[record.get(name, "not recorded") if record else "not recorded"] += 1
+    return counts
+
+
+def counted_text(counts: Counter[str]) -> str:
+    """``value`` when all trials agree, else ``a (n trials), b (m trials)``, most first (ties
+    in text order)."""
+    if len(counts) == 1:
+        return next(iter(counts))
+    return ", ".join(f"{value} ({n} trial{'s' if n != 1 else ''})"
+                     for value, n in sorted(counts.items(), key=lambda c: (-c[1], c[0])))
+
+
+def warnings(trials: Sequence[StoredTrial], records: dict[str, dict[str, str]]) -> list[str]:
+    """One line per field in which the trials differ, a missing record, or a dirty checkout."""
+    lines: list[str] = []
+    missing = sum(1 for t in trials if str(t.user_attrs.get("provenance")) not in records)
+    if missing:
+        lines.append(f"{missing} of {len(trials)} trials have no provenance record (trained "
+                     "before kraby-study stored it, or by another tool)")
+    recorded = [t for t in trials if str(t.user_attrs.get("provenance")) in records]
+    for name in CHECKED:
+        counts = field_counts(recorded, records, name)
+        if len(counts) > 1:
+            lines.append(f"trials differ in {name}: {counted_text(counts)}")
+    dirty = field_counts(recorded, records, "git_dirty").get("yes", 0)
+    if dirty:
+        lines.append(f"{dirty} trial{'s' if dirty != 1 else ''} ran from a git checkout with "
+                     "uncommitted changes: the commit alone does not give its code")
+    return lines
+
+
+def _seeds_block(data: StudyData, trials: Sequence[StoredTrial]) -> list[str]:
+    per_trial = int(data.definition.get("seeds", 1)) if data.kind == StudyKind.SEARCH else 1
+    own = {seed for t in trials for seed in trial_seeds(t, per_trial)}
+    if data.kind != StudyKind.CONFIRM:
+        return [f"Tuning seeds (the seeds this study's runs trained): {seed_text(own)}.",
+                "Test seeds: none in this study; `kraby-study confirm` retrains chosen "
+                "settings on fresh seeds."]
+    planned = [int(s) for s in data.definition.get("seeds", [])] or sorted(own)
+    lines = [f"Test seeds (fresh seeds of this confirm study): {seed_text(planned)}."]
+    source = data.definition.get("source")
+    if not source:
+        lines.append("No source study (baselines only): no tuning seeds to keep apart.")
+    elif data.source_seeds is None:
+        lines.append(f"Tuning seeds: those of {source!r}, which is not in this store, so "
+                     "disjointness is not checked here.")
+    else:
+        shared = sorted(set(planned) & set(data.source_seeds))
+        lines.append(f"Tuning seeds (of the source study {source!r}): "
+                     f"{seed_text(data.source_seeds)}.")
+        lines.append("Test and tuning seeds are disjoint." if not shared else
+                     f"Warning: test and tuning seeds share {seed_text(shared)}.")
+    return lines
+
+
+def _flat(settings: dict[str, Any], prefix: str = "") -> list[str]:
+    out: list[str] = []
+    for key, value in settings.items():
+        if isinstance(value, dict):
+            out += _flat(value, f"{prefix}{key}.")
+        else:
+            out.append(f"{prefix}{key}={value}")
+    return out
+
+
+def _compared_block(data: StudyData) -> list[Block]:
+    definition = data.definition
+    if data.kind == StudyKind.CONFIRM:
+        rows = [[str(arm.get("label")), str(arm.get("origin") or ""),
+                 " ".join(_flat(dict(arm.get("settings", {}).get("ppo", {}))))]
+                for arm in definition.get("arms", [])]
+        return [Text("Configurations retrained (each arm's ppo settings):"),
+                Table(["arm", "origin", "ppo settings"], rows)]
+    blocks: list[Block] = []
+    if data.kind == StudyKind.SWEEP:
+        values = ", ".join(str(v) for v in definition.get("values", []))
+        blocks.append(Text(f"Values compared: {definition.get('parameter')} = {values}."))
+    elif data.kind == StudyKind.SEARCH:
+        search = dict(definition.get("search", {}))
+        space = search.pop("params", {})
+        rows = [[name, " ".join(_flat(dict(p)))] for name, p in space.items()]
+        blocks.append(Text("Search space:"))
+        blocks.append(Table(["parameter", "definition"], rows))
+        blocks.append(Text("Search settings: " + " ".join(_flat(search)) + "."))
+    settings = definition.get("settings")
+    if isinstance(settings, dict):
+        blocks.append(Text("Fixed settings: " + " ".join(_flat(settings)) + "."))
+    return blocks
+
+
+def _budget_block(data: StudyData, trials: Sequence[StoredTrial]) -> list[str]:
+    attrs = [TrialAttrs.of(t) for t in trials]
+    steps = data.definition.get("steps")
+    env_steps = sum(a.env_steps or 0 for a in attrs)
+    cpu = [a.cpu_time for a in attrs if a.cpu_time is not None]
+    wall = sum(a.wall_time or 0.0 for a in attrs)
+    lines = [f"Env steps per run: {int(steps):,}." if steps else "Env steps per run: not "
+             "stored.",
+             f"Runs that trained: {len(trials)}; env steps trained in all: {env_steps:,}."]
+    if cpu:
+        note = "" if len(cpu) == len(attrs) else (
+            f" ({len(attrs) - len(cpu)} trials recorded no CPU time)")
+        lines.append(f"CPU seconds in all (user + system, worker and leg processes): "
+                     f"{sum(cpu):,.0f}; training wall-clock seconds summed over runs: "
+                     f"{wall:,.0f}{note}.")
+    else:
+        lines.append(f"CPU seconds: not recorded; training wall-clock seconds summed over "
+                     f"runs: {wall:,.0f}.")
+    return lines
+
+
+def _facts_table(trials: Sequence[StoredTrial], records: dict[str, dict[str, str]],
+                 names: Sequence[str]) -> Table:
+    rows = [[name, counted_text(field_counts(trials, records, name))] for name in names]
+    return Table(["field", "value (trials, when they differ)"], rows)
+
+
+def reproducibility_blocks(data: StudyData) -> list[Block]:
+    """The page's blocks."""
+    trials = started(data.trials)
+    records = data.provenance
+    commands = field_counts(trials, records, "command")
+    commands.pop("not recorded", None)
+    blocks: list[Block] = [
+        Heading(f"Reproducibility: {data.name}", 1),
+        Text(f"A {data.kind} study; {len(trials)} of its {len(data.trials)} counted trials "
+             "ran. Each trial stores the machine that trained it and the command that ran it "
+             "when it starts. Checklist: Eimer et al., ICML 2023."),
+    ]
+    found = warnings(trials, records)
+    if found:
+        blocks += [Heading("Warnings", 2), Items([f"Warning: {line}." for line in found])]
+    blocks += [Heading("Seeds", 2), Items(_seeds_block(data, trials)),
+               Heading("What was compared", 2), *_compared_block(data),
+               Heading("Budget", 2), Items(_budget_block(data, trials)),
+               Heading("Hardware", 2), _facts_table(trials, records, HARDWARE),
+               Heading("Software and code", 2), _facts_table(trials, records, SOFTWARE),
+               Heading("Commands", 2),
+               Items([f"`{c}` ({n} trial{'s' if n != 1 else ''})"
+                      for c, n in commands.most_common()] or ["none recorded"])]
+    return blocks
+
+
+def write_reproducibility(data: StudyData, folder: Path) -> Path:
+    """Write ``folder/reproducibility.md``; returns its path."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / FILE
+    path.write_text(to_markdown(reproducibility_blocks(data)), encoding="utf-8")
+    return path
