@@ -40,6 +40,8 @@ A study file may take a setting from a finished study's selected value: ppo.gamm
 ${winner:gamma}.
 executor=local|ray: trials run in worker processes here, or as Ray actors on a cluster
 (ray.address=auto|host:port; null starts a Ray instance here); the command writes the store.
+tensorboard_dir=DIR: each run's SB3 logs in DIR/<study>/<value or trial>-seed<n>, for
+tensorboard --logdir DIR (pip install 'kraby-study[tensorboard]').
 Any setting can be overridden with key=value (ppo.gamma=0.8); a flag such as --storage URL is
 the same as its key=value form (storage=URL), on every command that takes it.
 Your own YAML files in ./conf/<group>/ extend these groups and win over packaged files of the

@@ -147,8 +147,9 @@ def test_a_ray_sweep_gives_the_local_executors_exact_scores(workdir: Path) -> No
     before = set(ray_processes("ray/"))
     common = ["study=gamma", *TINY, "study.values=[0.8,0.99]", "workers=2"]
     assert run_cli("run", *common, f"storage={sqlite_url(workdir / 'local.db')}") == 0
+    # With TensorBoard logs on Ray too: they land at DIR and change no result.
     proc = spawn_cli("run", *common, f"storage={sqlite_url(workdir / 'ray.db')}",
-                     "executor=ray", cwd=workdir)
+                     "executor=ray", "tensorboard_dir=tb", cwd=workdir)
     out, _ = proc.communicate(timeout=600)
     assert proc.returncode == 0, out
     local, on_ray = scores(workdir / "local.db", "gamma"), scores(workdir / "ray.db", "gamma")
@@ -161,6 +162,8 @@ def test_a_ray_sweep_gives_the_local_executors_exact_scores(workdir: Path) -> No
     assert {r["torch"] for r in made} == {metadata.version("torch")}
     assert all("executor=ray" in r["command"] for r in made)
     assert not local_ray_processes(before)  # the command stopped its own Ray instance
+    assert sorted(p.name for p in (workdir / "tb" / "gamma").iterdir()) == [
+        "gamma=0.8-seed0", "gamma=0.8-seed1", "gamma=0.99-seed0", "gamma=0.99-seed1"]
 
 
 @pytest.mark.parametrize("args,message", [

@@ -282,6 +282,9 @@ class KrabyConfig:
     """Where models go; null: a folder named after the SQLite file (else studies/models)."""
     out: str = "reports"
     """Output folder of ``report``."""
+    tensorboard_dir: str | None = None
+    """Folder of TensorBoard logs: each training run writes SB3's logs to
+    DIR/<study>/<value or trial>-seed<n>; null: none (needs the [tensorboard] extra)."""
 
 
 def register_schema() -> None:

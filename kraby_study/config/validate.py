@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
+from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
@@ -113,6 +114,7 @@ def validate(cfg: DictConfig) -> None:
         if cfg[name] is not None:
             _require(int(cfg[name]) >= 1, f"{name} must be at least 1, got {cfg[name]}")
     validate_executor(cfg)
+    validate_tensorboard(cfg)
     _require(int(cfg.seed) >= 0, f"seed must be >= 0, got {cfg.seed}")
     _require(int(cfg.report.bootstrap) >= 100,
              f"report.bootstrap must be at least 100 resamples, got {cfg.report.bootstrap}")
@@ -166,6 +168,20 @@ def validate_executor(cfg: DictConfig) -> None:
         _require(importlib.util.find_spec("ray") is not None,
                  "executor=ray needs Ray, which is not installed: pip install "
                  "'kraby-study[ray]'")
+
+
+def validate_tensorboard(cfg: DictConfig) -> None:
+    """A TensorBoard folder, when one is asked for, is a folder name, and TensorBoard (which
+    SB3's tensorboard logger writes with) is installed."""
+    if cfg.tensorboard_dir is None:
+        return
+    _require(str(cfg.tensorboard_dir).strip() != "",
+             "tensorboard_dir must name a folder (or be null for no TensorBoard logs)")
+    folder = Path(str(cfg.tensorboard_dir)).expanduser()
+    _require(not folder.exists() or folder.is_dir(), f"tensorboard_dir {folder} is a file")
+    _require(importlib.util.find_spec("tensorboard") is not None,
+             "tensorboard_dir needs TensorBoard, which is not installed: pip install "
+             "'kraby-study[tensorboard]'")
 
 
 def cores() -> int:

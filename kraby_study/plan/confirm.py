@@ -17,7 +17,7 @@ from omegaconf import DictConfig
 
 from kraby_study.errors import ConfigError
 from kraby_study.plan.racing import race_rules
-from kraby_study.plan.settings import model_path, settings_with_ppo
+from kraby_study.plan.settings import model_path, settings_with_ppo, tensorboard_run
 from kraby_study.plan.spec import StudyPlan, TrialSpec
 from kraby_study.records import StudyKind, sweep_key
 
@@ -117,7 +117,8 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
     specs = [TrialSpec(study=name, key=sweep_key(index, seed), seed=seed, steps=steps,
                        curve_every=curve_every, settings=arm.settings, value=arm.label,
                        model_path=model_path(cfg, name, sweep_key(index, seed)),
-                       label=f"{arm.label} seed {seed}")
+                       label=f"{arm.label} seed {seed}",
+                       tensorboard_run=tensorboard_run(cfg, name, arm.label))
              for index, arm in enumerate(arms) for seed in seeds]
     definition = {
         "kind": StudyKind.CONFIRM.value, "parameter": PARAMETER, "values": labels,

@@ -1,10 +1,12 @@
-"""The settings of one run: resolved from a config, changed one at a time, and where its model goes.
+"""The settings of one run: resolved from a config, changed one at a time, and where its model
+and its TensorBoard logs go.
 
 Shared by every plan (sweeps, searches, confirm studies, train runs); pure.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -18,6 +20,9 @@ from kraby_study.errors import ConfigError, first_line
 from kraby_study.store.url import sqlite_path
 
 SWEEPABLE_ROOTS = ("env", "ppo")
+
+UNSAFE = re.compile(r"[^A-Za-z0-9._,=+-]+")
+"""Characters a folder name avoids: path separators, spaces, brackets, quotes, ..."""
 
 
 def resolved_settings(cfg: DictConfig) -> dict[str, Any]:
@@ -42,6 +47,26 @@ def model_path(cfg: DictConfig, study: str, key: str) -> str | None:
     if not cfg.save_models:
         return None
     return str(models_dir(cfg) / study / f"{key}.zip")
+
+
+def tensorboard_run(cfg: DictConfig, study: str, name: str) -> str | None:
+    """Where a run's TensorBoard logs go, ``DIR/<study>/<name>`` (the trial adds ``-seed<n>``),
+    both parts made safe as folder names; None when ``tensorboard_dir`` is null.
+
+    A relative DIR is taken from the command's working folder, so every worker (and every
+    node of a Ray cluster) is given the same absolute path.
+    """
+    if cfg.tensorboard_dir is None:
+        return None
+    root = Path(str(cfg.tensorboard_dir)).expanduser().absolute()
+    return str(root / folder_name(study) / folder_name(name))
+
+
+def folder_name(text: str) -> str:
+    """A name as a folder name on any system: each run of characters other than letters,
+    digits and ``. _ , = + -`` becomes one ``_`` (``t0 = ppo=tuned`` -> ``t0_=_ppo=tuned``)."""
+    name = UNSAFE.sub("_", text).strip("_")
+    return name if name.strip(".") else "_"
 
 
 def with_value(cfg: DictConfig, parameter: str, value: Any) -> DictConfig:

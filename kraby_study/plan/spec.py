@@ -44,6 +44,10 @@ class TrialSpec:
     """Fixed targets of the evaluation objective."""
     label: str = ""
     """How progress lines name the run, e.g. 'clip_range=0.2 seed 1'."""
+    tensorboard_run: str | None = None
+    """Where SB3's TensorBoard logs go, as ``DIR/<study>/<name>``: seed n writes to
+    ``<this>-seed<n>`` (``-attempt2``, ... added when an earlier attempt has that folder);
+    None: no logs (``tensorboard_dir`` null)."""
 
     @property
     def reports(self) -> bool:

@@ -8,7 +8,12 @@ from omegaconf import DictConfig
 from kraby_study.config.validate import to_container, validate_env, validate_ppo
 from kraby_study.errors import ConfigError
 from kraby_study.plan.racing import race_rules
-from kraby_study.plan.settings import model_path, resolved_settings, with_value
+from kraby_study.plan.settings import (
+    model_path,
+    resolved_settings,
+    tensorboard_run,
+    with_value,
+)
 from kraby_study.plan.spec import StudyPlan, TrialSpec
 from kraby_study.records import StudyKind, param_name, sweep_key, value_key, value_label
 
@@ -38,13 +43,15 @@ def expand_study(cfg: DictConfig) -> StudyPlan:
         except ConfigError as err:
             raise ConfigError(f"study {study.name}, value {value!r}: {err}") from None
         settings = resolved_settings(trial_cfg)
+        named = f"{param_name(str(study.parameter))}={value_label(value)}"
+        logs = tensorboard_run(cfg, str(study.name), named)
         for seed in run_seeds(cfg):
             key = sweep_key(index, seed)
             specs.append(TrialSpec(
                 study=str(study.name), key=key, seed=seed, steps=int(cfg.budget.steps),
                 curve_every=int(cfg.budget.curve_every), settings=settings, value=value,
                 model_path=model_path(cfg, str(study.name), key),
-                label=f"{param_name(str(study.parameter))}={value_label(value)} seed {seed}"))
+                label=f"{named} seed {seed}", tensorboard_run=logs))
     base = resolved_settings(cfg)
     root, leaf = str(study.parameter).split(".", 1)
     base[root].pop(leaf, None)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from omegaconf import DictConfig
 
 from kraby_study.config.validate import validate_env, validate_ppo
-from kraby_study.plan.settings import model_path, resolved_settings
+from kraby_study.plan.settings import model_path, resolved_settings, tensorboard_run
 from kraby_study.plan.spec import StudyPlan, TrialSpec, fingerprint
 from kraby_study.records import StudyKind, train_key
 
@@ -25,6 +25,7 @@ def train_plan(cfg: DictConfig) -> StudyPlan:
     key = train_key(seed)
     spec = TrialSpec(study=name, key=key, seed=seed, steps=int(cfg.budget.steps),
                      curve_every=int(cfg.budget.curve_every), settings=settings,
-                     model_path=model_path(cfg, name, key), label=f"seed {seed}")
+                     model_path=model_path(cfg, name, key), label=f"seed {seed}",
+                     tensorboard_run=tensorboard_run(cfg, name, "train"))
     return StudyPlan(name=name, parameter="seed", values=[seed], specs=[spec],
                      definition=definition)

@@ -9,7 +9,7 @@ from omegaconf import DictConfig
 from optuna.trial import TrialState
 
 from kraby_study.errors import ConfigError
-from kraby_study.plan.settings import model_path, resolved_settings
+from kraby_study.plan.settings import model_path, resolved_settings, tensorboard_run
 from kraby_study.plan.space import (
     apply_params,
     checkpoint_every,
@@ -95,7 +95,8 @@ class SearchSource(StudySource):
             checkpoint_every=None if seed_scores else checkpoint_every(cfg),
             seed_scores=seed_scores, seeds=int(cfg.budget.seeds),
             objective=str(cfg.search.objective), eval_episodes=int(cfg.search.eval_episodes),
-            label=short_label(params, key))
+            label=short_label(params, key),
+            tensorboard_run=tensorboard_run(cfg, self.ledger.name, key))
 
     def checkpoint(self, number: int, step: int, value: float) -> bool:
         """Report an intermediate value to the pruner; False stops the trial."""

@@ -46,11 +46,11 @@ def _is_divergence(err: BaseException) -> bool:
     return "nan" in text or "invalid values" in text or "inf" in text.split()
 
 
-def build_model(spec: TrialSpec, env: Any, seed: int) -> Any:
-    """The PPO learner of a spec on a given vectorised environment."""
+def build_model(spec: TrialSpec, env: Any, seed: int, logs: Path | None = None) -> Any:
+    """The PPO learner of a spec on a given vectorised environment; with ``logs``, SB3 writes
+    what it logs (rollout reward, losses, fps) there as TensorBoard events."""
     import torch
     from stable_baselines3 import PPO
-    from stable_baselines3.common.logger import Logger
 
     ppo = spec.settings["ppo"]
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[ppo["activation"]]
@@ -62,9 +62,40 @@ def build_model(spec: TrialSpec, env: Any, seed: int) -> Any:
         max_grad_norm=ppo["max_grad_norm"], learning_rate=ppo["learning_rate"],
         policy_kwargs={"net_arch": {"pi": arch, "vf": arch}, "activation_fn": activation},
         seed=seed, device="cpu", verbose=0)
-    # A logger with no outputs: SB3's default one makes an empty folder in /tmp per model.
-    model.set_logger(Logger(folder=None, output_formats=[]))
+    model.set_logger(sb3_logger(logs))
     return model
+
+
+def sb3_logger(logs: Path | None) -> Any:
+    """SB3's logger of a run: TensorBoard events in ``logs``, or no output at all.
+
+    Without outputs rather than SB3's default, which makes an empty folder in /tmp per model.
+    """
+    from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
+
+    if logs is None:
+        return Logger(folder=None, output_formats=[])
+    return Logger(folder=str(logs), output_formats=[TensorBoardOutputFormat(str(logs))])
+
+
+def tensorboard_folder(run: str, seed: int) -> Path:
+    """A new folder ``<run>-seed<seed>`` for one seed's TensorBoard logs, made here.
+
+    Made exclusively: when an earlier attempt of the run (a retry, an interrupted trial run
+    again) left that folder, the next free ``-attempt2``, ``-attempt3``, ... is taken, so no
+    two runs ever write into one folder and TensorBoard shows each attempt apart.
+    """
+    base = Path(f"{run}-seed{seed}")
+    base.parent.mkdir(parents=True, exist_ok=True)
+    attempt = 1
+    while True:
+        folder = base if attempt == 1 else base.with_name(f"{base.name}-attempt{attempt}")
+        try:
+            folder.mkdir()
+        except FileExistsError:
+            attempt += 1
+            continue
+        return folder
 
 
 def make_env(spec: TrialSpec, seed: int, shards: int = 1) -> Any:
@@ -93,9 +124,10 @@ class _Seed:
 def _learn(spec: TrialSpec, seed: int, recorder: EpisodeRecorder, shards: int) -> _Seed:
     """Train one seed with the recorder as callback; divergence and errors are noted."""
     run = _Seed()
+    logs = tensorboard_folder(spec.tensorboard_run, seed) if spec.tensorboard_run else None
     env = make_env(spec, seed, shards)
     try:
-        run.model = build_model(spec, env, seed)
+        run.model = build_model(spec, env, seed, logs)
         run.model.learn(total_timesteps=spec.steps, callback=recorder)
         if _has_nan(run.model):
             run.failure = failure(Failure.DIVERGED, "the policy's parameters became NaN")
@@ -104,6 +136,8 @@ def _learn(spec: TrialSpec, seed: int, recorder: EpisodeRecorder, shards: int) -
         run.failure = failure(kind, f"{type(err).__name__}: {first_line(err)[:300]}")
     finally:
         env.close()
+        if run.model is not None:
+            run.model.logger.close()  # writes out the last TensorBoard events
     run.episodes = recorder.episodes
     run.pruned_at = recorder.pruned_at
     run.env_steps = int(run.model.num_timesteps) if run.model is not None else 0
