@@ -86,6 +86,16 @@ def _baseline(text: str) -> str:
     return name
 
 
+def _objective(text: str) -> str:
+    """``final_reward,training_time`` (or ``[final_reward,training_time]``) -> the list as an
+    override value; one name stays one name."""
+    names = [n.strip() for n in text.strip().strip("[]").split(",") if n.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError(f"expected a reward, or a reward and a cost, got "
+                                         f"{text!r}")
+    return names[0] if len(names) == 1 else f"[{','.join(names)}]"
+
+
 def _at_least_two(text: str) -> int:
     value = _positive_int(text)
     if value < 2:
@@ -109,12 +119,16 @@ SEARCH_FLAGS = [
     WORKERS, STORAGE,
     Flag("--study-name", "search.name", "name of the search in the store, as search.name=NAME "
          "(default ppo_search)", "NAME"),
-    Flag("--sampler", "search.sampler", "default tpe (seeded), as search.sampler=...",
-         choices=("tpe", "random")),
+    Flag("--objective", "search.objective", "what the search optimises, as "
+         "search.objective=...: a reward (final_reward or evaluation; default final_reward), "
+         "or a reward and a cost, final_reward,training_time (CPU seconds per seed), for a "
+         "front of trials", "NAME[,COST]", _objective),
+    Flag("--sampler", "search.sampler", "default tpe (seeded; handles one objective or two), "
+         "nsga2 for NSGA-II, as search.sampler=...", choices=("tpe", "random", "nsga2")),
     Flag("--pruner", "search.pruner", "stops bad trials: median and hyperband at env-step "
          "checkpoints, wilcoxon after whole seeds (races a trial's seeds against the best "
-         "trial's), as search.pruner=... (default median)",
-         choices=("median", "hyperband", "wilcoxon", "none")),
+         "trial's), as search.pruner=... (default median; none with two objectives, which "
+         "Optuna cannot prune)", choices=("median", "hyperband", "wilcoxon", "none")),
     Flag("--seed", "search.seed", "sampler seed, stored with the study, as search.seed=S "
          "(default 0)", "S", _whole),
 ]
@@ -123,7 +137,12 @@ CONFIRM_FLAGS = [
     Flag("--study-name", "confirm.study", "the search or sweep whose top configurations are "
          "retrained, as confirm.study=NAME (default: none, baselines only)", "NAME"),
     Flag("--top", "confirm.top", "configurations retrained: the search's best complete trials "
-         "or the sweep's best values, as confirm.top=K (default 5)", "K", _positive_int),
+         "(of a two-objective search, up to K trials of its front spread along it: the best "
+         "score, the cheapest, the rest evenly in cost order) or the sweep's best values, as "
+         "confirm.top=K (default 5)", "K", _positive_int),
+    Flag("--select", "confirm.select", "the confirm study's selection rule, as "
+         "confirm.select=RULE: final_score, auc or fastest_tied (default: fastest_tied for a "
+         "two-objective search, final_score otherwise)", "RULE"),
     Flag("--seeds", "confirm.seeds", "fresh seeds per configuration, none used by the study, as "
          "confirm.seeds=N (default 10)", "N", _at_least_two),
     STORAGE, WORKERS,
@@ -315,7 +334,7 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     """An Optuna search over conf/search/<space>.yaml, into the same store."""
     from kraby_study.answers.standing import study_standing
     from kraby_study.plan.settings import settings_with_ppo
-    from kraby_study.plan.space import validate_search
+    from kraby_study.plan.space import objectives, validate_search
     from kraby_study.run.executor import executor_for
     from kraby_study.run.search_source import run_search
 
@@ -336,21 +355,23 @@ def cmd_optuna(args: argparse.Namespace) -> int:
                                      sys.stdout, starts=starts)
         state = study_standing(ledger)
     counts = state.tally
+    chosen = state.selected if len(objectives(cfg)) == 2 else f"best {state.selected}"
     print(f"search {state.name}: {counts.complete} complete, {counts.pruned} pruned, "
-          f"{counts.failed} failed of {counts.planned}; best {state.selected}")
+          f"{counts.failed} failed of {counts.planned}; {chosen}")
     return 130 if summary.interrupted else 0
 
 
 def cmd_confirm(args: argparse.Namespace) -> int:
     """Retrain a study's top configurations (and baselines) on fresh seeds."""
     from kraby_study.answers.configurations import confirmed_study
-    from kraby_study.plan.confirm import baseline_arm, confirm_plan
+    from kraby_study.plan.confirm import baseline_arm, confirm_plan, confirm_rule
     from kraby_study.run.executor import executor_for
     from kraby_study.run.study_run import closing_line, run_plan
     from kraby_study.store.store import opened, opened_for_reading
 
     overrides = flag_overrides(args, CONFIRM_FLAGS)
     cfg = compose_config(with_default(overrides, "budget", "quick"))
+    confirm_rule(cfg, None)  # a rule that is not one is refused before the store is read
     baselines = [baseline_arm(name, overrides) for name in cfg.confirm.baselines]
     source = None
     if cfg.confirm.study is not None:
@@ -395,6 +416,8 @@ def cmd_best(args: argparse.Namespace) -> int:
                   else require_selection(store.load(name)))
     path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
     write_ppo_config(chosen.settings, chosen.env_keys, chosen.description, path)
+    for line in chosen.front:
+        print(line)
     print(f"best: {chosen.description}")
     print(f"wrote {path}: use it with `kraby-study train ppo={config_name}` or "
           f"`kraby-study run ppo={config_name} study=...`")
