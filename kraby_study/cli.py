@@ -485,7 +485,14 @@ def build_parser() -> argparse.ArgumentParser:
         "first seed. --pruner wilcoxon sees each seed's final score instead, and stops a "
         "trial's remaining seeds once its finished ones are worse than the best trial's same "
         "seeds by a one-sided Wilcoxon signed-rank test, p < search.wilcoxon_p (0.1: from its "
-        "4th seed on, so budget.seeds=5 or more; budget=full has 10).\n\n" + EPILOG)
+        "4th seed on, so budget.seeds=5 or more; budget=full has 10).\n\n"
+        "--objective final_reward,training_time (search.objective=[final_reward,"
+        "training_time]) searches for score and cost at once: the cost is the trial's CPU "
+        "seconds per seed, the study has two directions, TPE (or --sampler nsga2) samples "
+        "for both, and no pruner runs (Optuna cannot prune a trial of several objectives; "
+        "--pruner other than none is refused). list, best and the report show the front; "
+        "best writes its cheapest trial tied with the best score, and confirm --study-name "
+        "retrains --top trials spread along it.\n\n" + EPILOG)
     for name in ("run", "optuna", "confirm"):
         parsers[name].add_argument(
             "--dry-run", action="store_true",
@@ -509,7 +516,9 @@ def build_parser() -> argparse.ArgumentParser:
         "each configuration trains --seeds runs at the study's budget (steps and curve bins; "
         "budget=quick for baselines alone), with seeds no trial of the study used. The study "
         "NAME-confirm is resumable like run; report it, then `kraby-study best --study-name "
-        "NAME-confirm` writes the confirmed winner's settings.\n\n" + EPILOG)
+        "NAME-confirm` writes the confirmed winner's settings, selected by --select (of a "
+        "two-objective search's front by default fastest_tied: the cheapest in CPU seconds "
+        "among the arms tied with the best).\n\n" + EPILOG)
     parsers["best"].add_argument("--name", help="config name to write in ./conf/ppo/ (default "
                                  "best_<study>, or campaign_<NAME>)")
     parsers["best"].add_argument("--campaign", metavar="NAME",

@@ -274,6 +274,10 @@ def pareto(search: Search, path: Path) -> Path:
         ax.scatter(queued["cost"], queued["value"], s=95, marker="D", facecolors="none",
                    edgecolors="black", linewidths=1.0, zorder=5,
                    label=f"enqueued ({names})")
+        for _, row in queued.iterrows():
+            ax.annotate(str(row["enqueued"]), (row["cost"], row["value"]),
+                        textcoords="offset points", xytext=(-6, -14), ha="right",
+                        fontsize=8, color="black")
     choice = search.front.choice
     if choice is not None:
         ax.scatter([choice.chosen.cost], [choice.chosen.score], s=260, marker="*",
