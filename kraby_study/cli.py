@@ -89,6 +89,16 @@ def _baseline(text: str) -> str:
     return name
 
 
+def _objective(text: str) -> str:
+    """``final_reward,training_time`` (or ``[final_reward,training_time]``) -> the list as an
+    override value; one name stays one name."""
+    names = [n.strip() for n in text.strip().strip("[]").split(",") if n.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError(f"expected a reward, or a reward and a cost, got "
+                                         f"{text!r}")
+    return names[0] if len(names) == 1 else f"[{','.join(names)}]"
+
+
 def _at_least_two(text: str) -> int:
     value = _positive_int(text)
     if value < 2:
@@ -112,12 +122,16 @@ SEARCH_FLAGS = [
     WORKERS, STORAGE,
     Flag("--study-name", "search.name", "name of the search in the store, as search.name=NAME "
          "(default ppo_search)", "NAME"),
-    Flag("--sampler", "search.sampler", "default tpe (seeded), as search.sampler=...",
-         choices=("tpe", "random")),
+    Flag("--objective", "search.objective", "what the search optimises, as "
+         "search.objective=...: a reward (final_reward or evaluation; default final_reward), "
+         "or a reward and a cost, final_reward,training_time (CPU seconds per seed), for a "
+         "front of trials", "NAME[,COST]", _objective),
+    Flag("--sampler", "search.sampler", "default tpe (seeded; handles one objective or two), "
+         "nsga2 for NSGA-II, as search.sampler=...", choices=("tpe", "random", "nsga2")),
     Flag("--pruner", "search.pruner", "stops bad trials: median and hyperband at env-step "
          "checkpoints, wilcoxon after whole seeds (races a trial's seeds against the best "
-         "trial's), as search.pruner=... (default median)",
-         choices=("median", "hyperband", "wilcoxon", "none")),
+         "trial's), as search.pruner=... (default median; none with two objectives, which "
+         "Optuna cannot prune)", choices=("median", "hyperband", "wilcoxon", "none")),
     Flag("--seed", "search.seed", "sampler seed, stored with the study, as search.seed=S "
          "(default 0)", "S", _whole),
 ]
@@ -126,7 +140,12 @@ CONFIRM_FLAGS = [
     Flag("--study-name", "confirm.study", "the search or sweep whose top configurations are "
          "retrained, as confirm.study=NAME (default: none, baselines only)", "NAME"),
     Flag("--top", "confirm.top", "configurations retrained: the search's best complete trials "
-         "or the sweep's best values, as confirm.top=K (default 5)", "K", _positive_int),
+         "(of a two-objective search, up to K trials of its front spread along it: the best "
+         "score, the cheapest, the rest evenly in cost order) or the sweep's best values, as "
+         "confirm.top=K (default 5)", "K", _positive_int),
+    Flag("--select", "confirm.select", "the confirm study's selection rule, as "
+         "confirm.select=RULE: final_score, auc or fastest_tied (default: fastest_tied for a "
+         "two-objective search, final_score otherwise)", "RULE"),
     Flag("--seeds", "confirm.seeds", "fresh seeds per configuration, none used by the study, as "
          "confirm.seeds=N (default 10)", "N", _at_least_two),
     STORAGE, WORKERS,
@@ -318,7 +337,7 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     """An Optuna search over conf/search/<space>.yaml, into the same store."""
     from kraby_study.answers.standing import study_standing
     from kraby_study.plan.settings import settings_with_ppo
-    from kraby_study.plan.space import validate_search
+    from kraby_study.plan.space import objectives, validate_search
     from kraby_study.run.executor import executor_for
     from kraby_study.run.search_source import run_search
 
@@ -339,21 +358,23 @@ def cmd_optuna(args: argparse.Namespace) -> int:
                                      sys.stdout, starts=starts)
         state = study_standing(ledger)
     counts = state.tally
+    chosen = state.selected if len(objectives(cfg)) == 2 else f"best {state.selected}"
     print(f"search {state.name}: {counts.complete} complete, {counts.pruned} pruned, "
-          f"{counts.failed} failed of {counts.planned}; best {state.selected}")
+          f"{counts.failed} failed of {counts.planned}; {chosen}")
     return 130 if summary.interrupted else 0
 
 
 def cmd_confirm(args: argparse.Namespace) -> int:
     """Retrain a study's top configurations (and baselines) on fresh seeds."""
     from kraby_study.answers.configurations import confirmed_study
-    from kraby_study.plan.confirm import baseline_arm, confirm_plan
+    from kraby_study.plan.confirm import baseline_arm, confirm_plan, confirm_rule
     from kraby_study.run.executor import executor_for
     from kraby_study.run.study_run import closing_line, run_plan
     from kraby_study.store.store import opened, opened_for_reading
 
     overrides = flag_overrides(args, CONFIRM_FLAGS)
     cfg = compose_config(with_default(overrides, "budget", "quick"))
+    confirm_rule(cfg, None)  # a rule that is not one is refused before the store is read
     baselines = [baseline_arm(name, overrides) for name in cfg.confirm.baselines]
     source = None
     if cfg.confirm.study is not None:
@@ -398,6 +419,8 @@ def cmd_best(args: argparse.Namespace) -> int:
                   else require_selection(store.load(name)))
     path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
     write_ppo_config(chosen.settings, chosen.env_keys, chosen.description, path)
+    for line in chosen.front:
+        print(line)
     print(f"best: {chosen.description}")
     print(f"wrote {path}: use it with `kraby-study train ppo={config_name}` or "
           f"`kraby-study run ppo={config_name} study=...`")
@@ -465,7 +488,14 @@ def build_parser() -> argparse.ArgumentParser:
         "first seed. --pruner wilcoxon sees each seed's final score instead, and stops a "
         "trial's remaining seeds once its finished ones are worse than the best trial's same "
         "seeds by a one-sided Wilcoxon signed-rank test, p < search.wilcoxon_p (0.1: from its "
-        "4th seed on, so budget.seeds=5 or more; budget=full has 10).\n\n" + EPILOG)
+        "4th seed on, so budget.seeds=5 or more; budget=full has 10).\n\n"
+        "--objective final_reward,training_time (search.objective=[final_reward,"
+        "training_time]) searches for score and cost at once: the cost is the trial's CPU "
+        "seconds per seed, the study has two directions, TPE (or --sampler nsga2) samples "
+        "for both, and no pruner runs (Optuna cannot prune a trial of several objectives; "
+        "--pruner other than none is refused). list, best and the report show the front; "
+        "best writes its cheapest trial tied with the best score, and confirm --study-name "
+        "retrains --top trials spread along it.\n\n" + EPILOG)
     for name in ("run", "optuna", "confirm"):
         parsers[name].add_argument(
             "--dry-run", action="store_true",
@@ -489,7 +519,9 @@ def build_parser() -> argparse.ArgumentParser:
         "each configuration trains --seeds runs at the study's budget (steps and curve bins; "
         "budget=quick for baselines alone), with seeds no trial of the study used. The study "
         "NAME-confirm is resumable like run; report it, then `kraby-study best --study-name "
-        "NAME-confirm` writes the confirmed winner's settings.\n\n" + EPILOG)
+        "NAME-confirm` writes the confirmed winner's settings, selected by --select (of a "
+        "two-objective search's front by default fastest_tied: the cheapest in CPU seconds "
+        "among the arms tied with the best).\n\n" + EPILOG)
     parsers["best"].add_argument("--name", help="config name to write in ./conf/ppo/ (default "
                                  "best_<study>, or campaign_<NAME>)")
     parsers["best"].add_argument("--campaign", metavar="NAME",

@@ -53,6 +53,9 @@ class StoredTrial(Protocol):
     def value(self) -> float | None: ...
 
     @property
+    def values(self) -> list[float] | None: ...
+
+    @property
     def params(self) -> dict[str, Any]: ...
 
     @property
@@ -207,11 +210,21 @@ class TrialMeasures:
     """Why it failed or was given back: ``<Failure kind>: <detail>``."""
     pruned_at: int | None = None
     """Env steps at which the pruner stopped it."""
+    scores: list[float] | None = None
+    """Each seed's score, in seed order, of a trial that trained to its end: the sample the
+    comparison with the best reads for a search trial (its final_score is their mean)."""
 
     def measures(self) -> TrialMeasures:
         """Only the measured fields (of a result or of stored attributes)."""
         return TrialMeasures(**{f.name: getattr(self, f.name)
                                 for f in dataclasses.fields(TrialMeasures)})
+
+    def training_time(self) -> float | None:
+        """The cost objective ``training_time``: CPU seconds per seed, the trial's cpu_time
+        over the seeds it scored; None without both."""
+        if self.cpu_time is None or not self.scores:
+            return None
+        return float(self.cpu_time) / len(self.scores)
 
 
 @dataclass(kw_only=True)
@@ -246,6 +259,9 @@ class TrialAttrs(TrialMeasures):
     provenance: str | None = None
     """Key of what made it (:func:`provenance_key`): the record itself is stored once per study
     under ``kraby_provenance:<key>``."""
+    enqueued: str | None = None
+    """The configuration a new search evaluated first (``search.enqueue``), e.g. ppo=tuned;
+    kept by its later attempts."""
 
     def stored(self) -> dict[str, Any]:
         """The attributes to store: every field that is set."""
@@ -522,14 +538,30 @@ def swept_value(trial: StoredTrial, name: str, planned: Sequence[Any]) -> Any:
     return None
 
 
-def best_trial(trials: Iterable[T], maximize: bool = True) -> T | None:
-    """The complete trial with the best value (a search's best); None when none is complete.
+def score(trial: StoredTrial) -> float | None:
+    """A trial's score: its value, or its first objective's (a two-objective search's reward);
+    None without one. (Optuna's ``FrozenTrial.value`` raises on a trial of two objectives.)"""
+    values = trial.values
+    return float(values[0]) if values else None
 
-    kraby-study maximises; ``maximize=False`` serves foreign studies that minimise.
+
+def cost(trial: StoredTrial) -> float | None:
+    """A two-objective search trial's cost (its second objective); None for one objective."""
+    values = trial.values
+    return float(values[1]) if values and len(values) > 1 else None
+
+
+def best_trial(trials: Iterable[T], maximize: bool = True, objectives: int = 1) -> T | None:
+    """The complete trial with the best score (a search's best); None when none is complete.
+
+    kraby-study maximises; ``maximize=False`` serves foreign studies that minimise. Trials
+    count when they have ``objectives`` values, by the first: 2 for a two-objective search's
+    best score; a foreign study of several objectives has no single best.
     """
-    done = [t for t in trials if outcome(t) == Outcome.COMPLETE and t.value is not None]
+    done = [t for t in trials if outcome(t) == Outcome.COMPLETE and t.values
+            and len(t.values) == objectives]
     pick = max if maximize else min
-    return pick(done, key=lambda t: float(t.value), default=None)  # type: ignore[arg-type]
+    return pick(done, key=lambda t: float(score(t)), default=None)  # type: ignore[arg-type]
 
 
 PROVENANCE_PREFIX = "kraby_provenance:"
@@ -548,3 +580,62 @@ def trial_seeds(trial: StoredTrial, per_trial: int = 1) -> list[int]:
     trains several one after another); none when it has no seed stored."""
     seed = trial.user_attrs.get("seed")
     return [] if seed is None else [int(seed) + i for i in range(per_trial)]
+
+
+# A search's objectives ------------------------------------------------------------------------
+
+REWARDS = ("final_reward", "evaluation")
+"""A search's rewards, maximised: the mean episode reward over the last 10 % of training, or
+the deterministic policy's reward on fixed targets."""
+COSTS = ("training_time",)
+"""A search's costs, minimised: ``training_time`` is CPU seconds per seed
+(:meth:`TrialMeasures.training_time`)."""
+
+
+def objective_names(objective: Any) -> list[str]:
+    """A search's objective as names: one name (as stored by a one-objective search) or a
+    list of names."""
+    if isinstance(objective, str):
+        return [objective]
+    return [str(name) for name in objective]
+
+
+def check_objective(objective: Any) -> list[str]:
+    """The objective's names, a reward first and then any cost; ConfigError, one line, for an
+    unknown name, more than two, two rewards, two costs or a cost alone."""
+    names = objective_names(objective)
+    shown = f"search.objective={_listed(names)}"
+    for name in names:
+        if name not in REWARDS + COSTS:
+            raise ConfigError(f"{shown}: unknown objective {name!r}: choose a reward "
+                              f"({' or '.join(REWARDS)}), optionally with the cost "
+                              f"{' or '.join(COSTS)}")
+    rewards = [n for n in names if n in REWARDS]
+    costs = [n for n in names if n in COSTS]
+    if len(names) > 2:
+        raise ConfigError(f"{shown}: at most two objectives, a reward and a cost, got "
+                          f"{len(names)}")
+    if len(rewards) != 1:
+        raise ConfigError(f"{shown}: " + ("two rewards: give one reward and a cost, e.g. "
+                                          "[final_reward,training_time]" if rewards else
+                                          "a cost alone: give a reward with it, e.g. "
+                                          "[final_reward,training_time]"))
+    if len(costs) > 1:
+        raise ConfigError(f"{shown}: two costs: give one reward and one cost")
+    return rewards + costs
+
+
+def _listed(names: Sequence[str]) -> str:
+    return names[0] if len(names) == 1 else f"[{','.join(names)}]"
+
+
+def stored_objective(names: Sequence[str]) -> str | list[str]:
+    """The objective as a search's definition stores it: one name as a string (as every
+    one-objective search stored it), two as a list."""
+    return names[0] if len(names) == 1 else list(names)
+
+
+def two_objectives(definition: Mapping[str, Any]) -> bool:
+    """Whether a stored search definition has a reward and a cost."""
+    objective = definition.get("search", {}).get("objective", REWARDS[0])
+    return len(objective_names(objective)) == 2

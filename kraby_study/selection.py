@@ -38,6 +38,7 @@ from kraby_study.records import (
     Outcome,
     SelectRule,
     StoredTrial,
+    StudyKind,
     TrialAttrs,
     best_group,
     ordered_values,
@@ -54,8 +55,9 @@ if TYPE_CHECKING:
 RULE_TEXT = {
     SelectRule.FINAL_SCORE: "highest mean final score",
     SelectRule.AUC: "highest mean AUC (sample efficiency)",
-    SelectRule.FASTEST_TIED: ("lowest mean training time among the values tied with the best "
-                              f"final score (not worse under the {procedure_name(ALPHA)})"),
+    SelectRule.FASTEST_TIED: ("lowest mean training time (wall-clock seconds; CPU seconds on "
+                              "a confirm study) among the values tied with the best final "
+                              f"score (not worse under the {procedure_name(ALPHA)})"),
 }
 
 K = TypeVar("K", bound=Hashable)
@@ -115,11 +117,20 @@ class Samples:
     seconds: dict[int, list[float]]
 
 
+def time_measure(kind: str | None) -> str:
+    """The training time fastest_tied compares, as a trial attribute: CPU seconds on a confirm
+    study (a two-objective search's cost is CPU seconds per seed, and other work on the
+    machine moves it little), wall-clock seconds on a sweep (as the documented studies
+    compared them)."""
+    return "cpu_time" if kind == StudyKind.CONFIRM else "wall_time"
+
+
 def samples(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: str,
-            values: Sequence[Any]) -> Samples:
+            values: Sequence[Any], time_attr: str = "wall_time") -> Samples:
     """The samples of a sweep's counted trials; ``curves`` holds their curve points (columns
     number, step, mean_reward), None when no AUC is needed. A trial whose value is not in
-    ``values`` is left out."""
+    ``values`` is left out. ``time_attr``: the trial attribute read as its training time
+    (:func:`time_measure`)."""
     index = {value_key(v): i for i, v in enumerate(values)}
     final: dict[int, list[float]] = {}
     aucs: dict[int, list[float]] = {}
@@ -138,9 +149,9 @@ def samples(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: st
         final.setdefault(vi, []).append(float(trial.value))
         if trial.number in rewards:
             aucs.setdefault(vi, []).append(auc(rewards[trial.number]))
-        wall = TrialAttrs.of(trial).wall_time
-        if wall is not None:
-            seconds.setdefault(vi, []).append(float(wall))
+        spent = getattr(TrialAttrs.of(trial), time_attr)
+        if spent is not None:
+            seconds.setdefault(vi, []).append(float(spent))
     order = sorted(final)
     return Samples(values=list(values), final={vi: final[vi] for vi in order},
                    aucs={vi: aucs.get(vi, []) for vi in order},
@@ -159,9 +170,9 @@ def swept_values(kind: str, definition: Mapping[str, Any],
 
 def selected_index(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: str,
                    values: Sequence[Any], rule: str, min_seeds: int = MIN_SEEDS,
-                   dropped: Collection[int] = ()) -> int | None:
+                   dropped: Collection[int] = (), time_attr: str = "wall_time") -> int | None:
     """Index in ``values`` of the value ``rule`` selects among the complete runs; None when
     no value has ``min_seeds`` complete seeds. ``dropped``: indices in ``values`` of the values
     a race dropped (:func:`kraby_study.answers.raced.dropped_indices`), never selected."""
-    found = samples(trials, curves, name, values)
+    found = samples(trials, curves, name, values, time_attr)
     return select(rule, found.final, found.aucs, found.seconds, min_seeds, dropped)

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
+from kraby_study.answers.search_front import search_front
 from kraby_study.answers.selected import searched_env_keys
 from kraby_study.errors import StoreError
+from kraby_study.front import spread
 from kraby_study.plan.confirm import Arm, ConfirmedStudy
 from kraby_study.records import (
     Outcome,
@@ -13,9 +15,11 @@ from kraby_study.records import (
     counted,
     outcome,
     param_name,
+    score,
     search_key,
     swept_value,
     trial_seeds,
+    two_objectives,
     value_key,
     value_label,
 )
@@ -24,7 +28,9 @@ from kraby_study.store.ledger import StudyLedger
 
 def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
     """The ``top`` best configurations of a search (distinct complete trials, best first) or
-    of a sweep (values by mean final score), with the seeds its trials used.
+    of a sweep (values by mean final score), with the seeds its trials used. Of a
+    two-objective search, up to ``top`` trials of its front spread along it
+    (:func:`kraby_study.front.spread`: the best score, the cheapest, the rest in cost order).
 
     Raises:
         StoreError: The study is neither a search nor a sweep, or has fewer than ``top``
@@ -33,10 +39,12 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
     attrs = ledger.attrs
     definition = attrs.definition
     trials = counted(ledger.trials())
-    done = [t for t in trials if outcome(t) == Outcome.COMPLETE and t.value is not None
+    done = [t for t in trials if outcome(t) == Outcome.COMPLETE and score(t) is not None
             and t.user_attrs.get("settings")]
+    front = attrs.kind == StudyKind.SEARCH and two_objectives(definition)
     if attrs.kind == StudyKind.SEARCH:
-        arms = _search_arms(ledger.name, done)
+        arms = (_front_arms(ledger.name, done, top) if front
+                else _search_arms(ledger.name, done))
         per_trial = int(definition.get("seeds", 1))
         used = {seed for t in trials for seed in trial_seeds(t, per_trial)}
         env_keys = searched_env_keys(definition)
@@ -49,26 +57,50 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
     else:
         raise StoreError(f"confirm retrains a search or a sweep; study {ledger.name!r} is "
                          f"{'a ' + attrs.kind if attrs.kind else 'not made by kraby-study'}")
-    if len(arms) < top:
+    if len(arms) < top and not front:
         raise StoreError(f"study {ledger.name!r} has {len(arms)} complete configuration(s), "
                          f"fewer than --top {top}")
+    if not arms:
+        raise StoreError(f"search {ledger.name!r} has no complete trial on its front yet")
     return ConfirmedStudy(name=ledger.name, arms=arms[:top], used_seeds=used,
-                  steps=int(definition["steps"]), curve_every=int(definition["curve_every"]),
-                  env_keys=env_keys)
+                          steps=int(definition["steps"]),
+                          curve_every=int(definition["curve_every"]), env_keys=env_keys,
+                          two_objectives=front)
+
+
+def _front_arms(name: str, done: list[Any], top: int) -> list[Arm]:
+    """Up to ``top`` trials of a two-objective search's front, spread along it: the best
+    score first, then the cheapest, then the rest by cost."""
+    found = search_front(done)
+    by_number = {t.number: t for t in done}
+    chosen = spread(found.front, top)
+    places = {p.key: "best score" for p in chosen[:1]}
+    places.update({p.key: "cheapest" for p in chosen[1:2]})
+    arms = []
+    for point in chosen:
+        trial = by_number[point.key]
+        place = places.get(point.key, "on the front")
+        arms.append(Arm(label=str(trial.user_attrs.get("key", search_key(trial.number))),
+                        settings=trial.user_attrs["settings"],
+                        origin=f"trial {trial.number} of search {name!r} ({place} of "
+                               f"{len(found.front)} on the front: score {point.score:.4g}, "
+                               f"{point.cost:.3g} CPU s/seed)",
+                        source_score=point.score))
+    return arms
 
 
 def _search_arms(name: str, done: list[Any]) -> list[Arm]:
     """Complete search trials, best first, one per distinct configuration."""
     arms: list[Arm] = []
     seen: set[Any] = set()
-    for trial in sorted(done, key=lambda t: -float(t.value)):
+    for trial in sorted(done, key=lambda t: -float(score(t))):  # type: ignore[arg-type]
         settings = trial.user_attrs["settings"]
         if value_key(settings) in seen:
             continue
         seen.add(value_key(settings))
         arms.append(Arm(label=str(trial.user_attrs.get("key", search_key(trial.number))),
                         settings=settings, origin=f"trial {trial.number} of search {name!r}",
-                        source_score=float(trial.value)))
+                        source_score=float(score(trial))))  # type: ignore[arg-type]
     return arms
 
 

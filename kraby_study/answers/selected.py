@@ -8,10 +8,11 @@ under ``final_score`` the best value, under ``fastest_tied`` the fastest value t
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from kraby_study.answers.raced import dropped_indices
+from kraby_study.answers.search_front import front_lines, front_short, search_front
 from kraby_study.comparison import MIN_SEEDS
 from kraby_study.errors import StoreError
 from kraby_study.records import (
@@ -25,12 +26,14 @@ from kraby_study.records import (
     counted,
     outcome,
     param_name,
+    score,
     swept_value,
     tally,
+    two_objectives,
     value_key,
     value_label,
 )
-from kraby_study.selection import selected_index, swept_values
+from kraby_study.selection import selected_index, swept_values, time_measure
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -53,6 +56,8 @@ class Selection:
     """The env and ppo settings it trained with."""
     env_keys: list[str]
     """Env settings the study varied: written with the ppo settings so they travel together."""
+    front: list[str] = field(default_factory=list)
+    """A two-objective search's front, one line per trial, for ``best`` to print first."""
 
 
 def selection_of(ledger: StudyLedger) -> Selection | None:
@@ -74,16 +79,36 @@ def selection_of(ledger: StudyLedger) -> Selection | None:
                                      f"{len(chosen.trials)} seed(s){rule_text(chosen)}",
                          settings=chosen.trials[0].user_attrs.get("settings", {}),
                          env_keys=env_keys)
+    if attrs.kind == StudyKind.SEARCH and two_objectives(definition):
+        return front_selection(ledger.name, definition, trials)
     trial = best_trial(trials, ledger.maximize)
     if trial is None:
         return None
     env_keys = searched_env_keys(definition)
     params = ", ".join(f"{k}={value_label(v)}" for k, v in trial.params.items())
-    score = float(trial.value)  # type: ignore[arg-type]
+    value = float(score(trial))  # type: ignore[arg-type]
     return Selection(short=trial_short(trial),
                      description=f"trial {trial.number} of {attrs.kind or 'study'} "
-                                 f"{ledger.name!r}: score {score:.4g} ({params})",
+                                 f"{ledger.name!r}: score {value:.4g} ({params})",
                      settings=trial.user_attrs.get("settings", {}), env_keys=env_keys)
+
+
+def front_selection(name: str, definition: dict[str, Any],
+                    trials: Sequence[StoredTrial]) -> Selection | None:
+    """A two-objective search's selection: the cheapest trial of its front tied with the
+    front's best score (:func:`kraby_study.front.cheapest_tied`), with the front."""
+    found = search_front(trials)
+    if found.choice is None:
+        return None
+    chosen = found.choice.chosen
+    trial = next(t for t in trials if t.number == chosen.key)
+    params = ", ".join(f"{k}={value_label(v)}" for k, v in trial.params.items())
+    return Selection(short=front_short(found),
+                     description=f"trial {chosen.key} of search {name!r}: score "
+                                 f"{chosen.score:.4g}, cost {chosen.cost:.3g} CPU s per seed "
+                                 f"({params}); selected by {found.choice.rule}",
+                     settings=trial.user_attrs.get("settings", {}),
+                     env_keys=searched_env_keys(definition), front=front_lines(found))
 
 
 def selected_short(attrs: StudyAttrs, trials: Sequence[StoredTrial], maximize: bool,
@@ -93,6 +118,8 @@ def selected_short(attrs: StudyAttrs, trials: Sequence[StoredTrial], maximize: b
     if StudyKind.of(attrs.kind).swept:
         chosen = selected_value(attrs, trials, curves)
         return sweep_short(attrs, chosen) if chosen is not None else "-"
+    if attrs.kind == StudyKind.SEARCH and two_objectives(attrs.definition):
+        return front_short(search_front(trials))
     trial = best_trial(trials, maximize)
     return trial_short(trial) if trial is not None else "-"
 
@@ -133,7 +160,8 @@ def selected_value(attrs: StudyAttrs, trials: Sequence[StoredTrial],
     frame = curves([t.number for t in trials]) if rule == SelectRule.AUC else None
     # A raced study selects among its survivors: a dropped value is never selected.
     dropped = dropped_indices(attrs.definition, trials, values)
-    index = selected_index(trials, frame, name, values, rule, dropped=dropped)
+    index = selected_index(trials, frame, name, values, rule, dropped=dropped,
+                           time_attr=time_measure(attrs.kind))
     if index is None:
         return None
     key = value_key(values[index])
@@ -165,7 +193,7 @@ def sweep_short(attrs: StudyAttrs, chosen: SweepSelection) -> str:
 
 def trial_short(trial: StoredTrial) -> str:
     """A search's best trial in a few words: ``trial 7 (-0.0123)``."""
-    return f"trial {trial.number} ({float(trial.value):.4g})"  # type: ignore[arg-type]
+    return f"trial {trial.number} ({float(score(trial)):.4g})"  # type: ignore[arg-type]
 
 
 def require_selection(ledger: StudyLedger) -> Selection:

@@ -123,11 +123,14 @@ class SearchConfig:
     trials: int = 50
     """Total trials of the study, over every invocation (a rerun tops it up to this number)."""
     sampler: str = "tpe"
-    """tpe or random."""
-    pruner: str = "median"
-    """median, hyperband, wilcoxon or none. median and hyperband judge env-step checkpoints;
-    wilcoxon races a trial's seeds: it sees each seed's final score and stops the remaining
-    seeds once they are significantly worse than the best trial's same seeds."""
+    """tpe, random or nsga2 (NSGA-II, Optuna's default population of 50). TPE handles one
+    objective or two."""
+    pruner: str | None = None
+    """median, hyperband, wilcoxon or none; null: median with one objective, none with two
+    (Optuna prunes no trial of several objectives, and refuses a pruner there). median and
+    hyperband judge env-step checkpoints; wilcoxon races a trial's seeds: it sees each seed's
+    final score and stops the remaining seeds once they are significantly worse than the best
+    trial's same seeds."""
     seed: int = 0
     """Seed of the sampler, stored with the study."""
     startup_trials: int = 5
@@ -148,9 +151,13 @@ class SearchConfig:
     last is an intermediate value (the pruner's steps), as is the mean score after each seed
     but the last. With the wilcoxon pruner the intermediate values are each seed's own score
     instead, at the env steps of the seed's end, and nothing within a seed."""
-    objective: str = "final_reward"
-    """final_reward: mean episode reward over the last 10 % of training; evaluation: mean
-    reward of the deterministic policy on a fixed set of targets (reset options)."""
+    objective: Any = "final_reward"
+    """One reward, or a list of a reward and a cost ([final_reward,training_time]). Rewards
+    (maximised): final_reward, the mean episode reward over the last 10 % of training;
+    evaluation, the mean reward of the deterministic policy on a fixed set of targets (reset
+    options). Cost (minimised): training_time, CPU seconds per seed (the worker's and its
+    leg-stepping processes'), mean over the trial's seeds. Two objectives make a front of
+    trials (docs/studies.md)."""
     eval_episodes: int = 16
     """Fixed targets of the evaluation objective."""
     params: dict[str, ParamSpace] = field(default_factory=dict)
@@ -195,11 +202,16 @@ class ConfirmConfig:
     study: str | None = None
     """The search or sweep whose top configurations are retrained; null: baselines only."""
     top: int = 5
-    """Configurations retrained: the search's best complete trials, or the sweep's best values."""
+    """Configurations retrained: the search's best complete trials (of a two-objective search,
+    up to this many trials of its front, spread along it), or the sweep's best values."""
     seeds: int = 10
     """Fresh seeds per configuration, none used by the study's trials."""
     baselines: list[str] = field(default_factory=list)
     """ppo config names added as arms, e.g. [tuned]."""
+    select: str | None = None
+    """The confirm study's selection rule (final_score, auc or fastest_tied, as a sweep's
+    study.select); null: fastest_tied for a two-objective search's front, final_score
+    otherwise. fastest_tied reads CPU seconds on a confirm study."""
 
 
 @dataclass

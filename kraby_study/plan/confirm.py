@@ -19,7 +19,7 @@ from kraby_study.errors import ConfigError
 from kraby_study.plan.racing import race_rules
 from kraby_study.plan.settings import model_path, settings_with_ppo, tensorboard_run
 from kraby_study.plan.spec import StudyPlan, TrialSpec
-from kraby_study.records import StudyKind, sweep_key
+from kraby_study.records import SelectRule, StudyKind, sweep_key
 
 PARAMETER = "config"
 """The Optuna parameter of a confirm study's trials: the arm's label."""
@@ -53,6 +53,8 @@ class ConfirmedStudy:
     curve_every: int
     env_keys: list[str]
     """Env settings it varied (written with the ppo settings by ``best``)."""
+    two_objectives: bool = False
+    """A two-objective search: its arms are trials of its front, spread along it."""
 
 
 def baseline_arm(name: str, overrides: Sequence[str]) -> Arm:
@@ -88,6 +90,17 @@ def distinct_arms(arms: Sequence[Arm]) -> list[Arm]:
         out.append(Arm(label=" = ".join(labels), settings=same[0].settings,
                        origin="; ".join(origins), source_score=score))
     return out
+
+
+def confirm_rule(cfg: DictConfig, source: ConfirmedStudy | None) -> SelectRule:
+    """The confirm study's selection rule: ``confirm.select``, or fastest_tied for a
+    two-objective search's front (the cheapest settings tied with the best, on fresh seeds)
+    and final_score otherwise; ConfigError for a name that is not a rule."""
+    if cfg.confirm.select is not None:
+        return SelectRule.check(str(cfg.confirm.select), "confirm.select")
+    if source is not None and source.two_objectives:
+        return SelectRule.FASTEST_TIED
+    return SelectRule.FINAL_SCORE
 
 
 def confirm_name(source: str | None, baselines: list[str]) -> str:
@@ -132,4 +145,5 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
     if racing is not None:
         definition["racing"] = racing.stored()
     return StudyPlan(name=name, parameter=PARAMETER, values=labels, specs=specs,
-                     definition=definition, racing=racing)
+                     definition=definition, racing=racing,
+                     select=confirm_rule(cfg, source).value)

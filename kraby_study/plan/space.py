@@ -13,11 +13,10 @@ from omegaconf import DictConfig
 from kraby_study.config.validate import rollout_size, to_container, validate_env, validate_ppo
 from kraby_study.errors import ConfigError
 from kraby_study.plan.settings import resolved_settings, with_value
-from kraby_study.records import value_key
+from kraby_study.records import check_objective, stored_objective, value_key
 
-SAMPLERS = ("tpe", "random")
+SAMPLERS = ("tpe", "random", "nsga2")
 PRUNERS = ("median", "hyperband", "wilcoxon", "none")
-OBJECTIVES = ("final_reward", "evaluation")
 NMINIBATCHES = "ppo.nminibatches"
 
 
@@ -30,10 +29,12 @@ def validate_search(cfg: DictConfig) -> None:
     search = cfg.search
     if search.sampler not in SAMPLERS:
         _fail(f"unknown sampler {search.sampler!r}: choose {' or '.join(SAMPLERS)}")
-    if search.pruner not in PRUNERS:
+    if search.pruner is not None and search.pruner not in PRUNERS:
         _fail(f"unknown pruner {search.pruner!r}: choose {', '.join(PRUNERS)}")
-    if search.objective not in OBJECTIVES:
-        _fail(f"search.objective must be {' or '.join(OBJECTIVES)}, got {search.objective!r}")
+    names = objectives(cfg)
+    if len(names) == 2 and search.pruner not in (None, "none"):
+        _fail(f"Optuna cannot prune a trial with several objectives: search.objective="
+              f"[{','.join(names)}] runs with --pruner none, not {search.pruner}")
     for name in ("trials", "checkpoints", "eval_episodes"):
         if int(search[name]) < 1:
             _fail(f"search.{name} must be at least 1, got {search[name]}")
@@ -45,7 +46,7 @@ def validate_search(cfg: DictConfig) -> None:
               f"got {search.warmup}")
     if not 0 < float(search.wilcoxon_p) < 1:
         _fail(f"search.wilcoxon_p must be in (0, 1) (a p threshold), got {search.wilcoxon_p}")
-    if search.pruner == "wilcoxon":
+    if pruner_name(cfg) == "wilcoxon":
         _validate_wilcoxon(int(cfg.budget.seeds), float(search.wilcoxon_p))
     if not search.params:
         _fail("search.params is empty: the space needs at least one parameter")
@@ -55,6 +56,21 @@ def validate_search(cfg: DictConfig) -> None:
     for name, param in search.params.items():
         _validate_param(cfg, str(name), param)
     _validate_batches(cfg)
+
+
+def objectives(cfg: DictConfig) -> list[str]:
+    """The search's objective names, its reward first, then any cost
+    (:func:`kraby_study.records.check_objective`); ConfigError for a bad one."""
+    objective = cfg.search.objective
+    return check_objective(objective if isinstance(objective, str) else to_container(objective))
+
+
+def pruner_name(cfg: DictConfig) -> str:
+    """The search's pruner: ``search.pruner``, or when it is null, median with one objective
+    and none with two (Optuna prunes no trial of several objectives)."""
+    if cfg.search.pruner is not None:
+        return str(cfg.search.pruner)
+    return "none" if len(objectives(cfg)) == 2 else "median"
 
 
 def wilcoxon_seeds(p: float) -> int:
@@ -177,6 +193,10 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
     search = to_container(cfg.search)
     search.pop("trials")
     search.pop("name")
+    # Resolved as before the defaults existed: a one-objective search keeps the definition
+    # (and the fingerprint) it had when its pruner was median and its objective one name.
+    search["pruner"] = pruner_name(cfg)
+    search["objective"] = stored_objective(objectives(cfg))
     if search["pruner"] != "wilcoxon":
         # Read by the wilcoxon pruner only: other searches keep the definition (and the
         # fingerprint) they had before the setting existed.

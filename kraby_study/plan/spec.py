@@ -40,6 +40,9 @@ class TrialSpec:
     """Training runs, with seeds seed, seed + 1, ...; the score is their mean (searches)."""
     objective: str = "final_reward"
     """final_reward (mean reward over the last 10 % of training) or evaluation."""
+    cost: str | None = None
+    """A two-objective search's cost (training_time): progress lines show it beside the
+    score."""
     eval_episodes: int = 16
     """Fixed targets of the evaluation objective."""
     label: str = ""

@@ -27,7 +27,7 @@ from kraby_study.report.document import (
 )
 from kraby_study.report.load import StudyData, check_format, load_study, select_studies
 from kraby_study.report.reproducibility import write_reproducibility
-from kraby_study.report.search_tables import build_search
+from kraby_study.report.search_tables import build_search, is_two_objective
 from kraby_study.report.study_report import ReportIndex, StudyReport
 from kraby_study.report.sweep_tables import build_sweep, option
 from kraby_study.stats import BAND_NAME, BOOTSTRAP_REPETITIONS, HOLM_NAME, interval_name
@@ -101,12 +101,12 @@ def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
         report = sweep_output.write_sweep(sweep, folder, rel, fmt)
         report.sweep = sweep
         candidates = sweep_output.policy_candidates(sweep)
-    elif data.ledger.objectives > 1:
+    elif data.ledger.objectives > 1 and not is_two_objective(data):
         folder.mkdir(parents=True, exist_ok=True)
         report = StudyReport(name=data.name, kind=data.kind, folder=folder,
                              status=f"{len(data.trials)} trials", finished=True)
-        report.notes.append("multi-objective study: not drawn (kraby-study reports single "
-                            "objectives)")
+        report.notes.append("multi-objective study: not drawn (kraby-study draws its own "
+                            "two-objective searches only)")
         report.blocks = [Heading(data.name, 2)]
         candidates = []
     else:

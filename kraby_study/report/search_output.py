@@ -8,18 +8,23 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kraby_study.records import Outcome, StudyKind
+from kraby_study.records import Outcome, StudyKind, score
 from kraby_study.report import search_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
-from kraby_study.report.search_tables import Search, format_param, top_trials
+from kraby_study.report.search_tables import Search, format_param, front_table, top_trials
 from kraby_study.report.study_report import StudyReport
 from kraby_study.report.style import number, styled
 
 TITLES = {"history": "optimization history", "importances": "parameter importances",
           "slices": "slice plots", "intermediate": "intermediate values",
-          "parallel": "parallel coordinates"}
+          "parallel": "parallel coordinates", "pareto": "score against cost, the front"}
 CAPTIONS = {
+    "pareto": "Every complete trial's mean final score over its seeds against its mean cost "
+              "(CPU seconds per seed). The front (no other trial scores at least as high for "
+              "at most its cost) is joined as a staircase and labelled by trial number; "
+              "diamonds mark the enqueued configurations, the star the selected trial (the "
+              "cheapest tied with the front's best score).",
     "history": "Objective of every complete trial, and the best value so far; pruned and failed "
                "trials marked along the bottom.",
     "importances": "PED-ANOVA parameter importances (Optuna's default evaluator): how much "
@@ -87,13 +92,52 @@ def _tables(search: Search, folder: Path) -> list[Path]:
 
 
 def verdict(search: Search) -> str:
-    """One sentence on the best trial."""
+    """One sentence on the best trial; of a two-objective search, on its front and the trial
+    its rule selects."""
     best = search.best
     if best is None:
         return "No trial is complete yet."
     params = ", ".join(f"{p}={format_param(best.params.get(p), search.distributions.get(p))}"
                        for p in search.params if p in best.params)
-    return f"Best: trial {best.number}, objective {number(float(best.value))} ({params})."
+    text = f"Best: trial {best.number}, objective {number(float(score(best)))} ({params})."
+    if search.front is None or search.front.choice is None:
+        return text
+    choice = search.front.choice
+    chosen = choice.chosen
+    return (f"Front: {len(search.front.front)} of {len(search.front.points)} complete trials. "
+            f"Best score: trial {choice.best.key}, {number(choice.best.score)} at "
+            f"{choice.best.cost:.3g} CPU s per seed. Selected by {choice.rule}: trial "
+            f"{chosen.key}, score {number(chosen.score)} at {chosen.cost:.3g} CPU s per seed.")
+
+
+def front_cells(search: Search) -> Table:
+    """The front as formatted cells, best score first; the selected trial marked best."""
+    frame = front_table(search)
+    header = ["trial", "score", "cost (CPU s/seed)", "enqueued", "tie test", *search.params]
+    rows, marks = [], []
+    for _, row in frame.iterrows():
+        test = ("best score" if row["best"] else "tied" if row["tied"] else "worse"
+                if search.front is not None and search.front.choice is not None
+                and search.front.choice.tested else "-")
+        rows.append([str(row["trial"]) + (" (selected)" if row["selected"] else ""),
+                     _cell(row["score"]), f"{row['cost']:.3g}", str(row["enqueued"] or "-"),
+                     test,
+                     *[format_param(row[p], search.distributions.get(p))
+                       for p in search.params]])
+        marks.append("best" if row["selected"] else "tie" if row["tied"] or row["best"]
+                     else "")
+    return Table(header, rows, marks=marks)
+
+
+def _front_files(search: Search, folder: Path, section: list[Block]) -> list[Path]:
+    """pareto.csv and summary.md of a two-objective search."""
+    csv = write_csvs(folder, [("pareto.csv", front_table(search))])
+    summary = folder / "summary.md"
+    # The verdict (section[2]) names the rule that selected.
+    summary.write_text(blocks_to_markdown([
+        Heading(f"{search.data.name}: the front", 1), *section[1:3],
+        front_cells(search)]), encoding="utf-8")
+    return [*csv, summary]
 
 
 def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyReport:
@@ -103,6 +147,8 @@ def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyRepor
                          status=search.status(), finished=search.finished)
     has_complete = bool(search.complete)
     figures: list[tuple[str, Any]] = []
+    if has_complete and search.front is not None:
+        figures.append(("pareto", search_plots.pareto))
     if has_complete:
         figures.append(("history", search_plots.history))
         if search.importances:
@@ -124,12 +170,17 @@ def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyRepor
     tables = _tables(search, folder)
     kind = "Optuna search" if search.data.kind == StudyKind.SEARCH else "Optuna study"
     direction = "maximised" if search.maximize else "minimised"
+    objectives = (f"objective {direction}" if search.front is None else
+                  "two objectives: the score maximised, the cost (CPU s per seed) minimised")
     section: list[Block] = [
         Heading(search.data.name, 2),
-        Text(f"{kind} over {len(search.params)} parameter(s), objective {direction}. "
+        Text(f"{kind} over {len(search.params)} parameter(s), {objectives}. "
              f"Status: {search.status()}."),
-        Text(verdict(search)), Text(f"Top {len(top_trials(search))} complete trials:"),
-        top_table(search)]
+        Text(verdict(search))]
+    if search.front is not None and search.front.front:
+        section += [Text(f"The front ({len(search.front.front)} trials), best score first:"),
+                    front_cells(search)]
+    section += [Text(f"Top {len(top_trials(search))} complete trials:"), top_table(search)]
     failed = failed_items(search)
     if failed:
         section += [Text(f"Failed trials ({len(failed)}):"), Items(failed)]
@@ -137,18 +188,23 @@ def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyRepor
     top_md.write_text(blocks_to_markdown([Heading(f"{search.data.name}: top trials", 1),
                                           *section[1:]]), encoding="utf-8")
     report.files += tables + [top_md]
+    front_files = (_front_files(search, folder, section)
+                   if search.front is not None and search.front.front else [])
+    report.files += front_files
     report.blocks = section + images + [
-        Links("Tables", [(p.name, f"{rel}/{p.name}") for p in [top_md, *tables]])]
+        Links("Tables", [(p.name, f"{rel}/{p.name}")
+                         for p in [*front_files[::-1], top_md, *tables]])]
     return report
 
 
 def policy_candidates(search: Search) -> list[tuple[str, dict[str, Any], str]]:
     """Saved models of complete trials, best first: (path, settings, description)."""
-    done = sorted(search.complete, key=lambda t: float(t.value), reverse=search.maximize)
+    done = sorted(search.complete, key=lambda t: float(score(t)),  # type: ignore[arg-type]
+                  reverse=search.maximize)
     out = []
     for trial in done:
         path = trial.user_attrs.get("model_path")
         if isinstance(path, str) and path:
             out.append((path, dict(trial.user_attrs.get("settings") or {}),
-                        f"trial {trial.number} (objective {number(float(trial.value))})"))
+                        f"trial {trial.number} (objective {number(float(score(trial)))})"))
     return out

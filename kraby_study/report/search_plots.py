@@ -244,3 +244,49 @@ def parallel(search: Search, path: Path) -> Path:
     fig.colorbar(lines, ax=ax, label=_objective_label(search), shrink=0.9)
     fig.suptitle(_title(search, f"parallel coordinates of {len(done)} complete trials"))
     return save(fig, path)
+
+
+def pareto(search: Search, path: Path) -> Path:
+    """A two-objective search's trials, mean final score against mean cost (CPU s per seed):
+    every complete trial, the front joined as a staircase and labelled by trial number, the
+    enqueued configurations marked, the best score and the selected trial ringed."""
+    assert search.front is not None
+    fig, (ax,) = new_figure(SINGLE)
+    frame = search.trials
+    done = frame[frame["outcome"] == Outcome.COMPLETE]
+    on_front = {p.key for p in search.front.front}
+    others = done[~done["number"].isin(on_front)]
+    ax.scatter(others["cost"], others["value"], s=18, color="#3b6ea8", alpha=0.55,
+               linewidths=0, label=f"complete trial ({len(done)})", zorder=2)
+    front = search.front.front
+    xs = [p.cost for p in front]
+    ys = [p.score for p in front]
+    ax.step(xs, ys, where="post", color=BEST_COLOUR, linewidth=1.4, zorder=3)
+    ax.scatter(xs, ys, s=30, color=BEST_COLOUR, zorder=4,
+               label=f"front ({len(front)}), joined as a staircase")
+    for index, point in enumerate(front):
+        # Alternately above and below: neighbours on the front are often close.
+        ax.annotate(str(point.key), (point.cost, point.score), textcoords="offset points",
+                    xytext=(5, 5 if index % 2 == 0 else -12), fontsize=8.5, color=BEST_COLOUR)
+    queued = done[done["enqueued"].astype(str) != ""]
+    if len(queued):
+        names = ", ".join(str(n) for n in queued["enqueued"])
+        ax.scatter(queued["cost"], queued["value"], s=95, marker="D", facecolors="none",
+                   edgecolors="black", linewidths=1.0, zorder=5,
+                   label=f"enqueued ({names})")
+        for _, row in queued.iterrows():
+            ax.annotate(str(row["enqueued"]), (row["cost"], row["value"]),
+                        textcoords="offset points", xytext=(-6, -14), ha="right",
+                        fontsize=8, color="black")
+    choice = search.front.choice
+    if choice is not None:
+        ax.scatter([choice.chosen.cost], [choice.chosen.score], s=260, marker="*",
+                   facecolors="none", edgecolors="#2e8b57", linewidths=1.4, zorder=6,
+                   label=f"selected: trial {choice.chosen.key}"
+                         + (" (fastest_tied)" if choice.tested else " (best score, untested)"))
+    ax.set_xlabel("cost: mean CPU seconds per seed")
+    ax.set_ylabel(_objective_label(search))
+    ax.margins(x=0.08, y=0.1)
+    fig.legend(loc="outside lower center", ncols=2, frameon=False)
+    fig.suptitle(_title(search, "score against cost, the front"))
+    return save(fig, path)

@@ -1,7 +1,9 @@
-"""An Optuna search (or any Optuna study) as tables: trials, parameters, importances.
+"""An Optuna search (or any Optuna study) as tables: trials, parameters, importances, and a
+two-objective search's front.
 
-Works on any single-objective study with complete, pruned and failed trials; kraby searches
-add env-step checkpoints (``pruned_at``) and timings in user attributes.
+Works on any single-objective study with complete, pruned and failed trials, and on
+kraby-study's two-objective searches (a score and a cost); kraby searches add env-step
+checkpoints (``pruned_at``) and timings in user attributes.
 """
 
 from __future__ import annotations
@@ -22,7 +24,17 @@ from optuna.distributions import (
 )
 from optuna.trial import FrozenTrial
 
-from kraby_study.records import Outcome, best_trial, outcome
+from kraby_study.answers.search_front import SearchFront, search_front
+from kraby_study.records import (
+    Outcome,
+    StudyKind,
+    TrialAttrs,
+    best_trial,
+    cost,
+    outcome,
+    score,
+    two_objectives,
+)
 from kraby_study.report.load import StudyData
 
 TOP = 10
@@ -41,6 +53,7 @@ class Search:
         params: Parameter names, in first-seen order.
         distributions: A distribution per parameter (from the trials that used it).
         importances: Parameter importances (PED-ANOVA), or None with ``importance_note`` saying why.
+        front: A two-objective search's front and selection; None for one objective.
     """
 
     data: StudyData
@@ -50,17 +63,18 @@ class Search:
     distributions: dict[str, BaseDistribution]
     importances: dict[str, float] | None
     importance_note: str
+    front: SearchFront | None = None
 
     @property
     def complete(self) -> list[FrozenTrial]:
-        """Complete trials with a value."""
+        """Complete trials with a score."""
         return [t for t in self.data.trials
-                if outcome(t) == Outcome.COMPLETE and t.value is not None]
+                if outcome(t) == Outcome.COMPLETE and score(t) is not None]
 
     @property
     def best(self) -> FrozenTrial | None:
         """The best complete trial."""
-        return best_trial(self.data.trials, self.maximize)
+        return best_trial(self.data.trials, self.maximize, 1 if self.front is None else 2)
 
     def counts(self) -> dict[str, int]:
         """Trials complete, pruned, failed and pending (planned trials not started are pending)."""
@@ -96,15 +110,17 @@ def importances(maximize: bool, trials: list[FrozenTrial],
                 params: list[str]) -> tuple[dict[str, float] | None, str]:
     """PED-ANOVA importances of the parameters (Optuna's default evaluator, no scikit-learn),
     or None and the reason they cannot be computed."""
-    done = [t for t in trials if outcome(t) == Outcome.COMPLETE and t.value is not None]
+    done = [t for t in trials if outcome(t) == Outcome.COMPLETE and score(t) is not None]
     if len(done) < 2:
         return None, f"parameter importances need at least 2 complete trials ({len(done)} so far)"
     varying = [p for p in params if len({repr(t.params.get(p)) for t in done}) > 1]
     if not varying:
         return None, "no parameter varies across the complete trials"
-    # An in-memory copy of the trials read: the evaluator reads a study, not the store.
+    # An in-memory copy of the trials read, by their score alone (a two-objective search's
+    # trials have two values): the evaluator reads a study, not the store.
     study = optuna.create_study(direction="maximize" if maximize else "minimize")
-    study.add_trials(done)
+    study.add_trials([optuna.trial.create_trial(params=t.params, distributions=t.distributions,
+                                                value=score(t)) for t in done])
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -116,8 +132,11 @@ def importances(maximize: bool, trials: list[FrozenTrial],
     return {k: float(v) for k, v in result.items()}, ""
 
 
-def trial_rows(trials: list[FrozenTrial], params: list[str]) -> pd.DataFrame:
-    """One row per trial with its outcome, value, costs and parameters."""
+def trial_rows(trials: list[FrozenTrial], params: list[str],
+               two: bool = False) -> pd.DataFrame:
+    """One row per trial with its outcome, value (its score), costs and parameters; with
+    ``two`` (a two-objective search) also its cost objective (``cost``, CPU s per seed) and
+    the configuration it was enqueued as (``enqueued``)."""
     rows = []
     for trial in trials:
         attrs = trial.user_attrs
@@ -127,8 +146,10 @@ def trial_rows(trials: list[FrozenTrial], params: list[str]) -> pd.DataFrame:
             steps = max(trial.intermediate_values)
         rows.append({
             "number": trial.number, "outcome": state.value,
-            "value": float(trial.value) if state == Outcome.COMPLETE and trial.value is not None
-            else math.nan,
+            "value": float(score(trial))  # type: ignore[arg-type]
+            if state == Outcome.COMPLETE and score(trial) is not None else math.nan,
+            "cost": cost(trial) if state == Outcome.COMPLETE else None,
+            "enqueued": TrialAttrs.of(trial).enqueued or "",
             "env_steps": steps, "wall_time": attrs.get("wall_time", _duration(trial)),
             "pruned_at": attrs.get("pruned_at", max(trial.intermediate_values)
                                    if state == Outcome.PRUNED and trial.intermediate_values
@@ -136,9 +157,10 @@ def trial_rows(trials: list[FrozenTrial], params: list[str]) -> pd.DataFrame:
             "failure": attrs.get("failure", "") if state == Outcome.FAILED else "",
             **{name: trial.params.get(name) for name in params},
         })
-    frame = pd.DataFrame(rows, columns=["number", "outcome", "value", "env_steps", "wall_time",
-                                        "pruned_at", "failure", *params])
-    for column in ("env_steps", "wall_time", "pruned_at"):
+    extra = ["cost", "enqueued"] if two else []
+    frame = pd.DataFrame(rows, columns=["number", "outcome", "value", *extra, "env_steps",
+                                        "wall_time", "pruned_at", "failure", *params])
+    for column in ("env_steps", "wall_time", "pruned_at", *extra[:1]):
         frame[column] = pd.to_numeric(frame[column], errors="coerce").astype(float)
     return frame
 
@@ -154,9 +176,37 @@ def build_search(data: StudyData) -> Search:
     maximize = data.ledger.maximize
     params, distributions = param_columns(data.trials)
     imp, note = importances(maximize, data.trials, params)
-    return Search(data=data, maximize=maximize, trials=trial_rows(data.trials, params),
+    two = is_two_objective(data)
+    return Search(data=data, maximize=maximize, trials=trial_rows(data.trials, params, two),
                   params=params, distributions=distributions, importances=imp,
-                  importance_note=note)
+                  importance_note=note, front=search_front(data.trials) if two else None)
+
+
+def is_two_objective(data: StudyData) -> bool:
+    """A kraby-study search of a reward and a cost (a foreign multi-objective study is not
+    drawn)."""
+    return data.kind == StudyKind.SEARCH and two_objectives(data.definition)
+
+
+def front_table(search: Search) -> pd.DataFrame:
+    """The front's trials, best score first: number, score, cost, the configuration it was
+    enqueued as, whether it is the best score, tied with it or selected, and its parameters
+    (pareto.csv)."""
+    assert search.front is not None
+    choice = search.front.choice
+    rows = search.trials.set_index("number")
+    out = []
+    for point in sorted(search.front.front, key=lambda p: -p.score):
+        row = rows.loc[point.key]
+        out.append({
+            "trial": point.key, "score": point.score, "cost": point.cost,
+            "enqueued": row["enqueued"],
+            "best": choice is not None and point.key == choice.best.key,
+            "tied": choice is not None and point.key in choice.tied,
+            "selected": choice is not None and point.key == choice.chosen.key,
+            **{name: row[name] for name in search.params}})
+    return pd.DataFrame(out, columns=["trial", "score", "cost", "enqueued", "best", "tied",
+                                      "selected", *search.params])
 
 
 def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:

@@ -34,7 +34,7 @@ from kraby_study.records import (
 )
 from kraby_study.report.load import StudyData
 from kraby_study.report.style import value_colours
-from kraby_study.selection import selected_index, swept_values
+from kraby_study.selection import selected_index, swept_values, time_measure
 from kraby_study.stats import (
     BOOTSTRAP_REPETITIONS,
     Verdict,
@@ -498,7 +498,7 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
                  verdict=study_verdict(summary, seeds, min_seeds, list(dropped)),
                  min_seeds=min_seeds, race=race)
     chosen = (selected_index(data.trials, data.curves, name, values, sweep.rule, min_seeds,
-                             dropped=list(dropped))
+                             dropped=list(dropped), time_attr=time_measure(data.kind))
               if name and sweep.finished else None)
     sweep.summary["selected"] = [vi == chosen for vi in sweep.summary.index]
     return sweep

@@ -43,10 +43,15 @@ def one_line(text: str, limit: int = REASON_CHARS) -> str:
     return text if len(text) <= limit else text[: limit - 3].rstrip() + "..."
 
 
-def describe(result: TrialResult) -> str:
-    """How a trial ended, in a few words: ``complete, score -0.0123 (12 s)`` and the like."""
+def describe(result: TrialResult, cost: bool = False) -> str:
+    """How a trial ended, in a few words: ``complete, score -0.0123 (12 s)`` and the like;
+    with ``cost`` (a two-objective search) its cost too: ``complete, score -0.0123, cost
+    8.41 CPU s/seed (12 s)``."""
     if result.outcome == Outcome.COMPLETE:
         score = "" if result.final_score is None else f", score {result.final_score:.4g}"
+        seconds = result.training_time()
+        if cost and seconds is not None:
+            score += f", cost {seconds:.3g} CPU s/seed"
         return f"complete{score} ({result.wall_time or 0:.0f} s)"
     if result.outcome == Outcome.PRUNED:
         where = "" if result.pruned_at is None else f" at {result.pruned_at:,} env steps"
@@ -129,8 +134,9 @@ class Progress:
         if self.bar is not None and self.clock() - self._last_draw >= REDRAW_SECONDS:
             self._draw()
 
-    def finish(self, label: str, result: TrialResult) -> None:
-        """A trial ended: complete, failed or pruned."""
+    def finish(self, label: str, result: TrialResult, cost: bool = False) -> None:
+        """A trial ended: complete, failed or pruned; ``cost``: show its cost (a
+        two-objective search's trial)."""
         so_far, _ = self.running.pop(label, (0, 0))
         trained = max(result.env_steps or 0, so_far)
         self.ended_steps += trained
@@ -140,7 +146,7 @@ class Progress:
             self.failed += 1
         if self.bar is not None:
             self.bar.update(1)
-        self._line(f"[{self.done}/{self.total}] {label}: {describe(result)}")
+        self._line(f"[{self.done}/{self.total}] {label}: {describe(result, cost)}")
 
     def interrupt(self, label: str, reason: str) -> None:
         """A trial stopped without ending (its worker died, or Ctrl-C): not done."""

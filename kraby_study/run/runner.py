@@ -180,7 +180,7 @@ class _Run:
     def finish(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
         self.source.record(number, spec, result)
         self.summary.count(result.outcome)
-        self.progress.finish(spec.label, result)
+        self.progress.finish(spec.label, result, cost=spec.cost is not None)
 
     def stop(self, why: str = "stopped by the user") -> None:
         """Ctrl-C (or the executor's machines lost): stop the workers and give their trials

@@ -17,7 +17,7 @@ from optuna.distributions import (
 )
 
 from kraby_study.config.validate import to_container
-from kraby_study.plan.space import warmup_steps, wilcoxon_seeds
+from kraby_study.plan.space import objectives, pruner_name, warmup_steps, wilcoxon_seeds
 
 
 def distributions(cfg: DictConfig) -> dict[str, BaseDistribution]:
@@ -33,11 +33,19 @@ def distributions(cfg: DictConfig) -> dict[str, BaseDistribution]:
     return space
 
 
+def directions(cfg: DictConfig) -> list[str]:
+    """The study's directions: the reward maximised, then any cost minimised."""
+    return ["maximize", "minimize"][:len(objectives(cfg))]
+
+
 def make_sampler(cfg: DictConfig) -> optuna.samplers.BaseSampler:
-    """The seeded sampler of a search."""
+    """The seeded sampler of a search. TPE handles one objective or two (Optuna's
+    multi-objective TPE); NSGA-II keeps Optuna's default population."""
     seed = int(cfg.search.seed)
     if cfg.search.sampler == "random":
         return optuna.samplers.RandomSampler(seed=seed)
+    if cfg.search.sampler == "nsga2":
+        return optuna.samplers.NSGAIISampler(seed=seed)
     return optuna.samplers.TPESampler(seed=seed, n_startup_trials=int(cfg.search.startup_trials),
                                       constant_liar=True)
 
@@ -52,7 +60,8 @@ def make_pruner(cfg: DictConfig) -> optuna.pruners.BasePruner:
     seeds than can reach that p (4 at 0.1), so a tie-corrected approximation cannot act
     sooner. It waits for no complete trials beyond the best one.
     """
-    if cfg.search.pruner == "wilcoxon":
+    pruner = pruner_name(cfg)
+    if pruner == "wilcoxon":
         p = float(cfg.search.wilcoxon_p)
         # Experimental in Optuna (since 3.6): its warning at construction would only alarm
         # users; store/store.py silences the same warning for heartbeats.
@@ -61,10 +70,10 @@ def make_pruner(cfg: DictConfig) -> optuna.pruners.BasePruner:
             return optuna.pruners.WilcoxonPruner(p_threshold=p,
                                                  n_startup_steps=wilcoxon_seeds(p))
     warmup = warmup_steps(cfg)
-    if cfg.search.pruner == "median":
+    if pruner == "median":
         return optuna.pruners.MedianPruner(n_startup_trials=int(cfg.search.pruner_startup_trials),
                                            n_warmup_steps=warmup)
-    if cfg.search.pruner == "hyperband":
+    if pruner == "hyperband":
         total = int(cfg.budget.steps) * int(cfg.budget.seeds)
         return optuna.pruners.HyperbandPruner(min_resource=warmup, max_resource=total)
     return optuna.pruners.NopPruner()

@@ -14,6 +14,8 @@ from kraby_study.plan.space import (
     apply_params,
     checkpoint_every,
     fitted_params,
+    objectives,
+    pruner_name,
     search_definition,
     wilcoxon_seeds,
 )
@@ -29,7 +31,7 @@ from kraby_study.records import (
 from kraby_study.run.executor import Executor
 from kraby_study.run.progress import Progress
 from kraby_study.run.runner import CommandRun, Retrying, run_trials
-from kraby_study.run.sampling import distributions, make_pruner, make_sampler
+from kraby_study.run.sampling import directions, distributions, make_pruner, make_sampler
 from kraby_study.run.source import StudySource, requeue_orphans
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
@@ -86,16 +88,19 @@ class SearchSource(StudySource):
     def _spec(self, key: str, trial_cfg: DictConfig, params: dict[str, Any]) -> TrialSpec:
         cfg = self.cfg
         # The wilcoxon pruner pairs seeds: it sees each seed's score, nothing within a seed.
-        seed_scores = cfg.search.pruner == "wilcoxon"
+        pruner = pruner_name(cfg)
+        seed_scores = pruner == "wilcoxon"
+        names = objectives(cfg)
+        # Optuna takes no intermediate value from a trial of several objectives.
+        every = None if seed_scores or len(names) == 2 else checkpoint_every(cfg)
         return TrialSpec(
             study=self.ledger.name, key=key, seed=int(cfg.seed),
             steps=int(cfg.budget.steps), curve_every=int(cfg.budget.curve_every),
             settings=resolved_settings(trial_cfg),
             model_path=model_path(cfg, self.ledger.name, key),
-            checkpoint_every=None if seed_scores else checkpoint_every(cfg),
-            seed_scores=seed_scores, seeds=int(cfg.budget.seeds),
-            objective=str(cfg.search.objective), eval_episodes=int(cfg.search.eval_episodes),
-            label=short_label(params, key),
+            checkpoint_every=every, seed_scores=seed_scores, seeds=int(cfg.budget.seeds),
+            objective=names[0], cost=names[1] if len(names) == 2 else None,
+            eval_episodes=int(cfg.search.eval_episodes), label=short_label(params, key),
             tensorboard_run=tensorboard_run(cfg, self.ledger.name, key))
 
     def checkpoint(self, number: int, step: int, value: float) -> bool:
@@ -105,11 +110,14 @@ class SearchSource(StudySource):
 
 def pruner_label(cfg: DictConfig) -> str:
     """The pruner as the start line names it; the wilcoxon pruner with its threshold."""
-    if cfg.search.pruner == "wilcoxon":
+    pruner = pruner_name(cfg)
+    if pruner == "wilcoxon":
         p = float(cfg.search.wilcoxon_p)
         return (f"wilcoxon pruner (a trial's seeds against the best's, p < {p:g}, from "
                 f"{wilcoxon_seeds(p)} seeds)")
-    return f"{cfg.search.pruner} pruner"
+    if len(objectives(cfg)) == 2:
+        return f"objectives {' and '.join(objectives(cfg))}, no pruner"
+    return f"{pruner} pruner"
 
 
 def warm_start(ledger: StudyLedger, cfg: DictConfig,
@@ -123,7 +131,7 @@ def warm_start(ledger: StudyLedger, cfg: DictConfig,
         for name, settings in starts[:int(cfg.search.trials)]:
             params = fitted_params(cfg, settings)
             if params:
-                ledger.queue(params, TrialAttrs())
+                ledger.queue(params, TrialAttrs(enqueued=name))
                 queued.append(name)
     return queued
 
@@ -137,7 +145,8 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
     ledger = store.define(str(cfg.search.name),
                           StudyAttrs(kind="search", definition=definition,
                                      fingerprint=fingerprint(definition)),
-                          sampler=make_sampler(cfg), pruner=make_pruner(cfg))
+                          sampler=make_sampler(cfg), pruner=make_pruner(cfg),
+                          directions=directions(cfg))
     ledger.update(StudyAttrs(sampler=str(cfg.search.sampler), sampler_seed=int(cfg.search.seed),
                              planned=int(cfg.search.trials)))
     requeue_orphans(ledger, stream)

@@ -226,7 +226,8 @@ def _result(spec: TrialSpec, runs: list[_Seed], started: str, seconds: float,
     elif last.pruned_at is not None:
         result.outcome, result.pruned_at = Outcome.PRUNED, last.pruned_at
     else:
-        result.final_score = float(np.mean([r.score for r in runs]))
+        result.scores = [float(r.score) for r in runs]  # type: ignore[arg-type]
+        result.final_score = float(np.mean(result.scores))
         rewards = [r.train_reward for r in runs if r.train_reward is not None]
         result.train_reward = float(np.mean(rewards)) if rewards else None
         if spec.model_path:

@@ -14,6 +14,7 @@ def requeue_stale(study: optuna.Study, trial: FrozenTrial) -> None:
     Also Optuna's heartbeat callback, for trials whose owner stopped sending heartbeats.
     """
     old = TrialAttrs.of(trial)
-    attrs = TrialAttrs(key=old.key, seed=old.seed, retry_of=trial.number)
+    attrs = TrialAttrs(key=old.key, seed=old.seed, retry_of=trial.number,
+                       enqueued=old.enqueued)
     params = trial.params or trial.system_attrs.get("fixed_params", {})
     study.enqueue_trial(params=dict(params), user_attrs=attrs.stored())

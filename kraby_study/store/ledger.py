@@ -64,7 +64,8 @@ class StudyLedger:
 
     @property
     def objectives(self) -> int:
-        """How many objectives the study has (kraby-study's have one)."""
+        """How many objectives the study has: one, or a score and a cost (a two-objective
+        search)."""
         return len(self._study.directions)
 
     def update(self, attrs: StudyAttrs) -> None:
@@ -175,7 +176,9 @@ class StudyLedger:
         """Store a finished trial: its curve, its attributes, then its final state."""
         self.write_curves({number: result.curve})
         self.set_attrs(number, TrialAttrs(**vars(result.measures())))
-        if result.outcome == Outcome.COMPLETE:
+        if result.outcome == Outcome.COMPLETE and self.objectives == 2:
+            self._study.tell(number, [result.final_score, result.training_time()])
+        elif result.outcome == Outcome.COMPLETE:
             self._study.tell(number, result.final_score)
         elif result.outcome == Outcome.PRUNED:
             self._study.tell(number, state=TrialState.PRUNED)

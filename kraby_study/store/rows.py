@@ -35,10 +35,11 @@ from kraby_study.store.url import check_url, reading_url, sqlite_path
 if TYPE_CHECKING:
     import pandas as pd
 
-ROW_ATTRS = ("key", "retry_of", "failure", "wall_time", "env_steps")
+ROW_ATTRS = ("key", "retry_of", "failure", "wall_time", "cpu_time", "env_steps", "scores")
 """The trial attributes a row holds: what counting reads (key, retry_of, failure), the
-fastest_tied rule's training time (wall_time), and the env steps a dry run's estimate divides
-by that time (env_steps)."""
+fastest_tied rule's training time (wall_time; cpu_time on a confirm study), the env steps a
+dry run's estimate divides by wall_time (env_steps), and the seeds' scores a two-objective
+search's ties are decided on (scores)."""
 SQLITE_PATIENCE = 60
 """Seconds a read waits while the writer holds the SQLite file (as the writer's own
 connection, :class:`kraby_study.store.backend.SqliteBackend`)."""
@@ -90,6 +91,8 @@ class TrialRow:
     state: RowState
     value: float | None
     """Its value when it has exactly one (Optuna's ``FrozenTrial.value``); None otherwise."""
+    values: list[float] | None
+    """Its values, one per objective (Optuna's ``FrozenTrial.values``); None without any."""
     params: dict[str, Any]
     """A swept study's parameter, when the trial has it; empty for other studies."""
     user_attrs: dict[str, Any]
@@ -184,7 +187,7 @@ class StoreReader:
             mine = values.get(trial_id, [])
             rows[study_id].append(TrialRow(
                 number=number, state=RowState[state],
-                value=mine[0] if len(mine) == 1 else None, params=param,
+                value=mine[0] if len(mine) == 1 else None, values=mine or None, params=param,
                 user_attrs=user_attrs.get(trial_id, {}), system_attrs=fixed))
         self._ids = {name: (study_id, numbers_of[study_id]) for study_id, name in names.items()}
         return [StudyRows(name=name, attrs=attrs[study_id],

@@ -93,8 +93,13 @@ class Store:
 
     def define(self, name: str, attrs: StudyAttrs,
                sampler: optuna.samplers.BaseSampler | None = None,
-               pruner: optuna.pruners.BasePruner | None = None) -> StudyLedger:
+               pruner: optuna.pruners.BasePruner | None = None,
+               directions: list[str] | None = None) -> StudyLedger:
         """Create a study, or load it after checking it was defined the same way.
+
+        ``directions``: Optuna's, one per objective (default: one maximised score). A stored
+        study keeps its own; its definition says how many objectives it has, so a change is
+        refused as a changed definition.
 
         Raises:
             StoreError: A study of that name was defined differently; the message names the
@@ -103,7 +108,7 @@ class Store:
         # On a server, commands starting at once must not both take the study as new.
         with self.server_lock(LOCK_BASE):
             study = optuna.create_study(study_name=name, storage=self.storage, sampler=sampler,
-                                        pruner=pruner, direction="maximize",
+                                        pruner=pruner, directions=directions or ["maximize"],
                                         load_if_exists=True)
             stored = StudyAttrs.of(study.user_attrs)
             if stored.fingerprint is None:

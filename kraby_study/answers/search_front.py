@@ -1,0 +1,74 @@
+"""A stored two-objective search's front and its selection: what ``list``, ``best``,
+``confirm`` and the report read of it (:mod:`kraby_study.front` holds the rules)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from kraby_study.front import FrontChoice, Point, cheapest_tied, pareto_front
+from kraby_study.records import Outcome, StoredTrial, TrialAttrs, cost, outcome, score
+
+
+@dataclass(frozen=True)
+class SearchFront:
+    """The front of a two-objective search's counted trials and the trial its rule selects."""
+
+    points: list[Point[int]]
+    """Every complete trial with a score and a cost, keyed by its number."""
+    front: list[Point[int]]
+    """The trials on the front, cheapest first."""
+    choice: FrontChoice[int] | None
+    """The cheapest trial tied with the front's best score; None when nothing is complete."""
+
+
+def seed_scores(trial: StoredTrial) -> list[float]:
+    """A trial's seed scores as stored (``scores``); its score alone when it stores none."""
+    stored = TrialAttrs.of(trial).scores
+    if stored:
+        return [float(s) for s in stored]
+    mean = score(trial)
+    return [] if mean is None else [mean]
+
+
+def search_front(trials: Sequence[StoredTrial]) -> SearchFront:
+    """The front of a two-objective search's counted trials, and its selection."""
+    points = [Point(t.number, float(score(t)), float(cost(t)))  # type: ignore[arg-type]
+              for t in trials if outcome(t) == Outcome.COMPLETE and score(t) is not None
+              and cost(t) is not None]
+    front = pareto_front(points)
+    on_front = {p.key for p in front}
+    samples = {t.number: seed_scores(t) for t in trials if t.number in on_front}
+    return SearchFront(points=points, front=front, choice=cheapest_tied(front, samples))
+
+
+def point_text(point: Point[int]) -> str:
+    """A front's trial in a few words: ``trial 7 (score -0.0123, 8.41 CPU s/seed)``."""
+    return f"trial {point.key} (score {point.score:.4g}, {point.cost:.3g} CPU s/seed)"
+
+
+def front_short(found: SearchFront) -> str:
+    """A two-objective search's standing for ``list``: the front's size and its selection."""
+    if found.choice is None:
+        return "-"
+    rule = "fastest_tied" if found.choice.tested else "best score, untested"
+    return f"front of {len(found.front)}; {point_text(found.choice.chosen)}, {rule}"
+
+
+def front_lines(found: SearchFront) -> list[str]:
+    """The front as ``best`` prints it: one line per trial (trial, score, cost), best score
+    and selection marked."""
+    choice = found.choice
+    lines = [f"front ({len(found.front)} of {len(found.points)} complete trials; score, cost "
+             "in CPU s per seed):"]
+    for point in sorted(found.front, key=lambda p: -p.score):
+        marks = []
+        if choice is not None and point.key == choice.best.key:
+            marks.append("best score")
+        if choice is not None and point.key in choice.tied:
+            marks.append("tied")
+        if choice is not None and point.key == choice.chosen.key:
+            marks.append("selected")
+        mark = f"  [{', '.join(marks)}]" if marks else ""
+        lines.append(f"  trial {point.key:>4}  {point.score:>10.4g}  {point.cost:>8.3g}{mark}")
+    return lines

@@ -1,0 +1,124 @@
+"""A two-objective search's front, and what is chosen from it by stated rules, never by eye.
+
+A two-objective search maximises a score and minimises a cost (CPU seconds per seed). A trial
+is on the front when no other complete trial is at least as good on both and better on one.
+Two choices are made from it:
+
+- :func:`cheapest_tied`, the search's selection (``best``, ``list``, the report): among the
+  front's trials, the best score and those tied with it (not worse under the closed
+  Holm-Welch step-down, alpha 0.05, on the trials' seed scores:
+  :func:`kraby_study.comparison.compare_with_best`), the cheapest. The family is the front,
+  not every trial: the best score is always on it, every trial off it is matched or beaten on
+  both objectives by one on it, and a family of 50 trials would tie nearly every one of them
+  at 3 seeds (the test's power falls with the family's size). With fewer than
+  ``min_seeds`` (2) seeds a trial there is no test, and the rule falls back to the best score.
+- :func:`spread`, what ``confirm`` retrains: up to K trials spread along the front.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Generic, TypeVar
+
+from kraby_study.comparison import ALPHA, MIN_SEEDS, compare_with_best, procedure_name
+
+K = TypeVar("K", bound=Hashable)
+
+FASTEST_TIED_TEXT = ("fastest_tied: the lowest cost (CPU s per seed) among the front's trials "
+                     f"tied with its best score (not worse under the {procedure_name(ALPHA)}, "
+                     "on each trial's seed scores)")
+"""The search's selection rule, as ``best`` and the report name it."""
+UNTESTED_TEXT = ("the best score: with fewer than 2 seeds a trial no tie can be tested, so "
+                 "fastest_tied falls back to final_score")
+"""What the rule becomes when the trials have too few seeds for a test."""
+
+
+@dataclass(frozen=True)
+class Point(Generic[K]):
+    """One complete trial of a two-objective search: its key (the trial's number), its score
+    (higher is better) and its cost (lower is better)."""
+
+    key: K
+    score: float
+    cost: float
+
+
+def dominates(a: Point[K], b: Point[K]) -> bool:
+    """``a`` is at least as good as ``b`` on both objectives and better on one."""
+    return (a.score >= b.score and a.cost <= b.cost) and (a.score > b.score or a.cost < b.cost)
+
+
+def pareto_front(points: Sequence[Point[K]]) -> list[Point[K]]:
+    """The points no other point dominates, cheapest first (equal costs: higher score first,
+    then in the given order). Equal points are both kept."""
+    front = [p for p in points if not any(dominates(q, p) for q in points)]
+    order = {id(p): i for i, p in enumerate(points)}
+    return sorted(front, key=lambda p: (p.cost, -p.score, order[id(p)]))
+
+
+def spread(front: Sequence[Point[K]], count: int) -> list[Point[K]]:
+    """Up to ``count`` points spread along a front (as :func:`pareto_front` orders it,
+    cheapest first): the best score first, then the cheapest, then the rest in cost order.
+
+    With n points on the front and count < n, the points taken are those at the evenly spaced
+    places round(i (n - 1) / (count - 1)), i = 0 .. count - 1, of the cost order: both ends
+    and the rest as evenly as the front's points allow. With count >= n every point is taken;
+    count 1 takes the best score alone.
+    """
+    n = len(front)
+    if n == 0 or count < 1:
+        return []
+    if count >= n:
+        places = list(range(n))
+    elif count == 1:
+        places = [n - 1]
+    else:
+        places = sorted({round(i * (n - 1) / (count - 1)) for i in range(count)})
+    best = n - 1
+    rest = [i for i in places if i not in (best, 0)]
+    ordered = [best] + ([0] if 0 in places and n > 1 else []) + rest
+    return [front[i] for i in ordered]
+
+
+@dataclass(frozen=True)
+class FrontChoice(Generic[K]):
+    """The front's trial a rule chose, and what it was chosen among."""
+
+    chosen: Point[K]
+    best: Point[K]
+    """The front's best score."""
+    tied: list[K] = field(default_factory=list)
+    """The front's trials tied with the best (the best excluded)."""
+    tested: bool = True
+    """False when the trials had too few seeds for a test: the chosen is then the best."""
+
+    @property
+    def rule(self) -> str:
+        """The rule that chose, in words."""
+        return FASTEST_TIED_TEXT if self.tested else UNTESTED_TEXT
+
+
+def cheapest_tied(front: Sequence[Point[K]], seed_scores: Mapping[K, Sequence[float]],
+                  min_seeds: int = MIN_SEEDS) -> FrontChoice[K] | None:
+    """The cheapest of the front's best score and the front's trials tied with it; None for an
+    empty front.
+
+    Args:
+        front: The front (:func:`pareto_front`).
+        seed_scores: Each trial's seed scores, by key; a trial with fewer than ``min_seeds``
+            is in no test.
+        min_seeds: Fewest seeds a trial needs to be tested (at least 2).
+    """
+    if not front:
+        return None
+    best_score = max(front, key=lambda p: p.score)
+    by_key = {p.key: p for p in front}
+    comparison = compare_with_best({p.key: list(seed_scores.get(p.key, [])) for p in front},
+                                   min_seeds=min_seeds)
+    if comparison.best is None:
+        return FrontChoice(chosen=best_score, best=best_score, tested=False)
+    best = by_key[comparison.best]
+    candidates = [best, *(by_key[k] for k in comparison.tied)]
+    chosen = min(candidates, key=lambda p: (p.cost, -p.score))
+    return FrontChoice(chosen=chosen, best=best, tied=list(comparison.tied))

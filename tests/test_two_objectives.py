@@ -1,0 +1,296 @@
+"""Two-objective searches (a reward and a cost): the study's directions, the front and the
+choices made from it (hand-worked), the confirm study's fastest_tied, the report's front, and
+the bad input refused."""
+
+from __future__ import annotations
+
+import csv
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import optuna
+import pytest
+from conftest import TINY, load, run_cli
+from optuna.study import StudyDirection
+
+from kraby_study.answers.selected import selected_value
+from kraby_study.comparison import welch_greater_p
+from kraby_study.config.compose import compose_config
+from kraby_study.errors import ConfigError
+from kraby_study.front import Point, cheapest_tied, pareto_front, spread
+from kraby_study.plan.confirm import ConfirmedStudy, confirm_rule
+from kraby_study.plan.space import search_definition
+from kraby_study.records import SelectRule, StudyAttrs, check_objective
+
+SPACE = """\
+name: two
+sampler: tpe
+seed: 0
+startup_trials: 2
+objective: [final_reward, training_time]
+trials: 4
+params:
+  learning_rate: {path: ppo.learning_rate, type: float, low: 1.0e-4, high: 1.0e-2, log: true}
+  n_epochs: {path: ppo.n_epochs, type: int, low: 1, high: 4}
+"""
+SEARCH = ["optuna", "search=two", "--workers", "2", *TINY, "budget.seeds=2"]
+
+
+# The front and the spread choice, on constructed trials -----------------------------------------
+
+# (number, score, cost). Trial 2 (0.8 at 6 s) is dominated by trial 1 (0.9 at 5 s); every other
+# trial is on the front, which runs cheapest first: 3, 5, 1, 4, 0.
+POINTS = [Point(0, 1.0, 10.0), Point(1, 0.9, 5.0), Point(2, 0.8, 6.0), Point(3, 0.5, 1.0),
+          Point(4, 0.95, 8.0), Point(5, 0.7, 3.0)]
+
+
+def test_the_front_is_the_trials_no_other_beats_on_both() -> None:
+    assert [p.key for p in pareto_front(POINTS)] == [3, 5, 1, 4, 0]
+    # Equal points are both on the front; a point equal in score but dearer is not.
+    twins = [Point("a", 1.0, 2.0), Point("b", 1.0, 2.0), Point("c", 1.0, 3.0)]
+    assert [p.key for p in pareto_front(twins)] == ["a", "b"]
+
+
+def test_the_spread_takes_both_ends_and_evenly_spaced_places_in_cost_order() -> None:
+    front = pareto_front(POINTS)  # cost order: 3, 5, 1, 4, 0 (places 0 .. 4)
+    # 3 of 5: places round(i * 4 / 2) = 0, 2, 4: the best score (0), the cheapest (3), then 1.
+    assert [p.key for p in spread(front, 3)] == [0, 3, 1]
+    # 4 of 5: places round(i * 4 / 3) = 0, 1 (1.33), 3 (2.67), 4.
+    assert [p.key for p in spread(front, 4)] == [0, 3, 5, 4]
+    assert [p.key for p in spread(front, 1)] == [0]
+    assert [p.key for p in spread(front, 2)] == [0, 3]
+    # More asked than the front holds: all of it, best score, cheapest, then by cost.
+    assert [p.key for p in spread(front, 9)] == [0, 3, 5, 1, 4]
+    assert spread([], 3) == []
+
+
+def test_the_cheapest_trial_tied_with_the_best_score_is_selected() -> None:
+    front = [Point(3, 0.5, 1.0), Point(1, 0.995, 5.0), Point(0, 1.0, 10.0)]
+    seeds = {0: [1.00, 1.01, 0.99], 1: [0.985, 0.995, 1.005], 3: [0.50, 0.51, 0.49]}
+    # By hand: every sd is 0.01, so se = sqrt(2 x 0.0001 / 3) = 0.00816 and Welch's df is 4.
+    # 0 against 1: t = 0.005 / 0.00816 = 0.61, one-sided p = 0.29, Holm's pi = 2 p = 0.57:
+    # tied. 0 against 3: t = 61, p ~ 2e-7, pi ~ 4e-7 < 0.05: worse.
+    assert welch_greater_p(seeds[0], seeds[1]) == pytest.approx(0.287, abs=0.005)
+    choice = cheapest_tied(front, seeds)
+    assert choice is not None and choice.tested
+    assert (choice.best.key, choice.tied, choice.chosen.key) == (0, [1], 1)
+    assert "fastest_tied" in choice.rule and "Holm-Welch" in choice.rule
+    # Nothing tied: the best score is the cheapest tied with itself.
+    apart = {0: [1.00, 1.01, 0.99], 1: [0.90, 0.91, 0.89], 3: [0.50, 0.51, 0.49]}
+    assert cheapest_tied(front, apart).chosen.key == 0  # type: ignore[union-attr]
+
+
+def test_with_one_seed_a_trial_no_tie_is_tested_and_the_rule_falls_back_to_the_best() -> None:
+    front = [Point(3, 0.5, 1.0), Point(0, 1.0, 10.0)]
+    choice = cheapest_tied(front, {0: [1.0], 3: [0.5]})
+    assert choice is not None and not choice.tested and choice.chosen.key == 0
+    assert "falls back to final_score" in choice.rule
+    assert cheapest_tied([], {}) is None
+
+
+# fastest_tied on a confirm study of constructed scores ------------------------------------------
+
+
+@dataclass
+class _State:
+    name: str
+
+
+@dataclass
+class _Run:
+    """A stored confirm run, as the selection reads it (a StoredTrial)."""
+
+    number: int
+    value: float
+    params: dict[str, Any]
+    user_attrs: dict[str, Any]
+    state: _State = field(default_factory=lambda: _State("COMPLETE"))
+    system_attrs: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def values(self) -> list[float]:
+        return [self.value]
+
+
+def test_fastest_tied_on_a_confirm_study_takes_the_cheapest_arm_in_cpu_seconds() -> None:
+    # t3 is best, t5 is tied with it (its seeds overlap t3's), t7 is far worse. In CPU seconds
+    # t5 is the cheapest tied arm; in wall-clock seconds (other work on the machine) t3 would be.
+    arms = {"t3": ([1.0, 1.02, 0.98, 1.0], 10.0, 1.0), "t5": ([0.99, 1.01, 0.97, 1.01], 4.0, 9.0),
+            "t7": ([0.5, 0.52, 0.48, 0.5], 1.0, 1.0)}
+    runs = [_Run(number=len(arms) * i + j, value=score, params={"config": label},
+                 user_attrs={"key": f"v{j}-s{i}", "cpu_time": cpu, "wall_time": wall})
+            for j, (label, (scores, cpu, wall)) in enumerate(arms.items())
+            for i, score in enumerate(scores)]
+    definition = {"kind": "confirm", "parameter": "config", "values": list(arms)}
+    chosen = selected_value(StudyAttrs(kind="confirm", definition=definition,
+                                       select="fastest_tied"), runs, lambda _: None)
+    assert chosen is not None and chosen.value == "t5" and chosen.rule == "fastest_tied"
+    best = selected_value(StudyAttrs(kind="confirm", definition=definition), runs,
+                          lambda _: None)
+    assert best is not None and best.value == "t3"
+
+
+def test_a_confirm_of_a_front_defaults_to_fastest_tied() -> None:
+    front = ConfirmedStudy(name="s", arms=[], used_seeds=set(), steps=1, curve_every=1,
+                           env_keys=[], two_objectives=True)
+    single = ConfirmedStudy(name="s", arms=[], used_seeds=set(), steps=1, curve_every=1,
+                            env_keys=[])
+    cfg = compose_config([])
+    assert confirm_rule(cfg, front) == SelectRule.FASTEST_TIED
+    assert confirm_rule(cfg, single) == SelectRule.FINAL_SCORE
+    assert confirm_rule(compose_config(["confirm.select=auc"]), front) == SelectRule.AUC
+    with pytest.raises(ConfigError, match="confirm.select must be one of"):
+        confirm_rule(compose_config(["confirm.select=cheapest"]), front)
+
+
+def test_a_one_objective_search_keeps_its_definition() -> None:
+    """The pruner's default (null) and the objective's list form change no stored search:
+    one objective is still stored as one name, with the median pruner."""
+    search = search_definition(compose_config(["budget=quick"]))["search"]
+    assert search["objective"] == "final_reward" and search["pruner"] == "median"
+    two = search_definition(compose_config(
+        ["budget=quick", "search.objective=[final_reward,training_time]"]))["search"]
+    assert two["objective"] == ["final_reward", "training_time"] and two["pruner"] == "none"
+    # A cost given first is put after the reward: one definition, one study.
+    assert check_objective(["training_time", "final_reward"]) == ["final_reward",
+                                                                  "training_time"]
+
+
+# A tiny two-objective search, end to end ------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def searched(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder holding a finished 4-trial two-objective search (2 seeds each)."""
+    root = tmp_path_factory.mktemp("two")
+    (root / "conf" / "search").mkdir(parents=True)
+    (root / "conf" / "search" / "two.yaml").write_text(SPACE)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.chdir(root)
+        assert run_cli(*SEARCH) == 0
+    return root
+
+
+@pytest.fixture
+def folder(searched: Path, workdir: Path) -> Path:
+    shutil.copytree(searched, workdir, dirs_exist_ok=True)
+    return workdir
+
+
+def test_the_study_has_two_directions_and_each_trial_a_score_and_a_cost(
+        searched: Path) -> None:
+    study = load(searched / "studies" / "kraby.db", "two")
+    assert study.directions == [StudyDirection.MAXIMIZE, StudyDirection.MINIMIZE]
+    assert isinstance(study.sampler, optuna.samplers.TPESampler)
+    assert len(study.trials) == 4 and not any(t.intermediate_values for t in study.trials)
+    # The enqueued configurations ran first, and say so.
+    assert [t.user_attrs.get("enqueued") for t in study.trials[:2]] == ["ppo=tuned", "ppo=start"]
+    for trial in study.trials:
+        score, cost = trial.values
+        seeds = trial.user_attrs["scores"]
+        assert len(seeds) == 2 and score == pytest.approx(sum(seeds) / 2)
+        assert cost == pytest.approx(trial.user_attrs["cpu_time"] / 2) and cost > 0
+    assert study.best_trials
+
+
+def test_list_best_and_progress_show_the_front(folder: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("optuna", "search=two", "--trials", "5", "--workers", "1", *TINY,
+                   "budget.seeds=2") == 0
+    out = capsys.readouterr().out
+    assert "[5/5]" in out and "CPU s/seed" in out.split("[5/5]")[1] and "front of" in out
+    assert run_cli("list") == 0
+    assert "front of " in capsys.readouterr().out
+    assert run_cli("best", "--study-name", "two") == 0
+    out = capsys.readouterr().out
+    assert out.startswith("front (")
+    assert "selected by fastest_tied" in out and "[" in out
+    assert (folder / "conf" / "ppo" / "best_two.yaml").is_file()
+
+
+def test_the_report_draws_the_front(folder: Path) -> None:
+    assert run_cli("report", "--study-name", "two", "--no-policy") == 0
+    out = folder / "reports" / "two"
+    assert (out / "pareto.png").stat().st_size > 0
+    with (out / "pareto.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert rows and list(rows[0])[:7] == ["trial", "score", "cost", "enqueued", "best", "tied",
+                                          "selected"]
+    assert {"learning_rate", "n_epochs"} <= set(rows[0])
+    assert sum(r["selected"] == "True" for r in rows) == 1
+    assert float(rows[0]["score"]) >= max(float(r["score"]) for r in rows)
+    assert "the front" in (out / "summary.md").read_text()
+    index = (folder / "reports" / "index.md").read_text()
+    assert "two/pareto.png" in index and "two/summary.md" in index
+    assert run_cli("report", "--study-name", "two", "--no-policy", "--format", "svg") == 0
+    assert (out / "pareto.svg").is_file()
+
+
+def test_confirm_retrains_the_front_and_selects_the_cheapest_tied(
+        folder: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("confirm", "--study-name", "two", "--top", "2", "--seeds", "2",
+                   "--workers", "2") == 0
+    study = load(folder / "studies" / "kraby.db", "two-confirm")
+    assert study.user_attrs["kraby_select"] == "fastest_tied"
+    arms = study.user_attrs["kraby_definition"]["arms"]
+    assert 1 <= len(arms) <= 2 and "best score" in arms[0]["origin"]
+    capsys.readouterr()
+    assert run_cli("best", "--study-name", "two-confirm") == 0
+    assert "selected by fastest_tied" in capsys.readouterr().out
+    assert run_cli("report", "--study-name", "two-confirm", "--no-policy") == 0
+    summary = (folder / "reports" / "two-confirm" / "summary.md").read_text()
+    assert "fastest_tied" in summary
+
+
+# Bad input: one line, exit 2, nothing written ----------------------------------------------------
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["search.objective=[final_reward,speed]"], "unknown objective 'speed'"),
+    (["--objective", "final_reward,training_time,evaluation"], "at most two objectives"),
+    (["search.objective=[final_reward,evaluation]"], "two rewards"),
+    (["--objective", "training_time"], "a cost alone"),
+    (["--objective", "final_reward,training_time", "--pruner", "median"],
+     "Optuna cannot prune a trial with several objectives"),
+])
+def test_bad_objectives_are_refused_in_one_line(workdir: Path,
+                                                capsys: pytest.CaptureFixture[str],
+                                                argv: list[str], message: str) -> None:
+    assert run_cli("optuna", *argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (workdir / "studies").exists()
+
+
+def test_a_confirm_rule_that_is_not_one_is_refused(workdir: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("confirm", "--baseline", "ppo=tuned", "--select", "cheapest") == 2
+    err = capsys.readouterr().err
+    assert "confirm.select must be one of final_score, auc, fastest_tied" in err
+    assert err.count("\n") == 1 and not (workdir / "studies").exists()
+
+
+def test_resuming_a_one_objective_search_with_two_is_a_changed_definition(
+        folder: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    base = ["optuna", "search=two", "search.name=one", "--workers", "1", *TINY,
+            "budget.seeds=1", "search.enqueue=[]"]
+    assert run_cli(*base, "--trials", "1", "--objective", "final_reward") == 0
+    capsys.readouterr()
+    assert run_cli(*base, "--trials", "2", "--objective", "final_reward,training_time") == 2
+    err = capsys.readouterr().err
+    assert "defined differently" in err and "objective" in err and err.count("\n") == 1
+    assert len(load(folder / "studies" / "kraby.db", "one").trials) == 1
+
+
+def test_the_sampler_and_directions_of_a_two_objective_search() -> None:
+    from kraby_study.run.sampling import directions, make_pruner, make_sampler
+
+    cfg = compose_config(["search.objective=[final_reward,training_time]",
+                          "search.sampler=nsga2"])
+    assert directions(cfg) == ["maximize", "minimize"]
+    assert isinstance(make_sampler(cfg), optuna.samplers.NSGAIISampler)
+    assert isinstance(make_pruner(cfg), optuna.pruners.NopPruner)
+    assert directions(compose_config([])) == ["maximize"]
+    assert isinstance(make_pruner(compose_config([])), optuna.pruners.MedianPruner)
