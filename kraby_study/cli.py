@@ -457,7 +457,8 @@ def build_parser() -> argparse.ArgumentParser:
          "(campaign=NAME): values x seeds, resumable"),
         ("train", cmd_train, "one training run (ppo=tuned by default), model saved"),
         ("list", cmd_list, "the studies in the store with their progress"),
-        ("optuna", cmd_optuna, "an Optuna search (TPE, pruning) over conf/search/ppo.yaml"),
+        ("optuna", cmd_optuna, "an Optuna search over conf/search/ppo.yaml: TPE with pruning, "
+         "or score and cost together (--objective)"),
         ("confirm", cmd_confirm, "retrain a search's top configurations (or a sweep's top "
          "values, or baselines) on fresh seeds, into study NAME-confirm"),
         ("best", cmd_best, "print a study's selected settings (or a campaign's, --campaign) and "
