@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.colors import Normalize
@@ -248,12 +249,36 @@ def parallel(search: Search, path: Path) -> Path:
 
 def pareto(search: Search, path: Path) -> Path:
     """A two-objective search's trials, mean final score against mean cost (CPU s per seed):
-    every complete trial, the front joined as a staircase and labelled by trial number, the
-    enqueued configurations marked, the best score and the selected trial ringed."""
+    (a) every complete trial, (b) a zoom on the front and the enqueued configurations. Both
+    panels join the front as a staircase, mark the enqueued configurations and ring the
+    selected trial; (b) labels the front's trials by number and the enqueued ones by name."""
     assert search.front is not None
-    fig, (ax,) = new_figure(SINGLE)
-    frame = search.trials
-    done = frame[frame["outcome"] == Outcome.COMPLETE]
+    fig, (whole, zoom) = new_figure(WIDE, ncols=2)
+    done = search.trials[search.trials["outcome"] == Outcome.COMPLETE]
+    _draw_front(whole, search, done, labels=False)
+    _draw_front(zoom, search, done, labels=True)
+    whole.set_title("(a) every complete trial", loc="left")
+    zoom.set_title("(b) the front (zoom)", loc="left")
+    queued = done[done["enqueued"].astype(str) != ""]
+    xs = [p.cost for p in search.front.front] + [float(c) for c in queued["cost"]]
+    ys = [p.score for p in search.front.front] + [float(v) for v in queued["value"]]
+    x_pad = max(0.15 * (max(xs) - min(xs)), 0.02 * max(abs(x) for x in xs), 1e-9)
+    y_pad = max(0.15 * (max(ys) - min(ys)), 0.02 * max(abs(y) for y in ys), 1e-9)
+    zoom.set_xlim(min(xs) - x_pad, max(xs) + x_pad)
+    zoom.set_ylim(min(ys) - y_pad, max(ys) + y_pad)
+    for ax in (whole, zoom):
+        ax.set_xlabel("cost: mean CPU seconds per seed")
+    whole.set_ylabel(_objective_label(search))
+    whole.margins(x=0.08, y=0.1)
+    handles, names = whole.get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncols=2, frameon=False)
+    fig.suptitle(_title(search, "score against cost, the front"))
+    return save(fig, path)
+
+
+def _draw_front(ax: Axes, search: Search, done: pd.DataFrame, labels: bool) -> None:
+    """One panel of :func:`pareto`: trials, the front, the enqueued and the selected trial."""
+    assert search.front is not None
     on_front = {p.key for p in search.front.front}
     others = done[~done["number"].isin(on_front)]
     ax.scatter(others["cost"], others["value"], s=18, color="#3b6ea8", alpha=0.55,
@@ -264,29 +289,26 @@ def pareto(search: Search, path: Path) -> Path:
     ax.step(xs, ys, where="post", color=BEST_COLOUR, linewidth=1.4, zorder=3)
     ax.scatter(xs, ys, s=30, color=BEST_COLOUR, zorder=4,
                label=f"front ({len(front)}), joined as a staircase")
-    for index, point in enumerate(front):
-        # Alternately above and below: neighbours on the front are often close.
-        ax.annotate(str(point.key), (point.cost, point.score), textcoords="offset points",
-                    xytext=(5, 5 if index % 2 == 0 else -12), fontsize=8.5, color=BEST_COLOUR)
+    if labels:
+        for index, point in enumerate(front):
+            # Alternately above and below: neighbours on the front are often close.
+            ax.annotate(str(point.key), (point.cost, point.score), textcoords="offset points",
+                        xytext=(5, 5 if index % 2 == 0 else -12), fontsize=8.5,
+                        color=BEST_COLOUR)
     queued = done[done["enqueued"].astype(str) != ""]
     if len(queued):
         names = ", ".join(str(n) for n in queued["enqueued"])
         ax.scatter(queued["cost"], queued["value"], s=95, marker="D", facecolors="none",
                    edgecolors="black", linewidths=1.0, zorder=5,
                    label=f"enqueued ({names})")
-        for _, row in queued.iterrows():
-            ax.annotate(str(row["enqueued"]), (row["cost"], row["value"]),
-                        textcoords="offset points", xytext=(-6, -14), ha="right",
-                        fontsize=8, color="black")
+        if labels:
+            for _, row in queued.iterrows():
+                ax.annotate(str(row["enqueued"]), (row["cost"], row["value"]),
+                            textcoords="offset points", xytext=(8, -3), ha="left",
+                            fontsize=8, color="black")
     choice = search.front.choice
     if choice is not None:
         ax.scatter([choice.chosen.cost], [choice.chosen.score], s=260, marker="*",
                    facecolors="none", edgecolors="#2e8b57", linewidths=1.4, zorder=6,
                    label=f"selected: trial {choice.chosen.key}"
                          + (" (fastest_tied)" if choice.tested else " (best score, untested)"))
-    ax.set_xlabel("cost: mean CPU seconds per seed")
-    ax.set_ylabel(_objective_label(search))
-    ax.margins(x=0.08, y=0.1)
-    fig.legend(loc="outside lower center", ncols=2, frameon=False)
-    fig.suptitle(_title(search, "score against cost, the front"))
-    return save(fig, path)
