@@ -56,6 +56,17 @@ def spawn_cli(*args: str, cwd: Path) -> subprocess.Popen[str]:
                             env=env)
 
 
+def finished_search(root: Path, name: str, space: str, *args: str) -> Path:
+    """``root`` with the search space ``conf/search/<name>.yaml`` written and the CLI run there
+    with ``args`` (a search that must succeed); returns ``root``."""
+    (root / "conf" / "search").mkdir(parents=True)
+    (root / "conf" / "search" / f"{name}.yaml").write_text(space)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.chdir(root)
+        assert run_cli(*args) == 0
+    return root
+
+
 def sqlite_url(path: Path) -> str:
     """The storage URL of a SQLite file."""
     return f"sqlite:///{path}"

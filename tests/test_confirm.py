@@ -7,7 +7,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from conftest import TINY, file_digest, load, run_cli, sqlite_url
+from conftest import TINY, file_digest, finished_search, load, run_cli, sqlite_url
 from optuna.trial import TrialState
 
 from kraby_study.config.compose import compose_config
@@ -34,13 +34,7 @@ SEARCH = ["optuna", "search=tiny", "--workers", "2", *TINY, "budget.seeds=2"]
 @pytest.fixture(scope="module")
 def searched(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A folder holding a finished 4-trial search (2 seeds each) in studies/kraby.db."""
-    root = tmp_path_factory.mktemp("searched")
-    (root / "conf" / "search").mkdir(parents=True)
-    (root / "conf" / "search" / "tiny.yaml").write_text(SPACE)
-    with pytest.MonkeyPatch.context() as patch:
-        patch.chdir(root)
-        assert run_cli(*SEARCH) == 0
-    return root
+    return finished_search(tmp_path_factory.mktemp("searched"), "tiny", SPACE, *SEARCH)
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ from typing import Any
 
 import optuna
 import pytest
-from conftest import TINY, load, run_cli
+from conftest import TINY, finished_search, load, run_cli
 from optuna.study import StudyDirection
 
 from kraby_study.answers.selected import selected_value
@@ -164,13 +164,7 @@ def test_a_one_objective_search_keeps_its_definition() -> None:
 @pytest.fixture(scope="module")
 def searched(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A folder holding a finished 4-trial two-objective search (2 seeds each)."""
-    root = tmp_path_factory.mktemp("two")
-    (root / "conf" / "search").mkdir(parents=True)
-    (root / "conf" / "search" / "two.yaml").write_text(SPACE)
-    with pytest.MonkeyPatch.context() as patch:
-        patch.chdir(root)
-        assert run_cli(*SEARCH) == 0
-    return root
+    return finished_search(tmp_path_factory.mktemp("two"), "two", SPACE, *SEARCH)
 
 
 @pytest.fixture
