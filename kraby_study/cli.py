@@ -510,8 +510,9 @@ def build_parser() -> argparse.ArgumentParser:
         parsers[name].add_argument(
             "--racing", action="store_true",
             help="run seeds in rounds and stop the values significantly worse than the best "
-            "(as racing.enabled=true; racing.min_seeds, default 3, and racing.alpha, default "
-            "0.05, tune it); budget.seeds (confirm: --seeds) is the most any value gets")
+            "(as racing.enabled=true; racing.min_seeds, default 3, racing.alpha, default "
+            "0.05, and racing.paired, default false, tune it); budget.seeds (confirm: --seeds) "
+            "is the most any value gets")
     parsers["confirm"].add_argument(
         "--baseline", action="append", type=_baseline, metavar="ppo=NAME",
         help="add a ppo config's settings as one more configuration (repeatable), e.g. "

@@ -157,6 +157,36 @@ def welch_greater_matrix(samples: Sequence[np.ndarray]) -> np.ndarray:
     return np.where(both_flat, certain, p)
 
 
+def paired_greater_matrix(samples: Sequence[np.ndarray]) -> np.ndarray:
+    """One-sided paired t-test p-values of every ordered pair at once: entry [j, g] is the p of
+    "mean of j > mean of g" on the differences j - g over the positions (seeds) where both are
+    finite, with n - 1 degrees of freedom for n such pairs; NaN with fewer than 2 pairs.
+
+    The samples are aligned: position i of each is the same seed. A seed shared by two values
+    (the same initial weights, the same action-noise stream) moves both their scores the same
+    way, and the difference removes that part of the noise (a randomised complete block design,
+    seeds as blocks; F-Race blocks on instances the same way). Differences without spread
+    (within :data:`CONSTANT_RTOL` of the scores' scale) are compared by their mean within the
+    same tolerance: p = 0 when it is positive beyond it, else p = 1.
+    """
+    x = np.vstack([np.asarray(s, dtype=float) for s in samples])
+    d = x[:, None, :] - x[None, :, :]
+    both = np.isfinite(d)
+    n = both.sum(axis=2).astype(float)
+    d0 = np.where(both, d, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mean = d0.sum(axis=2) / n
+        var = np.where(both, (d0 - mean[:, :, None]) ** 2, 0.0).sum(axis=2) / (n - 1)
+        top = np.nanmax(np.abs(x), axis=1)
+        scale = np.maximum.outer(top, top)
+        spread = np.where(both, d, -np.inf).max(axis=2) - np.where(both, d, np.inf).min(axis=2)
+        flat = spread <= CONSTANT_RTOL * scale
+        p = scipy.stats.t.sf(mean / np.sqrt(var / n), np.maximum(n - 1, 1))
+    certain = np.where(mean > CONSTANT_RTOL * scale, 0.0, 1.0)
+    p = np.where(flat, certain, p)
+    return np.where(n >= 2, p, math.nan)
+
+
 def holm(pvalues: Sequence[float]) -> list[float]:
     """Holm (1979) step-down adjusted p-values, in the order given.
 
@@ -216,7 +246,7 @@ def best_with_evidence(scores: Mapping[K, Sequence[float]], min_seeds: int = MIN
 
 
 def compare_with_best(scores: Mapping[K, Sequence[float]], alpha: float = ALPHA,
-                      min_seeds: int = MIN_SEEDS) -> Comparison[K]:
+                      min_seeds: int = MIN_SEEDS, paired: bool = False) -> Comparison[K]:
     """Which values are worse than the best, with family-wise error at most ``alpha``.
 
     A function of the current per-value samples only, so it can be applied after each round of
@@ -227,6 +257,9 @@ def compare_with_best(scores: Mapping[K, Sequence[float]], alpha: float = ALPHA,
         alpha: Family-wise error rate.
         min_seeds: Fewest complete seeds a value needs to be in the family (at least 2: a
             Welch test needs two).
+        paired: The samples are aligned by seed (position i of every sample is the same seed,
+            NaN where that run has no score) and each pair of values is compared by a paired
+            t-test on their common seeds (:func:`paired_greater_matrix`) instead of Welch's.
 
     Returns:
         The :class:`Comparison`.
@@ -237,10 +270,17 @@ def compare_with_best(scores: Mapping[K, Sequence[float]], alpha: float = ALPHA,
         return Comparison(None, {}, [], [], left_out, alpha, need)
     groups = list(family)
     k = len(groups)
-    # pi_g: Bonferroni over the k - 1 one-sided tests "some j beats g" (the local test of H_g).
-    beaten = np.where(np.eye(k, dtype=bool), np.nan, welch_greater_matrix(
-        [family[g] for g in groups]))
-    pi = (np.minimum(1.0, (k - 1) * np.nanmin(beaten, axis=0)) if k > 1 else np.ones(1))
+    if paired:
+        aligned = [np.asarray(scores[g], dtype=float).ravel() for g in groups]
+        if len({len(x) for x in aligned}) > 1:
+            raise ValueError("paired samples must be aligned by seed: equal lengths")
+        matrix = paired_greater_matrix(aligned)
+    else:
+        matrix = welch_greater_matrix([family[g] for g in groups])
+    # pi_g: Bonferroni over the k - 1 one-sided tests "some j beats g" (the local test of H_g);
+    # a pair with too few common seeds to test (NaN) does not count against g.
+    beaten = np.where(np.eye(k, dtype=bool) | np.isnan(matrix), 1.0, matrix)
+    pi = (np.minimum(1.0, (k - 1) * np.min(beaten, axis=0)) if k > 1 else np.ones(1))
     adjusted = dict(zip(groups, holm(list(pi)), strict=True))
     adjusted[best] = math.nan
     worse = [g for g in groups if g != best and adjusted[g] < alpha]

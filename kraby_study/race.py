@@ -2,9 +2,16 @@
 
 Round r gives every value still in the race its r-th seed. From round ``min_seeds`` on, after
 each round the values' first r seeds are compared with the best by the report's procedure
-(:func:`kraby_study.comparison.compare_with_best`, the closed Holm-Welch step-down), and the
-values it calls worse are dropped: their later seeds are never run. The race ends when one value
-is left or every value left has ``seeds`` seeds.
+(:func:`kraby_study.comparison.compare_with_best`, the closed Holm step-down), and the values it
+calls worse are dropped: their later seeds are never run. The race ends when one value is left
+or every value left has ``seeds`` seeds.
+
+Every value runs the same seeds, and a seed can move the scores of all values together (the
+same initial weights and action-noise stream). With ``RaceRules.paired`` (``racing.paired``)
+each pair of values is compared by a paired t-test on the seeds both have ended: seeds are
+blocks, as instances are in F-Race (Birattari et al. 2002), whose Friedman test blocks on them.
+It pays only where that shared part is large: on the four quick studies of docs/benchmarks.md
+it saved no run, so the default stays Welch's unpaired tests, the report's own.
 
 Each look is one more chance of a false "worse", so the looks share the family-wise error:
 alpha is spent in equal parts over the ``seeds - min_seeds + 1`` looks the race can take
@@ -19,7 +26,6 @@ computes it, so a race resumes after a crash and is shared by commands on one da
 
 from __future__ import annotations
 
-import math
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
@@ -92,9 +98,10 @@ def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: Race
         rounds = r
         if r < rules.min_seeds:
             continue
-        scores = {v: [runs[v][i] for i in range(r) if not math.isnan(runs[v][i])]
-                  for v in alive}
-        look = compare_with_best(scores, alpha=rules.look_alpha, min_seeds=2)
+        # Aligned by seed (NaN where a run failed): a paired look pairs position i of each.
+        scores = {v: [runs[v][i] for i in range(r)] for v in alive}
+        look = compare_with_best(scores, alpha=rules.look_alpha, min_seeds=2,
+                                 paired=rules.paired)
         for v in look.worse:
             dropped[v] = Drop(round=r, p=look.p_adjusted[v])
     return Race(values=list(values), rules=rules, rounds=rounds, dropped=dropped)

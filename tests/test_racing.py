@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+import scipy
 import yaml
 from conftest import (
     FAST_HEARTBEAT,
@@ -32,7 +33,7 @@ from conftest import (
 from optuna.trial import TrialState
 
 from kraby_study.answers.raced import race_of
-from kraby_study.comparison import compare_with_best
+from kraby_study.comparison import compare_with_best, paired_greater_matrix
 from kraby_study.config.compose import compose_config
 from kraby_study.plan.spec import RaceRules, TrialSpec
 from kraby_study.plan.sweep import expand_study
@@ -131,6 +132,70 @@ def test_failed_runs_count_as_ended_without_a_score() -> None:
     assert state.rounds == 3 and 1 not in state.dropped and 2 in state.dropped
 
 
+def test_the_paired_p_is_scipys_paired_t_test_on_the_common_seeds() -> None:
+    a = [0.31, 0.52, 0.18, 0.44, 0.27]
+    b = [0.25, 0.50, 0.11, 0.40, 0.29]
+    c = [0.30, math.nan, 0.20, 0.41, math.nan]  # seeds 1 and 4 failed
+    p = paired_greater_matrix([np.array(a), np.array(b), np.array(c)])
+    assert p[0, 1] == pytest.approx(
+        scipy.stats.ttest_rel(a, b, alternative="greater").pvalue, rel=1e-12)
+    common = [0, 2, 3]
+    assert p[2, 0] == pytest.approx(scipy.stats.ttest_rel(
+        [c[i] for i in common], [a[i] for i in common], alternative="greater").pvalue, rel=1e-12)
+    # Fewer than two common seeds: no test.
+    assert math.isnan(paired_greater_matrix([np.array([1.0, math.nan]),
+                                             np.array([0.0, 2.0])])[0, 1])
+    # Differences without spread: a sure answer either way.
+    q = paired_greater_matrix([np.array([1.0, 2.0, 3.0]), np.array([0.5, 1.5, 2.5])])
+    assert q[0, 1] == 0.0 and q[1, 0] == 1.0
+
+
+def test_a_paired_race_drops_a_value_a_seed_effect_hides_from_welch() -> None:
+    """Seed i moves every value by the same 10 sd; value 2 is worse by 1 on every seed. Welch
+    sees two spread-out samples and keeps it; the paired look sees a difference of -1 on every
+    seed, with a little noise, and drops it after round 3."""
+    seed_effect = [0.0, 10.0, -10.0, 5.0, -5.0, 2.0]
+    noise = {0: [0.01, -0.02, 0.0, 0.02, -0.01, 0.0], 1: [-0.01, 0.0, 0.02, -0.02, 0.01, 0.0],
+             2: [0.0, 0.01, -0.01, 0.0, 0.02, -0.02]}
+    runs = {v: {i: seed_effect[i] + noise[v][i] - (1.0 if v == 2 else 0.0) for i in range(6)}
+            for v in range(3)}
+    welch = race([0, 1, 2], runs, RaceRules(seeds=6, min_seeds=3))
+    paired = race([0, 1, 2], runs, RaceRules(seeds=6, min_seeds=3, paired=True))
+    assert not welch.dropped
+    assert list(paired.dropped) == [2] and paired.dropped[2].round == 3
+    look = compare_with_best({v: [runs[v][i] for i in range(3)] for v in runs},
+                             alpha=RaceRules(seeds=6, min_seeds=3).look_alpha, paired=True)
+    assert look.worse == [2] and paired.dropped[2].p == pytest.approx(look.p_adjusted[2])
+
+
+def test_a_paired_look_pairs_only_the_seeds_both_values_ended() -> None:
+    nan = math.nan
+    runs = {0: dict(enumerate([0.0, 0.1, -0.1, 0.05])), 1: dict(enumerate([nan, nan, nan, nan])),
+            2: dict(enumerate([-10.0, -9.9, -10.1, nan]))}
+    state = race([0, 1, 2], runs, RaceRules(seeds=5, min_seeds=3, paired=True))
+    # Value 1 never scored, so it is never tested; value 2 is paired with 0 on seeds 0-2.
+    assert state.rounds == 4 and 1 not in state.dropped and state.dropped[2].round == 3
+
+
+def test_the_rules_store_pairing_and_a_race_stored_before_it_replays_unpaired() -> None:
+    rules = RaceRules(seeds=10, round_seeds=tuple(range(10)), min_seeds=3, paired=True)
+    assert RaceRules.of({"racing": rules.stored()}) == rules
+    assert "paired t-tests" in rules.describe()
+    old = {"seeds": 10, "min_seeds": 3, "alpha": 0.05, "round_seeds": list(range(10))}
+    unpaired = RaceRules.of({"racing": old})
+    assert unpaired is not None and not unpaired.paired and unpaired.stored() == old
+    assert "Holm-Welch" in unpaired.describe()
+
+
+@pytest.mark.parametrize(("extra", "paired"), [([], False), (["racing.paired=true"], True)])
+def test_racing_pairs_its_looks_when_asked(
+        workdir: Path, extra: list[str], paired: bool) -> None:
+    plan = raced_plan(workdir, 6, *extra)
+    rules = RaceRules.of(plan.definition)
+    assert rules is not None and rules.paired is paired
+    assert ("paired" in plan.definition["racing"]) is paired
+
+
 # A raced sweep on a fake pool ----------------------------------------------------------------
 
 SCORES = {  # value -> final score of seeds 0, 1, 2, ...
@@ -194,10 +259,10 @@ def raced_plan(workdir: Path, seeds: int = 6, *extra: str) -> Any:
     return expand_study(cfg)
 
 
-@pytest.mark.parametrize("workers", [1, 2])
+@pytest.mark.parametrize(("workers", "extra"), [(1, []), (2, []), (2, ["racing.paired=true"])])
 def test_a_raced_sweep_drops_what_the_procedure_says_and_never_runs_its_later_seeds(
-        workdir: Path, workers: int) -> None:
-    plan = raced_plan(workdir)
+        workdir: Path, workers: int, extra: list[str]) -> None:
+    plan = raced_plan(workdir, 6, *extra)
     executor = ScoreExecutor()
     with opened(sqlite_url(workdir / "r.db")) as store:
         summary, counts = run_plan(store, plan, executor, workers, io.StringIO(), live=False)
@@ -306,6 +371,20 @@ def test_a_raced_study_is_never_mixed_with_the_same_study_run_fixed(
     assert len(err.strip().splitlines()) == 1 and file_digest(db) == before
 
 
+def test_a_race_is_never_resumed_with_another_test(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write_study_file(workdir, "pair", "ppo.clip_range", "[0.1, 0.3]")
+    raced = ["run", "study=pair", *TINY, "budget.seeds=2", "--racing", "racing.min_seeds=2"]
+    assert run_cli(*raced) == 0
+    db = workdir / "studies" / "kraby.db"
+    before = file_digest(db)
+    capsys.readouterr()
+    assert run_cli(*raced, "racing.paired=true") == 2
+    err = capsys.readouterr().err
+    assert "defined differently" in err and "racing" in err
+    assert len(err.strip().splitlines()) == 1 and file_digest(db) == before
+
+
 def _race_consistent(url: str, name: str) -> dict[str, Any]:
     """The stored race agrees with its replay, no run ran twice, and no value ran past its
     drop by more than one round's tail."""
@@ -383,17 +462,20 @@ def test_a_raced_campaign_races_every_stage(workdir: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("paired", [False, True])
 @pytest.mark.parametrize(("values", "seeds"), [(3, 10), (5, 10), (8, 10)])
-def test_a_race_holds_its_family_wise_error_under_the_global_null(values: int,
-                                                                   seeds: int) -> None:
-    """Every value from one normal distribution: any drop is false. Over 1,000 races the share
-    with a drop stays within alpha plus 3 Monte-Carlo standard errors."""
+def test_a_race_holds_its_family_wise_error_under_the_global_null(values: int, seeds: int,
+                                                                   paired: bool) -> None:
+    """Every value from one normal distribution, a seed giving every value the same shift (0.8
+    of the variance): any drop is false. Over 1,000 races the share with a drop stays within
+    alpha plus 3 Monte-Carlo standard errors, unpaired and paired."""
     rng = np.random.default_rng(20261125 + values)
-    rules = RaceRules(seeds=seeds, min_seeds=3, alpha=0.05)
+    rules = RaceRules(seeds=seeds, min_seeds=3, alpha=0.05, paired=paired)
     sims = 1000
     false = 0
     for _ in range(sims):
-        x = rng.normal(size=(values, seeds))
+        x = math.sqrt(0.8) * rng.normal(size=(1, seeds)) + math.sqrt(0.2) * rng.normal(
+            size=(values, seeds))
         false += bool(race(list(range(values)), {v: dict(enumerate(x[v])) for v in range(values)},
                            rules).dropped)
     assert false / sims <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / sims)

@@ -193,6 +193,9 @@ class RacingConfig:
     """Seeds every value gets before a value can be dropped (2 .. the most seeds)."""
     alpha: float = 0.05
     """Family-wise error of every drop of the race together, in (0, 0.5]."""
+    paired: bool = False
+    """Compare values by paired t-tests on the seeds they share (seeds as blocks) instead of
+    Welch's unpaired tests; pays where a seed moves every value's score alike."""
 
 
 @dataclass

@@ -20,4 +20,5 @@ def race_rules(cfg: DictConfig, seeds: list[int], where: str) -> RaceRules | Non
     if not cfg.racing.enabled:
         return None
     return RaceRules(seeds=len(seeds), round_seeds=tuple(seeds),
-                     min_seeds=int(cfg.racing.min_seeds), alpha=float(cfg.racing.alpha))
+                     min_seeds=int(cfg.racing.min_seeds), alpha=float(cfg.racing.alpha),
+                     paired=bool(cfg.racing.paired))

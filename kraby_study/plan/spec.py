@@ -70,6 +70,9 @@ class RaceRules:
     """Seeds every value gets before the first look (at least 2)."""
     alpha: float = 0.05
     """Family-wise error rate over every look of the race."""
+    paired: bool = False
+    """Each look compares values by paired t-tests on their common seeds (seeds as blocks);
+    False: Welch's unpaired tests, the report's own."""
 
     @property
     def looks(self) -> int:
@@ -84,15 +87,19 @@ class RaceRules:
     def describe(self) -> str:
         """How reports name the rule, e.g. 'racing from round 3 of 10, alpha 0.05 spent
         over 8 looks (0.00625 each)'."""
-        return (f"racing from round {self.min_seeds} of {self.seeds}: closed Holm-Welch "
-                f"step-down at each look, alpha {self.alpha:g} spent equally over {self.looks} "
-                f"looks ({self.look_alpha:.3g} each)")
+        test = ("closed Holm step-down over paired t-tests (seeds as blocks)" if self.paired
+                else "closed Holm-Welch step-down")
+        return (f"racing from round {self.min_seeds} of {self.seeds}: {test} at each look, "
+                f"alpha {self.alpha:g} spent equally over {self.looks} looks "
+                f"({self.look_alpha:.3g} each)")
 
-    def stored(self) -> dict[str, float | int]:
+    def stored(self) -> dict[str, float | int | bool | list[int]]:
         """The rules as a study's definition stores them: a race is never extended or mixed
-        with a fixed design under one name (changing them would change past drops)."""
+        with a fixed design under one name (changing them would change past drops). An
+        unpaired race stores no ``paired`` key, as every race did before pairing existed, so
+        those resume unchanged."""
         return {"seeds": self.seeds, "min_seeds": self.min_seeds, "alpha": self.alpha,
-                "round_seeds": list(self.round_seeds)}
+                "round_seeds": list(self.round_seeds), **({"paired": True} if self.paired else {})}
 
     @classmethod
     def of(cls, definition: dict[str, Any]) -> RaceRules | None:
@@ -102,7 +109,8 @@ class RaceRules:
             return None
         return cls(seeds=int(stored["seeds"]),
                    round_seeds=tuple(int(s) for s in stored["round_seeds"]),
-                   min_seeds=int(stored["min_seeds"]), alpha=float(stored["alpha"]))
+                   min_seeds=int(stored["min_seeds"]), alpha=float(stored["alpha"]),
+                   paired=bool(stored.get("paired", False)))
 
 
 @dataclass(frozen=True)
