@@ -255,11 +255,11 @@ def pareto(search: Search, path: Path) -> Path:
     assert search.front is not None
     fig, (whole, zoom) = new_figure(WIDE, ncols=2)
     done = search.trials[search.trials["outcome"] == Outcome.COMPLETE]
-    _draw_front(whole, search, done, labels=False)
-    _draw_front(zoom, search, done, labels=True)
+    queued = done[done["enqueued"].astype(str) != ""]
+    _draw_front(whole, search, done, queued, labels=False)
+    _draw_front(zoom, search, done, queued, labels=True)
     whole.set_title("(a) every complete trial", loc="left")
     zoom.set_title("(b) the front (zoom)", loc="left")
-    queued = done[done["enqueued"].astype(str) != ""]
     xs = [p.cost for p in search.front.front] + [float(c) for c in queued["cost"]]
     ys = [p.score for p in search.front.front] + [float(v) for v in queued["value"]]
     x_pad = max(0.15 * (max(xs) - min(xs)), 0.02 * max(abs(x) for x in xs), 1e-9)
@@ -276,8 +276,10 @@ def pareto(search: Search, path: Path) -> Path:
     return save(fig, path)
 
 
-def _draw_front(ax: Axes, search: Search, done: pd.DataFrame, labels: bool) -> None:
-    """One panel of :func:`pareto`: trials, the front, the enqueued and the selected trial."""
+def _draw_front(ax: Axes, search: Search, done: pd.DataFrame, queued: pd.DataFrame,
+                labels: bool) -> None:
+    """One panel of :func:`pareto`: the complete trials (``done``), the front, the enqueued
+    ones among them (``queued``) and the selected trial."""
     assert search.front is not None
     on_front = {p.key for p in search.front.front}
     others = done[~done["number"].isin(on_front)]
@@ -295,7 +297,6 @@ def _draw_front(ax: Axes, search: Search, done: pd.DataFrame, labels: bool) -> N
             ax.annotate(str(point.key), (point.cost, point.score), textcoords="offset points",
                         xytext=(5, 5 if index % 2 == 0 else -12), fontsize=8.5,
                         color=BEST_COLOUR)
-    queued = done[done["enqueued"].astype(str) != ""]
     if len(queued):
         names = ", ".join(str(n) for n in queued["enqueued"])
         ax.scatter(queued["cost"], queued["value"], s=95, marker="D", facecolors="none",
