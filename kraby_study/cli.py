@@ -99,6 +99,12 @@ def _objective(text: str) -> str:
     return names[0] if len(names) == 1 else f"[{','.join(names)}]"
 
 
+def _floor(text: str) -> str:
+    """An enqueued ppo config's name as an override value; ``none`` (or null) for no floor."""
+    name = text.strip()
+    return "null" if name.lower() in ("none", "null") else name
+
+
 def _at_least_two(text: str) -> int:
     value = _positive_int(text)
     if value < 2:
@@ -126,6 +132,10 @@ SEARCH_FLAGS = [
          "search.objective=...: a reward (final_reward or evaluation; default final_reward), "
          "or a reward and a cost, final_reward,training_time (CPU seconds per seed), for a "
          "front of trials", "NAME[,COST]", _objective),
+    Flag("--floor", "search.floor", "with two objectives, the enqueued ppo config a trial must "
+         "score at least as well as to be feasible (on the front, among the sampler's good "
+         "trials), as search.floor=NAME (default tuned); none for no floor", "NAME|none",
+         _floor),
     Flag("--sampler", "search.sampler", "default tpe (seeded; handles one objective or two), "
          "nsga2 for NSGA-II, as search.sampler=...", choices=("tpe", "random", "nsga2")),
     Flag("--pruner", "search.pruner", "stops bad trials: median and hyperband at env-step "
@@ -494,7 +504,10 @@ def build_parser() -> argparse.ArgumentParser:
         "training_time]) searches for score and cost at once: the cost is the trial's CPU "
         "seconds per seed, the study has two directions, TPE (or --sampler nsga2) samples "
         "for both, and no pruner runs (Optuna cannot prune a trial of several objectives; "
-        "--pruner other than none is refused). list, best and the report show the front; "
+        "--pruner other than none is refused). A trial scoring below the --floor "
+        "configuration (ppo=tuned unless you choose; it is enqueued) is infeasible: off the "
+        "front and out of the sampler's good trials, so the search looks for settings as good "
+        "as the floor at less cost. list, best and the report show the front; "
         "best writes its cheapest trial tied with the best score, and confirm --study-name "
         "retrains --top trials spread along it.\n\n" + EPILOG)
     for name in ("run", "optuna", "confirm"):

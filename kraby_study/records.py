@@ -551,6 +551,16 @@ def cost(trial: StoredTrial) -> float | None:
     return float(values[1]) if values and len(values) > 1 else None
 
 
+def floor_score(trials: Iterable[StoredTrial], floor: str) -> float | None:
+    """The score of a search's floor: its complete trial enqueued as ``ppo=<floor>`` (the first
+    such attempt); None while none is complete."""
+    for trial in trials:
+        if (outcome(trial) == Outcome.COMPLETE and TrialAttrs.of(trial).enqueued == f"ppo={floor}"
+                and score(trial) is not None):
+            return score(trial)
+    return None
+
+
 def best_trial(trials: Iterable[T], maximize: bool = True, objectives: int = 1) -> T | None:
     """The complete trial with the best score (a search's best); None when none is complete.
 
@@ -639,3 +649,10 @@ def two_objectives(definition: Mapping[str, Any]) -> bool:
     """Whether a stored search definition has a reward and a cost."""
     objective = definition.get("search", {}).get("objective", REWARDS[0])
     return len(objective_names(objective)) == 2
+
+
+def stored_floor(definition: Mapping[str, Any]) -> str | None:
+    """A stored two-objective search's floor (an enqueued ppo config's name); None for a search
+    stored without one (one objective, ``search.floor=null``, or made before floors existed)."""
+    floor = definition.get("search", {}).get("floor")
+    return str(floor) if floor is not None and two_objectives(definition) else None

@@ -269,7 +269,7 @@ def test_a_confirm_rule_that_is_not_one_is_refused(workdir: Path,
 def test_resuming_a_one_objective_search_with_two_is_a_changed_definition(
         folder: Path, capsys: pytest.CaptureFixture[str]) -> None:
     base = ["optuna", "search=two", "search.name=one", "--workers", "1", *TINY,
-            "budget.seeds=1", "search.enqueue=[]"]
+            "budget.seeds=1", "search.enqueue=[]", "search.floor=null"]
     assert run_cli(*base, "--trials", "1", "--objective", "final_reward") == 0
     capsys.readouterr()
     assert run_cli(*base, "--trials", "2", "--objective", "final_reward,training_time") == 2

@@ -17,6 +17,7 @@ from kraby_study.records import (
     param_name,
     score,
     search_key,
+    stored_floor,
     swept_value,
     trial_seeds,
     two_objectives,
@@ -43,7 +44,7 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
             and t.user_attrs.get("settings")]
     front = attrs.kind == StudyKind.SEARCH and two_objectives(definition)
     if attrs.kind == StudyKind.SEARCH:
-        arms = (_front_arms(ledger.name, done, top) if front
+        arms = (_front_arms(ledger.name, done, top, stored_floor(definition)) if front
                 else _search_arms(ledger.name, done))
         per_trial = int(definition.get("seeds", 1))
         used = {seed for t in trials for seed in trial_seeds(t, per_trial)}
@@ -68,10 +69,10 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
                           two_objectives=front)
 
 
-def _front_arms(name: str, done: list[Any], top: int) -> list[Arm]:
-    """Up to ``top`` trials of a two-objective search's front, spread along it: the best
-    score first, then the cheapest, then the rest by cost."""
-    found = search_front(done)
+def _front_arms(name: str, done: list[Any], top: int, floor: str | None) -> list[Arm]:
+    """Up to ``top`` trials of a two-objective search's front (above its floor, if any),
+    spread along it: the best score first, then the cheapest, then the rest by cost."""
+    found = search_front(done, floor)
     by_number = {t.number: t for t in done}
     chosen = spread(found.front, top)
     places = {p.key: "best score" for p in chosen[:1]}

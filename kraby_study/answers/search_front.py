@@ -7,7 +7,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from kraby_study.front import FrontChoice, Point, cheapest_tied, pareto_front
-from kraby_study.records import Outcome, StoredTrial, TrialAttrs, cost, outcome, score
+from kraby_study.records import (
+    Outcome,
+    StoredTrial,
+    TrialAttrs,
+    cost,
+    floor_score,
+    outcome,
+    score,
+)
 
 
 @dataclass(frozen=True)
@@ -20,6 +28,22 @@ class SearchFront:
     """The trials on the front, cheapest first."""
     choice: FrontChoice[int] | None
     """The cheapest trial tied with the front's best score; None when nothing is complete."""
+    floor: str | None = None
+    """The search's floor (an enqueued ppo config's name), if it has one."""
+    floor_score: float | None = None
+    """The floor's measured score: the front holds only trials scoring at least this; None
+    without a floor, or while the floor is not measured (then every trial may be on it)."""
+
+    @property
+    def floor_text(self) -> str:
+        """The floor in words, for ``best`` and the report; empty without one."""
+        if self.floor is None:
+            return ""
+        if self.floor_score is None:
+            return f"floor ppo={self.floor} not measured yet: no trial left out"
+        below = sum(1 for p in self.points if p.score < self.floor_score)
+        return (f"floor ppo={self.floor}, score {self.floor_score:.4g}: {below} complete "
+                f"trial(s) below it are infeasible, off the front")
 
 
 def seed_scores(trial: StoredTrial) -> list[float]:
@@ -31,15 +55,25 @@ def seed_scores(trial: StoredTrial) -> list[float]:
     return [] if mean is None else [mean]
 
 
-def search_front(trials: Sequence[StoredTrial]) -> SearchFront:
-    """The front of a two-objective search's counted trials, and its selection."""
+def search_front(trials: Sequence[StoredTrial], floor: str | None = None) -> SearchFront:
+    """The front of a two-objective search's counted trials, and its selection.
+
+    Args:
+        trials: The search's counted trials.
+        floor: Its floor (:func:`kraby_study.records.stored_floor`): once the floor's trial is
+            complete, trials scoring below it are left out of the front (and so of the
+            selection and of ``confirm``); they stay among ``points``.
+    """
     points = [Point(t.number, float(score(t)), float(cost(t)))  # type: ignore[arg-type]
               for t in trials if outcome(t) == Outcome.COMPLETE and score(t) is not None
               and cost(t) is not None]
-    front = pareto_front(points)
+    measured = None if floor is None else floor_score(trials, floor)
+    feasible = [p for p in points if measured is None or p.score >= measured]
+    front = pareto_front(feasible)
     on_front = {p.key for p in front}
     samples = {t.number: seed_scores(t) for t in trials if t.number in on_front}
-    return SearchFront(points=points, front=front, choice=cheapest_tied(front, samples))
+    return SearchFront(points=points, front=front, choice=cheapest_tied(front, samples),
+                       floor=floor, floor_score=measured)
 
 
 def point_text(point: Point[int]) -> str:
@@ -61,6 +95,8 @@ def front_lines(found: SearchFront) -> list[str]:
     choice = found.choice
     lines = [f"front ({len(found.front)} of {len(found.points)} complete trials; score, cost "
              "in CPU s per seed):"]
+    if found.floor_text:
+        lines.append(f"  ({found.floor_text})")
     for point in sorted(found.front, key=lambda p: -p.score):
         marks = []
         if choice is not None and point.key == choice.best.key:

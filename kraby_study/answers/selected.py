@@ -27,6 +27,7 @@ from kraby_study.records import (
     outcome,
     param_name,
     score,
+    stored_floor,
     swept_value,
     tally,
     two_objectives,
@@ -96,8 +97,9 @@ def selection_of(ledger: StudyLedger) -> Selection | None:
 def front_selection(name: str, definition: dict[str, Any],
                     trials: Sequence[StoredTrial]) -> Selection | None:
     """A two-objective search's selection: the cheapest trial of its front tied with the
-    front's best score (:func:`kraby_study.front.cheapest_tied`), with the front."""
-    found = search_front(trials)
+    front's best score (:func:`kraby_study.front.cheapest_tied`), with the front (above the
+    search's floor, if it has one)."""
+    found = search_front(trials, stored_floor(definition))
     if found.choice is None:
         return None
     chosen = found.choice.chosen
@@ -119,7 +121,7 @@ def selected_short(attrs: StudyAttrs, trials: Sequence[StoredTrial], maximize: b
         chosen = selected_value(attrs, trials, curves)
         return sweep_short(attrs, chosen) if chosen is not None else "-"
     if attrs.kind == StudyKind.SEARCH and two_objectives(attrs.definition):
-        return front_short(search_front(trials))
+        return front_short(search_front(trials, stored_floor(attrs.definition)))
     trial = best_trial(trials, maximize)
     return trial_short(trial) if trial is not None else "-"
 

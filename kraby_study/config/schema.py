@@ -165,6 +165,11 @@ class SearchConfig:
     enqueue: list[str] = field(default_factory=lambda: ["tuned", "start"])
     """ppo config names whose settings are evaluated first, as far as the space holds them, so
     a search never ends below the settings it was given."""
+    floor: str | None = "tuned"
+    """A two-objective search's floor: one of ``enqueue``. A trial scoring below the floor's
+    measured score is infeasible: the sampler's good trials and the front leave it out, so the
+    search looks for cheaper settings at least as good as the floor, not for cheap settings
+    that learn little. null: no floor. Not read with one objective."""
 
 
 @dataclass

@@ -46,6 +46,11 @@ def validate_search(cfg: DictConfig) -> None:
               f"got {search.warmup}")
     if not 0 < float(search.wilcoxon_p) < 1:
         _fail(f"search.wilcoxon_p must be in (0, 1) (a p threshold), got {search.wilcoxon_p}")
+    floor = search.get("floor")
+    if floor is not None and len(names) == 2 and str(floor) not in [
+            str(n) for n in search.enqueue[:int(search.trials)]]:
+        _fail(f"search.floor={floor} is not an enqueued configuration: choose one of "
+              f"search.enqueue ({', '.join(map(str, search.enqueue)) or 'empty'}) or null")
     if pruner_name(cfg) == "wilcoxon":
         _validate_wilcoxon(int(cfg.budget.seeds), float(search.wilcoxon_p))
     if not search.params:
@@ -71,6 +76,13 @@ def pruner_name(cfg: DictConfig) -> str:
     if cfg.search.pruner is not None:
         return str(cfg.search.pruner)
     return "none" if len(objectives(cfg)) == 2 else "median"
+
+
+def search_floor(cfg: DictConfig) -> str | None:
+    """The search's floor: the enqueued ppo config whose score a two-objective search's trials
+    must reach to be feasible (``search.floor``); None with one objective, which has none."""
+    floor = cfg.search.get("floor")
+    return str(floor) if floor is not None and len(objectives(cfg)) == 2 else None
 
 
 def wilcoxon_seeds(p: float) -> int:
@@ -201,6 +213,11 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
         # Read by the wilcoxon pruner only: other searches keep the definition (and the
         # fingerprint) they had before the setting existed.
         search.pop("wilcoxon_p", None)
+    search.pop("floor", None)
+    if search_floor(cfg) is not None:
+        # Only a two-objective search with a floor stores one: others keep the definition (and
+        # the fingerprint) they had before floors existed.
+        search["floor"] = search_floor(cfg)
     settings = resolved_settings(cfg)
     return {"kind": "search", "search": search, "settings": settings,
             "steps": int(cfg.budget.steps), "seeds": int(cfg.budget.seeds),

@@ -24,7 +24,9 @@ CAPTIONS = {
               "(CPU seconds per seed). The front (no other trial scores at least as high for "
               "at most its cost) is joined as a staircase and labelled by trial number; "
               "diamonds mark the enqueued configurations, the star the selected trial (the "
-              "cheapest tied with the front's best score).",
+              "cheapest tied with the front's best score). A dashed line, when the search has "
+              "a floor, is the floor configuration's score: trials below it are infeasible and "
+              "off the front.",
     "history": "Objective of every complete trial, and the best value so far; pruned and failed "
                "trials marked along the bottom.",
     "importances": "PED-ANOVA parameter importances (Optuna's default evaluator): how much "
@@ -104,7 +106,9 @@ def verdict(search: Search) -> str:
         return text
     choice = search.front.choice
     chosen = choice.chosen
-    return (f"Front: {len(search.front.front)} of {len(search.front.points)} complete trials. "
+    floor = f" ({search.front.floor_text})" if search.front.floor_text else ""
+    return (f"Front: {len(search.front.front)} of {len(search.front.points)} complete trials"
+            f"{floor}. "
             f"Best score: trial {choice.best.key}, {number(choice.best.score)} at "
             f"{choice.best.cost:.3g} CPU s per seed. Selected by {choice.rule}: trial "
             f"{chosen.key}, score {number(chosen.score)} at {chosen.cost:.3g} CPU s per seed.")

@@ -250,8 +250,10 @@ def parallel(search: Search, path: Path) -> Path:
 def pareto(search: Search, path: Path) -> Path:
     """A two-objective search's trials, mean final score against mean cost (CPU s per seed):
     (a) every complete trial, (b) a zoom on the front and the enqueued configurations. Both
-    panels join the front as a staircase, mark the enqueued configurations and ring the
-    selected trial; (b) labels the front's trials by number and the enqueued ones by name."""
+    panels join the front as a staircase, mark the enqueued configurations, draw the floor
+    (the score below which a trial is infeasible, off the front) when the search has one, and
+    ring the selected trial; (b) labels the front's trials by number and the enqueued ones by
+    name."""
     assert search.front is not None
     fig, (whole, zoom) = new_figure(WIDE, ncols=2)
     done = search.trials[search.trials["outcome"] == Outcome.COMPLETE]
@@ -307,6 +309,10 @@ def _draw_front(ax: Axes, search: Search, done: pd.DataFrame, queued: pd.DataFra
                 ax.annotate(str(row["enqueued"]), (row["cost"], row["value"]),
                             textcoords="offset points", xytext=(8, -3), ha="left",
                             fontsize=8, color="black")
+    if search.front.floor_score is not None:
+        ax.axhline(search.front.floor_score, color="0.35", linestyle="--", linewidth=1.0,
+                   zorder=1, label=f"floor: ppo={search.front.floor}'s score (below: "
+                                   "infeasible, off the front)")
     choice = search.front.choice
     if choice is not None:
         ax.scatter([choice.chosen.cost], [choice.chosen.score], s=260, marker="*",

@@ -33,6 +33,7 @@ from kraby_study.records import (
     cost,
     outcome,
     score,
+    stored_floor,
     two_objectives,
 )
 from kraby_study.report.load import StudyData
@@ -179,7 +180,8 @@ def build_search(data: StudyData) -> Search:
     two = is_two_objective(data)
     return Search(data=data, maximize=maximize, trials=trial_rows(data.trials, params, two),
                   params=params, distributions=distributions, importances=imp,
-                  importance_note=note, front=search_front(data.trials) if two else None)
+                  importance_note=note,
+                  front=search_front(data.trials, stored_floor(data.definition)) if two else None)
 
 
 def is_two_objective(data: StudyData) -> bool:

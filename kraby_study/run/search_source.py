@@ -17,14 +17,18 @@ from kraby_study.plan.space import (
     objectives,
     pruner_name,
     search_definition,
+    search_floor,
     wilcoxon_seeds,
 )
 from kraby_study.plan.spec import TrialSpec, fingerprint
 from kraby_study.records import (
     Failure,
+    Outcome,
     StudyAttrs,
     TrialAttrs,
+    TrialResult,
     failure,
+    floor_score,
     search_key,
     value_label,
 )
@@ -35,6 +39,9 @@ from kraby_study.run.sampling import directions, distributions, make_pruner, mak
 from kraby_study.run.source import StudySource, requeue_orphans
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
+
+FLOOR_CONSTRAINT = "floor"
+"""The name of a trial's floor constraint in Optuna (``FrozenTrial.constraints``)."""
 
 SHORT_NAMES = {"learning_rate": "lr", "nminibatches": "nmb", "n_steps": "n_steps",
                "n_epochs": "epochs", "gae_lambda": "lambda", "clip_range": "clip",
@@ -107,6 +114,18 @@ class SearchSource(StudySource):
         """Report an intermediate value to the pruner; False stops the trial."""
         return self.ledger.checkpoint(number, step, value)
 
+    def record(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
+        """Store a finished trial. Under a floor a complete one first gets its constraint
+        ``floor``: the floor's measured score minus its own (feasible at 0 or less; 0 while the
+        floor is not measured). Optuna's samplers rank feasible trials first."""
+        floor = search_floor(self.cfg)
+        if (floor is not None and result.outcome == Outcome.COMPLETE
+                and result.final_score is not None):
+            measured = floor_score(self.ledger.trials(), floor)
+            gap = 0.0 if measured is None else measured - float(result.final_score)
+            self.ledger.set_constraint(number, FLOOR_CONSTRAINT, gap)
+        super().record(number, spec, result)
+
 
 def pruner_label(cfg: DictConfig) -> str:
     """The pruner as the start line names it; the wilcoxon pruner with its threshold."""
@@ -116,7 +135,9 @@ def pruner_label(cfg: DictConfig) -> str:
         return (f"wilcoxon pruner (a trial's seeds against the best's, p < {p:g}, from "
                 f"{wilcoxon_seeds(p)} seeds)")
     if len(objectives(cfg)) == 2:
-        return f"objectives {' and '.join(objectives(cfg))}, no pruner"
+        floor = search_floor(cfg)
+        below = f", trials below ppo={floor}'s score infeasible" if floor else ""
+        return f"objectives {' and '.join(objectives(cfg))}, no pruner{below}"
     return f"{pruner} pruner"
 
 

@@ -161,6 +161,11 @@ class StudyLedger:
                 for name, value in self._study.user_attrs.items()
                 if name.startswith(PROVENANCE_PREFIX) and isinstance(value, dict)}
 
+    def set_constraint(self, number: int, key: str, value: float) -> None:
+        """Store one of a trial's constraint values (feasible at 0 or less), which Optuna's
+        samplers read; set once, before the trial is told."""
+        optuna.Trial(self._study, self._id(number)).set_constraint(key, value)
+
     def refuse(self, number: int, reason: str) -> None:
         """Fail a trial that cannot run (a sampled configuration the rules refuse)."""
         self.set_attrs(number, TrialAttrs(failure=reason))
