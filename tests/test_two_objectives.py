@@ -15,6 +15,7 @@ import pytest
 from conftest import TINY, finished_search, load, run_cli
 from optuna.study import StudyDirection
 
+from kraby_study.answers.search_front import front_lines, search_front
 from kraby_study.answers.selected import selected_value
 from kraby_study.comparison import welch_greater_p
 from kraby_study.config.compose import compose_config
@@ -22,7 +23,7 @@ from kraby_study.errors import ConfigError
 from kraby_study.front import Point, cheapest_tied, pareto_front, spread
 from kraby_study.plan.confirm import ConfirmedStudy, confirm_rule
 from kraby_study.plan.space import search_definition
-from kraby_study.records import SelectRule, StudyAttrs, check_objective
+from kraby_study.records import SelectRule, StudyAttrs, check_objective, stored_floor
 
 SPACE = """\
 name: two
@@ -88,6 +89,69 @@ def test_with_one_seed_a_trial_no_tie_is_tested_and_the_rule_falls_back_to_the_b
     assert choice is not None and not choice.tested and choice.chosen.key == 0
     assert "falls back to final_score" in choice.rule
     assert cheapest_tied([], {}) is None
+
+
+# The floor, on constructed trials ---------------------------------------------------------------
+
+
+@dataclass
+class _Trial:
+    """A stored two-objective search trial, as the front reads it (a StoredTrial)."""
+
+    number: int
+    values: list[float] | None
+    user_attrs: dict[str, Any] = field(default_factory=dict)
+    state: _State = field(default_factory=lambda: _State("COMPLETE"))
+    params: dict[str, Any] = field(default_factory=dict)
+    system_attrs: dict[str, Any] = field(default_factory=dict)
+
+
+def _trials(floor_state: str = "COMPLETE") -> list[_Trial]:
+    # (score, cost): 0 is the enqueued floor (0.90 at 5 s), 1 cheap and bad (0.50 at 1 s),
+    # 2 the best (1.00 at 10 s), 3 better and cheaper than the floor (0.95 at 4 s).
+    floor = _Trial(0, [0.90, 5.0], {"enqueued": "ppo=tuned", "scores": [0.9, 0.9]},
+                   _State(floor_state))
+    if floor_state != "COMPLETE":
+        floor.values = None
+    return [floor, _Trial(1, [0.50, 1.0], {"scores": [0.5, 0.5]}),
+            _Trial(2, [1.00, 10.0], {"scores": [1.0, 1.01, 0.99]}),
+            _Trial(3, [0.95, 4.0], {"scores": [0.95, 0.96, 0.94]})]
+
+
+def test_a_floor_leaves_the_trials_below_its_score_off_the_front() -> None:
+    # Without a floor the front runs 1 (cheapest), 3, 2; 0 is dominated by 3 (better, cheaper).
+    assert [p.key for p in search_front(_trials()).front] == [1, 3, 2]
+    # With the floor ppo=tuned (trial 0, 0.90) trial 1 (0.50) is infeasible: the front is 3, 2.
+    found = search_front(_trials(), "tuned")
+    assert [p.key for p in found.front] == [3, 2] and len(found.points) == 4
+    assert found.floor_score == pytest.approx(0.90)
+    assert "floor ppo=tuned, score 0.9: 1 complete trial(s) below it" in found.floor_text
+    assert "floor ppo=tuned" in front_lines(found)[1]
+    # 2 against 3 (sd 0.01 each, 3 seeds): t = 0.05 / 0.00816 = 6.1, p ~ 0.002 < 0.05: worse,
+    # so the best score (2) is selected, not the cheap trial a smaller family could tie.
+    assert found.choice is not None and found.choice.chosen.key == 2
+    # A trial exactly at the floor's score is feasible: the floor itself when nothing beats it.
+    alone = [t for t in _trials() if t.number in (0, 1)]
+    assert [p.key for p in search_front(alone, "tuned").front] == [0]
+
+
+def test_a_floor_not_yet_measured_leaves_every_trial_eligible() -> None:
+    found = search_front(_trials("RUNNING"), "tuned")
+    assert found.floor_score is None and [p.key for p in found.front] == [1, 3, 2]
+    assert "not measured yet" in found.floor_text
+    assert search_front(_trials()).floor_text == ""
+
+
+def test_only_a_two_objective_search_with_a_floor_stores_one() -> None:
+    two = "search.objective=[final_reward,training_time]"
+    assert search_definition(compose_config([two]))["search"]["floor"] == "tuned"
+    assert search_definition(compose_config([two, "search.floor=start"]))["search"][
+        "floor"] == "start"
+    # One objective, or no floor: the definition (and fingerprint) it had before floors.
+    assert "floor" not in search_definition(compose_config([]))["search"]
+    assert "floor" not in search_definition(compose_config([two, "search.floor=null"]))["search"]
+    assert stored_floor(search_definition(compose_config([two]))) == "tuned"
+    assert stored_floor(search_definition(compose_config([]))) is None
 
 
 # fastest_tied on a confirm study of constructed scores ------------------------------------------
@@ -189,6 +253,22 @@ def test_the_study_has_two_directions_and_each_trial_a_score_and_a_cost(
     assert study.best_trials
 
 
+def test_each_trial_carries_its_floor_constraint_for_the_sampler(searched: Path) -> None:
+    study = load(searched / "studies" / "kraby.db", "two")
+    floor = study.trials[0]
+    assert floor.user_attrs["enqueued"] == "ppo=tuned" and floor.constraints == {"floor": 0.0}
+    after = 0
+    for trial in study.trials[1:]:
+        gap = trial.constraints["floor"]
+        # Ended after the floor: the floor's score minus its own; before it: 0 (not measured).
+        if trial.datetime_start > floor.datetime_complete:
+            after += 1
+            assert gap == pytest.approx(floor.values[0] - trial.values[0])
+        else:
+            assert gap in (0.0, pytest.approx(floor.values[0] - trial.values[0]))
+    assert after >= 1
+
+
 def test_list_best_and_progress_show_the_front(folder: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
     assert run_cli("optuna", "search=two", "--trials", "5", "--workers", "1", *TINY,
@@ -200,6 +280,7 @@ def test_list_best_and_progress_show_the_front(folder: Path,
     assert run_cli("best", "--study-name", "two") == 0
     out = capsys.readouterr().out
     assert out.startswith("front (")
+    assert "floor ppo=tuned, score" in out.splitlines()[1]
     assert "selected by fastest_tied" in out and "[" in out
     assert (folder / "conf" / "ppo" / "best_two.yaml").is_file()
 
@@ -215,7 +296,8 @@ def test_the_report_draws_the_front(folder: Path) -> None:
     assert {"learning_rate", "n_epochs"} <= set(rows[0])
     assert sum(r["selected"] == "True" for r in rows) == 1
     assert float(rows[0]["score"]) >= max(float(r["score"]) for r in rows)
-    assert "the front" in (out / "summary.md").read_text()
+    summary = (out / "summary.md").read_text()
+    assert "the front" in summary and "floor ppo=tuned, score" in summary
     index = (folder / "reports" / "index.md").read_text()
     assert "two/pareto.png" in index and "two/summary.md" in index
     assert run_cli("report", "--study-name", "two", "--no-policy", "--format", "svg") == 0
@@ -248,6 +330,10 @@ def test_confirm_retrains_the_front_and_selects_the_cheapest_tied(
     (["--objective", "training_time"], "a cost alone"),
     (["--objective", "final_reward,training_time", "--pruner", "median"],
      "Optuna cannot prune a trial with several objectives"),
+    (["--objective", "final_reward,training_time", "--floor", "best"],
+     "search.floor=best is not an enqueued configuration"),
+    (["--objective", "final_reward,training_time", "search.enqueue=[start]"],
+     "search.floor=tuned is not an enqueued configuration"),
 ])
 def test_bad_objectives_are_refused_in_one_line(workdir: Path,
                                                 capsys: pytest.CaptureFixture[str],
@@ -276,6 +362,15 @@ def test_resuming_a_one_objective_search_with_two_is_a_changed_definition(
     err = capsys.readouterr().err
     assert "defined differently" in err and "objective" in err and err.count("\n") == 1
     assert len(load(folder / "studies" / "kraby.db", "one").trials) == 1
+
+
+def test_resuming_a_search_with_another_floor_is_a_changed_definition(
+        folder: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    before = len(load(folder / "studies" / "kraby.db", "two").trials)
+    assert run_cli(*SEARCH, "--trials", "5", "--floor", "start") == 2
+    err = capsys.readouterr().err
+    assert "defined differently" in err and "floor" in err and err.count("\n") == 1
+    assert len(load(folder / "studies" / "kraby.db", "two").trials) == before
 
 
 def test_the_sampler_and_directions_of_a_two_objective_search() -> None:
