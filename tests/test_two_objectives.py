@@ -276,10 +276,14 @@ def test_list_best_and_progress_show_the_front(folder: Path,
     out = capsys.readouterr().out
     assert "[5/5]" in out and "CPU s/seed" in out.split("[5/5]")[1] and "front of" in out
     assert run_cli("list") == 0
-    assert "front of " in capsys.readouterr().out
+    listed = capsys.readouterr().out
+    assert "front of " in listed
     assert run_cli("best", "--study-name", "two") == 0
     out = capsys.readouterr().out
     assert out.startswith("front (")
+    # list reads rows without Optuna, best reads Optuna's trials: the same floored front.
+    size = out.split("front (", 1)[1].split(" of ", 1)[0]
+    assert f"front of {size};" in listed
     assert "floor ppo=tuned, score" in out.splitlines()[1]
     assert "selected by fastest_tied" in out and "[" in out
     assert (folder / "conf" / "ppo" / "best_two.yaml").is_file()

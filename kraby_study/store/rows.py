@@ -35,11 +35,12 @@ from kraby_study.store.url import check_url, reading_url, sqlite_path
 if TYPE_CHECKING:
     import pandas as pd
 
-ROW_ATTRS = ("key", "retry_of", "failure", "wall_time", "cpu_time", "env_steps", "scores")
+ROW_ATTRS = ("key", "retry_of", "failure", "wall_time", "cpu_time", "env_steps", "scores",
+             "enqueued")
 """The trial attributes a row holds: what counting reads (key, retry_of, failure), the
 fastest_tied rule's training time (wall_time; cpu_time on a confirm study), the env steps a
-dry run's estimate divides by wall_time (env_steps), and the seeds' scores a two-objective
-search's ties are decided on (scores)."""
+dry run's estimate divides by wall_time (env_steps), the seeds' scores a two-objective
+search's ties are decided on (scores), and which trial is its floor (enqueued)."""
 SQLITE_PATIENCE = 60
 """Seconds a read waits while the writer holds the SQLite file (as the writer's own
 connection, :class:`kraby_study.store.backend.SqliteBackend`)."""
