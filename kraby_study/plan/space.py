@@ -46,9 +46,8 @@ def validate_search(cfg: DictConfig) -> None:
               f"got {search.warmup}")
     if not 0 < float(search.wilcoxon_p) < 1:
         _fail(f"search.wilcoxon_p must be in (0, 1) (a p threshold), got {search.wilcoxon_p}")
-    floor = search.get("floor")
-    if floor is not None and len(names) == 2 and str(floor) not in [
-            str(n) for n in search.enqueue[:int(search.trials)]]:
+    floor = search_floor(cfg)
+    if floor is not None and floor not in [str(n) for n in search.enqueue[:int(search.trials)]]:
         _fail(f"search.floor={floor} is not an enqueued configuration: choose one of "
               f"search.enqueue ({', '.join(map(str, search.enqueue)) or 'empty'}) or null")
     if pruner_name(cfg) == "wilcoxon":
@@ -213,11 +212,12 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
         # Read by the wilcoxon pruner only: other searches keep the definition (and the
         # fingerprint) they had before the setting existed.
         search.pop("wilcoxon_p", None)
+    # Only a two-objective search with a floor stores one: others keep the definition (and
+    # the fingerprint) they had before floors existed.
     search.pop("floor", None)
-    if search_floor(cfg) is not None:
-        # Only a two-objective search with a floor stores one: others keep the definition (and
-        # the fingerprint) they had before floors existed.
-        search["floor"] = search_floor(cfg)
+    floor = search_floor(cfg)
+    if floor is not None:
+        search["floor"] = floor
     settings = resolved_settings(cfg)
     return {"kind": "search", "search": search, "settings": settings,
             "steps": int(cfg.budget.steps), "seeds": int(cfg.budget.seeds),
