@@ -55,6 +55,7 @@ def _add_confirm(store: Store) -> None:
     """A confirm study as the confirm command stores it: labels as values (given in an order
     that sorting would change), the search's winner t12 losing to t7 on fresh seeds."""
     labels = ["tuned", "t7", "t12"]
+    cpu = {"tuned": 2.0, "t7": 6.0, "t12": 3.0}  # CPU seconds per run; each run's wall is 4 s
     finals = {"tuned": [-0.05, -0.06, -0.04], "t7": [-0.010, -0.012, -0.011],
               "t12": [-0.03, -0.028, -0.032]}
     arms = [{"label": "tuned", "source_score": None, "origin": "ppo config 'tuned'"},
@@ -72,7 +73,7 @@ def _add_confirm(store: Store) -> None:
     for vi, label in enumerate(labels):
         for seed, final in enumerate(finals[label]):
             attrs = TrialAttrs(key=f"v{vi}-s{seed}", seed=100 + seed, final_score=final,
-                               wall_time=4.0, env_steps=400)
+                               wall_time=4.0, cpu_time=cpu[label] + seed, env_steps=400)
             add_trials(store, ledger.name, [create_trial(
                 state=TrialState.COMPLETE, value=final, params={"config": label},
                 distributions={"config": distribution}, user_attrs=attrs.stored())])
@@ -303,6 +304,12 @@ def test_confirm_study(report: ReportIndex) -> None:
     assert f"| -0.0201 | {mean:.4g} | [{low:.4g}, {high:.4g}] |" in row
     assert row.endswith("| 3 |")
     assert "| configuration | origin | source's score |" in index
+    # A confirm's training time is the CPU seconds its fastest_tied compares, and says so; a
+    # sweep's is wall-clock seconds.
+    assert summary["time_mean"].tolist() == pytest.approx([3.0, 7.0, 4.0])
+    assert "| reached | training time (CPU s) |" in text
+    sweep_text = (report.out / "learning_rate" / "summary.md").read_text()
+    assert "| reached | training time (wall s) |" in sweep_text
 
 
 def test_threshold_option_changes_reach(store_url: str, report: ReportIndex,

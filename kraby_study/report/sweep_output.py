@@ -44,7 +44,9 @@ CAPTIONS = {
                    "Shaded: the best mean, and the "
                    f"values not significantly worse than it ({PROCEDURE_NAME}).",
     "wallclock": "Mean episode reward against wall-clock time since the start of training.",
-    "training_time": f"Training time of every run, with mean and {SHORT_INTERVAL_NAME}.",
+    "training_time": "Training time of every run (wall-clock seconds; on a confirm study CPU "
+                     "seconds, which fastest_tied compares there), with mean and "
+                     f"{SHORT_INTERVAL_NAME}.",
     "sample_efficiency": "Sample efficiency (AUC: the mean of a seed's binned mean episode "
                          "rewards over the whole run, the normalised area under its learning "
                          f"curve) of every seed; mean and {SHORT_INTERVAL_NAME} beside "
@@ -115,7 +117,8 @@ def summary_table(sweep: Sweep) -> Table:
               *(["dropped after round"] if raced else []),
               "final score", "95 % CI", "sd",
               "IQM [95 % trimmed-t CI]", "final IQR", "final IQR (rescaled)", "AUC [95 % CI]",
-              "env steps to threshold", "seconds to threshold", "reached", "training time (s)",
+              "env steps to threshold", "seconds to threshold", "reached",
+              f"training time ({sweep.time_unit})",
               "Welch p vs best", "adjusted p (step-down)", "P(best > value) [95 % Newcombe CI]", "",
               "note"]
     rows = []

@@ -190,9 +190,9 @@ def _legend_entries(extra: list[Line2D | Patch]) -> list[Line2D | Patch]:
 def training_time(sweep: Sweep, path: Path) -> Path:
     """Training time of each run against the value, with mean and interval."""
     fig, (ax,) = new_figure(SINGLE)
-    _seeds_and_means(ax, sweep, "wall_time", "time_mean", "time_low", "time_high")
+    _seeds_and_means(ax, sweep, sweep.time_attr, "time_mean", "time_low", "time_high")
     _value_axis(ax, sweep)
-    ax.set_ylabel("training time per run (s)")
+    ax.set_ylabel(f"training time per run ({sweep.time_unit})")
     ax.set_ylim(bottom=0)
     _failed_marks(ax, sweep)
     fig.legend(handles=_legend_entries([]), loc="outside lower center", ncols=2, frameon=False)

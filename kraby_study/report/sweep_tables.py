@@ -58,7 +58,7 @@ SINGLE_LABEL = "all seeds"
 DROPPED_PREFIX = "dropped by the race"
 """How the summary's note of a value the race dropped begins."""
 TRIAL_COLUMNS = ["number", "key", "seed", "vi", "value", "outcome", "final_score",
-                 "wall_time", "env_steps", "failure", "model_path"]
+                 "wall_time", "cpu_time", "env_steps", "failure", "model_path"]
 SEED_COLUMNS = ["vi", "seed", "number", "final_score", "first_reward", "auc",
                 "steps_to_threshold", "seconds_to_threshold", "end_step", "end_seconds"]
 
@@ -127,6 +127,17 @@ class Sweep:
         return self.data.kind
 
     @property
+    def time_attr(self) -> str:
+        """The trial column the summary's training time describes: the one fastest_tied
+        compares (:func:`kraby_study.selection.time_measure`)."""
+        return time_measure(self.kind)
+
+    @property
+    def time_unit(self) -> str:
+        """How the training time is written: ``CPU s`` on a confirm study, ``wall s`` else."""
+        return "CPU s" if self.time_attr == "cpu_time" else "wall s"
+
+    @property
     def counts(self) -> dict[str, int]:
         """Runs complete, failed, pruned and pending (planned runs without a trial are
         pending)."""
@@ -170,6 +181,7 @@ def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.Data
             "final_score": float(trial.value)
             if state == Outcome.COMPLETE and trial.value is not None else np.nan,
             "wall_time": attrs.get("wall_time", np.nan) if state != Outcome.PENDING else np.nan,
+            "cpu_time": attrs.get("cpu_time", np.nan) if state != Outcome.PENDING else np.nan,
             "env_steps": attrs.get("env_steps", np.nan) if state != Outcome.PENDING else np.nan,
             # A sweep's pruned run is a raced value's retry, withdrawn: its reason says so.
             "failure": (attrs.get("failure", "")
@@ -177,7 +189,7 @@ def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.Data
             "model_path": attrs.get("model_path"),
         })
     frame = pd.DataFrame(rows, columns=TRIAL_COLUMNS)
-    for column in ("final_score", "wall_time", "env_steps"):
+    for column in ("final_score", "wall_time", "cpu_time", "env_steps"):
         frame[column] = pd.to_numeric(frame[column], errors="coerce").astype(float)
     return frame
 
@@ -222,12 +234,13 @@ def note_part(note: str, prefix: str) -> str | None:
 def summarise(trials: pd.DataFrame, labels: list[str],
               bootstrap: int = BOOTSTRAP_REPETITIONS, min_seeds: int = MIN_SEEDS,
               dropped: Mapping[int, Drop] | None = None,
-              look_alpha: float = math.nan) -> pd.DataFrame:
+              look_alpha: float = math.nan, time_attr: str = "wall_time") -> pd.DataFrame:
     """One row per value: run counts; the round after which a race dropped it
     (``dropped_at``, empty for a survivor and in a study that did not race); the complete
     seeds' final score (mean, sd, interval of the mean, :func:`kraby_study.stats.mean_interval`
     with ``bootstrap`` resamples; IQM with its trimmed-t interval; IQR raw and rescaled to be
-    comparable across n) and training time; the raw two-sided Welch p-value against the best
+    comparable across n) and training time (the trial column ``time_attr``,
+    :func:`kraby_study.selection.time_measure`); the raw two-sided Welch p-value against the best
     value (``p_vs_best``) and the adjusted p of the closed Holm-Welch step-down (``p_holm``,
     :func:`kraby_study.comparison.compare_with_best`); the probability that the best value
     beats this one, with its Newcombe score-type interval; a mark: ``best``, ``tie`` (adjusted
@@ -243,7 +256,7 @@ def summarise(trials: pd.DataFrame, labels: list[str],
     dropped = dict(dropped or {})
     done = trials[trials["outcome"] == Outcome.COMPLETE]
     score = describe(done, "vi", "final_score", bootstrap=bootstrap)
-    time = describe(done, "vi", "wall_time", bootstrap=bootstrap)
+    time = describe(done, "vi", time_attr, bootstrap=bootstrap)
     counts = pd.crosstab(trials["vi"], trials["outcome"])
     scores = _finals(done)
     survivors = {vi: finals for vi, finals in scores.items() if vi not in dropped}
@@ -485,7 +498,8 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     look_alpha = race.rules.look_alpha if race is not None else math.nan
     complete = trials[trials["outcome"] == Outcome.COMPLETE][["vi", "seed", "number"]]
     curves = data.curves.merge(complete, on="number", how="inner")
-    summary = summarise(trials, labels, bootstrap, min_seeds, dropped, look_alpha)
+    summary = summarise(trials, labels, bootstrap, min_seeds, dropped, look_alpha,
+                        time_measure(data.kind))
     threshold, is_default, untrained = study_threshold(curves, summary, chosen)
     seeds = seed_metrics(trials, curves, threshold)
     summary = add_curve_metrics(summary, seeds, bootstrap)
