@@ -184,7 +184,13 @@ def _legend_entries(extra: list[Line2D | Patch]) -> list[Line2D | Patch]:
     return [Line2D([], [], marker="o", linestyle="", color=MUTED, alpha=0.55, markersize=5,
                    label="one seed"),
             Line2D([], [], marker="o", linestyle="-", color=MUTED, markeredgecolor="black",
-                   markersize=7, label=f"mean, {SHORT_INTERVAL_NAME}"), *extra]
+                   markersize=7, label=_two_lines(f"mean, {SHORT_INTERVAL_NAME}")), *extra]
+
+
+def _two_lines(label: str) -> str:
+    """A legend label broken before its first parenthesis, so two legend columns fit the
+    figure's width."""
+    return label.replace(" (", "\n(", 1)
 
 
 def training_time(sweep: Sweep, path: Path) -> Path:
@@ -219,12 +225,15 @@ def final_score(sweep: Sweep, path: Path) -> Path:
         extra.append(Patch(color=BEST_COLOUR, alpha=0.3, label="best mean"))
     if (marks == "tie").any():
         extra.append(Patch(color=BEST_COLOUR, alpha=0.1,
-                           label="not sig. worse than best (Welch's t-test,\n"
-                                 "Holm-corrected p >= 0.05)"))
+                           label="not worse than the best\n(step-down adjusted p >= 0.05)"))
     if _failed_marks(ax, sweep):
         ax.margins(y=0.12)
-    fig.legend(handles=_legend_entries(extra), loc="outside lower center",
-               ncols=2 if several else 1, frameon=False)
+    one_seed, mean = _legend_entries([])
+    # Filled column by column: the short labels share the first, the two long ones the second,
+    # so both columns fit the figure's width.
+    handles = [one_seed, *extra[:1], mean, *extra[1:]]
+    fig.legend(handles=handles, loc="outside lower center", ncols=2 if several else 1,
+               frameon=False)
     fig.suptitle(_title(sweep, "final score"))
     return save(fig, path)
 
@@ -292,7 +301,7 @@ def time_to_threshold(sweep: Sweep, path: Path) -> Path:
                             "reached the threshold"))
     handles = _legend_entries(extra)
     handles[0].set_label("one seed that reached the threshold")
-    handles[1].set_label(f"mean over those seeds, {SHORT_INTERVAL_NAME}")
+    handles[1].set_label(_two_lines(f"mean over those seeds, {SHORT_INTERVAL_NAME}"))
     fig.legend(handles=handles, loc="outside lower center", ncols=2, frameon=False)
     fig.suptitle(_title(sweep, f"time to threshold, {_threshold_text(sweep)}"))
     return save(fig, path)
