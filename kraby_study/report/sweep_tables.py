@@ -498,8 +498,8 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     look_alpha = race.rules.look_alpha if race is not None else math.nan
     complete = trials[trials["outcome"] == Outcome.COMPLETE][["vi", "seed", "number"]]
     curves = data.curves.merge(complete, on="number", how="inner")
-    summary = summarise(trials, labels, bootstrap, min_seeds, dropped, look_alpha,
-                        time_measure(data.kind))
+    time_attr = time_measure(data.kind)  # the training time the summary shows and the rule reads
+    summary = summarise(trials, labels, bootstrap, min_seeds, dropped, look_alpha, time_attr)
     threshold, is_default, untrained = study_threshold(curves, summary, chosen)
     seeds = seed_metrics(trials, curves, threshold)
     summary = add_curve_metrics(summary, seeds, bootstrap)
@@ -512,7 +512,7 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
                  verdict=study_verdict(summary, seeds, min_seeds, list(dropped)),
                  min_seeds=min_seeds, race=race)
     chosen = (selected_index(data.trials, data.curves, name, values, sweep.rule, min_seeds,
-                             dropped=list(dropped), time_attr=time_measure(data.kind))
+                             dropped=list(dropped), time_attr=time_attr)
               if name and sweep.finished else None)
     sweep.summary["selected"] = [vi == chosen for vi in sweep.summary.index]
     return sweep
