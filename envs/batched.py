@@ -3,8 +3,9 @@
 All legs share one PyBullet client and one ``stepSimulation`` per sub-step; their bases
 sit on a grid far enough apart that they never touch. With ``shards > 1`` the grid is
 split into that many shards stepped in parallel, one process each (see
-:mod:`kraby_envs.sharded`). Leg ``i`` behaves exactly like a ``KrabyOneLegEnv`` reset
-with seed ``seed + i`` and driven by the same actions.
+:mod:`kraby_envs.sharded`). Leg ``i`` draws its starts and targets from its own stream
+(:mod:`kraby_envs.seeding`) and behaves exactly like a ``KrabyOneLegEnv`` whose generator is
+that stream, driven by the same actions.
 """
 
 from __future__ import annotations
@@ -16,7 +17,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnv,
     VecEnvIndices,
@@ -26,6 +26,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 
 from .config import ENV_KWARGS, LegConfig, make_config
 from .observation import observation_space
+from .seeding import check_scheme, leg_generator, leg_streams
 from .sharded import ShardedWorld
 from .world import draw_start, leg_info
 
@@ -52,6 +53,8 @@ class KrabyBatchedVecEnv(VecEnv):
         shards: Shards that step the legs in parallel, one process each, this process's
             included (at most ``n_envs`` are used); 1 keeps every leg in this process.
             Every leg moves bit for bit the same for any number.
+        seeding: How ``seed(s)`` gives each leg its stream: ``streams`` (child ``i`` of
+            ``SeedSequence(s)``) or ``offset`` (``s + i``); see :mod:`kraby_envs.seeding`.
         **env_kwargs: Keyword arguments of :class:`kraby_envs.KrabyOneLegEnv`.
 
     Raises:
@@ -65,15 +68,18 @@ class KrabyBatchedVecEnv(VecEnv):
         max_episode_steps: int = 32,
         leg_spacing: float = 1.0,
         shards: int = 1,
+        seeding: str = "streams",
         **env_kwargs: Any,
     ) -> None:
         n_envs = _positive_int("n_envs", n_envs)
+        self.seeding = check_scheme(seeding)
         self.max_episode_steps = _positive_int("max_episode_steps", max_episode_steps)
         self.config: LegConfig = make_config(**env_kwargs)
         self.render_mode = self.config.render_mode
         shards = _positive_int("shards", shards)
         self._world = ShardedWorld(n_envs, self.config, leg_spacing, shards)
         self._rngs: list[np.random.Generator | None] = [None] * n_envs
+        self._streams: list[np.random.SeedSequence | None] = [None] * n_envs
         self._actions = np.zeros((n_envs, 3))
         # float32 sums and int32 lengths, as VecMonitor accumulates them.
         self._episode_returns = np.zeros(n_envs, dtype=np.float32)
@@ -96,11 +102,15 @@ class KrabyBatchedVecEnv(VecEnv):
         self._world.set_config(self.config)
 
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
-        """Seeds leg ``i`` with ``seed + i`` at the next reset; None picks a fresh base seed."""
+        """Gives every leg a new stream from the run's ``seed`` at the next reset, by the
+        env's seeding scheme; None picks a fresh base seed. Returns the seed each leg's
+        stream comes from: ``seed + i`` (offset) or ``seed`` itself (streams)."""
         if seed is None:
             # OS entropy rather than SB3's draw from the global numpy state.
             seed = int(np.random.SeedSequence().entropy) % 2**63  # type: ignore[arg-type]
-        self._seeds = [int(seed) + i for i in range(self.num_envs)]
+        self._streams = list(leg_streams(int(seed), self.num_envs, self.seeding))
+        offset = self.seeding == "offset"
+        self._seeds = [int(seed) + i if offset else int(seed) for i in range(self.num_envs)]
         return self._seeds
 
     # --- stepping ------------------------------------------------------------------
@@ -108,10 +118,12 @@ class KrabyBatchedVecEnv(VecEnv):
     def _reset_legs(self, indices: list[int]) -> None:
         starts = []
         for index in indices:
-            seed = self._seeds[index]
-            if seed is not None or self._rngs[index] is None:
-                # The same generator a Gymnasium env creates in reset(seed=seed).
-                self._rngs[index], _ = seeding.np_random(seed)
+            stream = self._streams[index]
+            if stream is not None:
+                self._rngs[index] = leg_generator(stream)
+                self._streams[index] = None
+            elif self._rngs[index] is None:
+                self._rngs[index] = leg_generator(np.random.SeedSequence())
             starts.append(draw_start(self._rngs[index], self.config, self._options[index]))  # type: ignore[arg-type]
         self._world.place_legs(indices, starts)
         self._episode_returns[indices] = 0.0
@@ -215,9 +227,10 @@ def make_batched(
     seed: int | None = 0,
     max_episode_steps: int = 32,
     shards: int = 1,
+    seeding: str = "streams",
     **env_kwargs: Any,
 ) -> KrabyBatchedVecEnv:
-    """Builds the batched VecEnv; leg ``i`` is seeded like ``reset(seed=seed + i)``.
+    """Builds the batched VecEnv, every leg on its own stream of ``seed``.
 
     Args:
         n_envs: Number of legs.
@@ -225,6 +238,7 @@ def make_batched(
         max_episode_steps: Episode length.
         shards: Shards that step the legs in parallel, one process each (at most
             ``n_envs`` are used); 1 keeps every leg in this process.
+        seeding: ``streams`` or ``offset`` (:mod:`kraby_envs.seeding`).
         **env_kwargs: ``leg_spacing`` and the keyword arguments of ``KrabyOneLegEnv``.
 
     Returns:
@@ -233,7 +247,8 @@ def make_batched(
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int | np.integer)):
         raise ValueError(f"seed must be an integer or None, got {seed!r}")
     env = KrabyBatchedVecEnv(
-        n_envs, max_episode_steps=max_episode_steps, shards=shards, **env_kwargs
+        n_envs, max_episode_steps=max_episode_steps, shards=shards, seeding=seeding,
+        **env_kwargs
     )
     env.seed(seed)
     return env

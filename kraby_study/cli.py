@@ -235,6 +235,7 @@ def print_preview(cfg: DictConfig, counts: Sequence[Count],
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Run a study's sweep: every value x seed, resumable."""
+    from kraby_study.answers.resumed import resumed
     from kraby_study.answers.winners import StoreWinners
     from kraby_study.config.winner import winners_from
     from kraby_study.plan.sweep import expand_study
@@ -247,6 +248,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         if dry_run(args):
             return preview_campaign(cfg, overrides)
         return run_campaign_command(cfg, overrides)
+    if cfg.study is not None:
+        cfg = resumed(cfg, str(cfg.study.name))
     plan = dataclasses.replace(expand_study(cfg), inputs=[i.stored() for i in lookup.inputs])
     if dry_run(args):
         from kraby_study.plan.preview import plan_count
@@ -345,6 +348,7 @@ def standings_table(rows: Sequence[StudyStanding]) -> list[str]:
 
 def cmd_optuna(args: argparse.Namespace) -> int:
     """An Optuna search over conf/search/<space>.yaml, into the same store."""
+    from kraby_study.answers.resumed import resumed
     from kraby_study.answers.standing import study_standing
     from kraby_study.plan.settings import settings_with_ppo
     from kraby_study.plan.space import objectives, validate_search
@@ -357,6 +361,7 @@ def cmd_optuna(args: argparse.Namespace) -> int:
         raise ConfigError("racing is for run and confirm: a search races its trials' seeds "
                           "with --pruner wilcoxon")
     validate_search(cfg)
+    cfg = resumed(cfg, str(cfg.search.name))
     starts = [(f"ppo={name}", settings_with_ppo(name, overrides))
               for name in cfg.search.enqueue]
     if dry_run(args):
@@ -377,7 +382,8 @@ def cmd_optuna(args: argparse.Namespace) -> int:
 def cmd_confirm(args: argparse.Namespace) -> int:
     """Retrain a study's top configurations (and baselines) on fresh seeds."""
     from kraby_study.answers.configurations import confirmed_study
-    from kraby_study.plan.confirm import baseline_arm, confirm_plan, confirm_rule
+    from kraby_study.answers.resumed import resumed
+    from kraby_study.plan.confirm import baseline_arm, confirm_name, confirm_plan, confirm_rule
     from kraby_study.run.executor import executor_for
     from kraby_study.run.study_run import closing_line, run_plan
     from kraby_study.store.store import opened, opened_for_reading
@@ -393,6 +399,8 @@ def cmd_confirm(args: argparse.Namespace) -> int:
                                                                    writer=False)
         with reader(cfg.storage) as store:
             source = confirmed_study(store.load(str(cfg.confirm.study)), int(cfg.confirm.top))
+    cfg = resumed(cfg, confirm_name(source.name if source else None,
+                                    [arm.label for arm in baselines]))
     plan = confirm_plan(cfg, source, baselines)
     if dry_run(args):
         from kraby_study.plan.preview import plan_count

@@ -645,6 +645,43 @@ def stored_objective(names: Sequence[str]) -> str | list[str]:
     return names[0] if len(names) == 1 else list(names)
 
 
+SEEDING = "streams"
+"""The seeding scheme of a new study: each leg of a run its own child stream of the run's seed
+(``numpy.random.SeedSequence(seed).spawn(n_envs)``)."""
+LEGACY_SEEDING = "offset"
+"""The scheme of every study stored before streams existed (leg i seeded with seed + i); its
+definition has no ``seeding`` key."""
+SEEDING_TEXT = {
+    "streams": "streams: leg i of the run with seed s draws from child i of "
+               "numpy.random.SeedSequence(s), so no two runs share a leg's stream",
+    "offset": "offset: leg i of the run with seed s is seeded with s + i, so runs s and s + 1 "
+              "share all legs but one (the scheme before streams)",
+}
+"""How reports and ``--dry-run`` name each scheme."""
+
+
+def seed_text(seeds: Iterable[int]) -> str:
+    """Seeds as ranges, e.g. ``0-9, 12 (11 seeds)``; ``none`` when there are none."""
+    ordered = sorted(set(seeds))
+    if not ordered:
+        return "none"
+    parts: list[str] = []
+    start = prev = ordered[0]
+    for seed in [*ordered[1:], None]:
+        if seed is not None and seed == prev + 1:
+            prev = seed
+            continue
+        parts.append(str(start) if start == prev else f"{start}-{prev}")
+        if seed is not None:
+            start = prev = seed
+    return f"{', '.join(parts)} ({len(ordered)} seed{'s' if len(ordered) != 1 else ''})"
+
+
+def stored_seeding(definition: Mapping[str, Any]) -> str:
+    """A stored definition's seeding scheme: its ``seeding``, offset when it has none."""
+    return str(definition.get("seeding", LEGACY_SEEDING))
+
+
 def two_objectives(definition: Mapping[str, Any]) -> bool:
     """Whether a stored search definition has a reward and a cost."""
     objective = definition.get("search", {}).get("objective", REWARDS[0])

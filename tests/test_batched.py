@@ -14,6 +14,7 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from kraby_envs import KrabyBatchedVecEnv, KrabyOneLegEnv, make_batched
 from kraby_envs._bullet import p
+from kraby_envs.seeding import leg_generator, leg_streams
 from kraby_envs.task import TARGET_CENTRE, TARGET_HALF_EXTENTS
 
 
@@ -28,14 +29,24 @@ def random_actions(n_steps: int, n_envs: int, seed: int = 0) -> np.ndarray:
     return np.random.default_rng(seed).uniform(-1, 1, (n_steps, n_envs, 3)).astype(np.float32)
 
 
-@pytest.mark.parametrize("observation", ["default", "with_tip_to_target"])
-def test_each_leg_matches_a_single_env_over_several_episodes(observation):
+def single_reset(env: KrabyOneLegEnv, seed: int, leg: int, n_envs: int, seeding: str):
+    """A single env reset as leg ``leg`` of a batched run with ``seed`` starts."""
+    if seeding == "offset":
+        return env.reset(seed=seed + leg)
+    env.np_random = leg_generator(leg_streams(seed, n_envs, seeding)[leg])
+    return env.reset()
+
+
+@pytest.mark.parametrize(("observation", "seeding"), [
+    ("default", "streams"), ("with_tip_to_target", "streams"), ("default", "offset")])
+def test_each_leg_matches_a_single_env_over_several_episodes(observation, seeding):
     # 8 legs and these seeds hit self-collisions, where contact order once made legs drift.
     n_envs, seed, episodes = 8, 5, 3
-    venv = make_batched(n_envs=n_envs, seed=seed, observation=observation)
+    venv = make_batched(n_envs=n_envs, seed=seed, observation=observation, seeding=seeding)
     singles = [KrabyOneLegEnv(observation=observation) for _ in range(n_envs)]
     batched_obs = venv.reset()
-    single_obs = np.stack([env.reset(seed=seed + i)[0] for i, env in enumerate(singles)])
+    single_obs = np.stack([single_reset(env, seed, i, n_envs, seeding)[0]
+                           for i, env in enumerate(singles)])
     np.testing.assert_allclose(batched_obs, single_obs, atol=1e-4)
     for t, actions in enumerate(random_actions(32 * episodes, n_envs)):
         batched_obs, rewards, dones, infos = venv.step(actions)
@@ -89,11 +100,52 @@ def test_seed_reseeds_the_next_reset(venv):
     first = venv.reset()
     again = venv.reset()
     assert not np.allclose(first, again)
-    assert venv.seed(11) == [11, 12, 13, 14]
+    assert venv.seed(11) == [11] * 4
     np.testing.assert_array_equal(venv.reset(), first)
-    other = make_batched(n_envs=4, seed=12)
-    np.testing.assert_array_equal(other.reset()[:3], first[1:])
-    other.close()
+
+
+def first_draws(seed: int, seeding: str, n_envs: int = 4) -> np.ndarray:
+    """Six numbers from each leg's stream after its first reset (its starts drawn)."""
+    venv = make_batched(n_envs=n_envs, seed=seed, seeding=seeding)
+    venv.reset()
+    draws = np.stack([rng.uniform(size=6) for rng in venv._rngs])  # type: ignore[union-attr]
+    venv.close()
+    return draws
+
+
+def test_neighbouring_seeds_share_no_leg_stream():
+    # Streams: no leg of run 12 starts like any leg of run 11 (the episodes differ).
+    ours, neighbour = first_draws(11, "streams"), first_draws(12, "streams")
+    assert not np.isin(neighbour, ours).any()
+    # Offset, the scheme before streams: run 12's legs 0-2 are run 11's legs 1-3.
+    ours, neighbour = first_draws(11, "offset"), first_draws(12, "offset")
+    np.testing.assert_array_equal(neighbour[:3], ours[1:])
+
+
+def test_neighbouring_runs_start_apart():
+    # What a leg observes first: start angles and target. Streams share no leg's, offset
+    # shares three of four between runs 11 and 12.
+    for seeding, shared in (("streams", 0), ("offset", 3)):
+        runs = [make_batched(n_envs=4, seed=seed, seeding=seeding) for seed in (11, 12)]
+        first, second = (run.reset() for run in runs)
+        same = sum(any(np.array_equal(b, a) for a in first) for b in second)
+        assert same == shared, seeding
+        for run in runs:
+            run.close()
+
+
+def test_offset_streams_are_gymnasium_seeds():
+    # A study stored before streams resumes bit for bit: offset leg i is reset(seed=s + i).
+    from gymnasium.utils import seeding
+
+    for leg, stream in enumerate(leg_streams(7, 3, "offset")):
+        expected, _ = seeding.np_random(7 + leg)
+        assert leg_generator(stream).random(5).tolist() == expected.random(5).tolist()
+
+
+def test_an_unknown_scheme_is_refused():
+    with pytest.raises(ValueError, match="seeding must be one of streams, offset"):
+        make_batched(n_envs=2, seeding="sequential")
 
 
 def test_legs_never_touch_each_other():

@@ -88,7 +88,8 @@ def test_confirm_retrains_the_top_configurations_on_fresh_seeds(
     # Seeds no trial of the search used: it trained seeds 0 and 1 (2 per trial).
     used = {t.user_attrs["seed"] + i for t in search for i in range(2)}
     seeds = {t.user_attrs["seed"] for t in trials}
-    assert seeds == {2, 3} and not seeds & used
+    # Test seeds start at 1000, apart from every tuning seed a command uses by default.
+    assert seeds == {1000, 1001} and not seeds & used
     # Each arm trains its source's settings exactly; the steps are the search's budget.
     for trial in trials:
         arm = labels.index(trial.params["config"])
@@ -103,7 +104,7 @@ def test_confirm_retrains_the_top_configurations_on_fresh_seeds(
     # Its reproducibility page keeps the test seeds apart from the search's tuning seeds.
     assert run_cli("report", "--study-name", "tiny-confirm", "--no-policy") == 0
     page = (folder / "reports" / "tiny-confirm" / "reproducibility.md").read_text()
-    assert "Test seeds (fresh seeds of this confirm study): 2-3 (2 seeds)." in page
+    assert "Test seeds (fresh seeds of this confirm study): 1000-1001 (2 seeds)." in page
     assert "Tuning seeds (of the source study 'tiny'): 0-1 (2 seeds)." in page
     assert "Test and tuning seeds are disjoint." in page
     # best writes the confirmed winner's settings.
@@ -116,7 +117,7 @@ def test_baselines_alone_retrain_a_config_on_n_seeds(store_url: str) -> None:
     assert run_cli("confirm", "--baseline", "ppo=tuned", "--seeds", "2", "--workers", "2",
                    "--storage", store_url, *TINY) == 0
     trials = load(store_url, "confirm-ppo=tuned").trials
-    assert sorted(t.user_attrs["seed"] for t in trials) == [0, 1]
+    assert sorted(t.user_attrs["seed"] for t in trials) == [1000, 1001]
     assert {t.params["config"] for t in trials} == {"ppo=tuned"}
 
 

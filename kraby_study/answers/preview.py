@@ -12,12 +12,23 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from kraby_study.answers.resumed import resumed_stage
 from kraby_study.answers.winners import StoreWinners, Unfinished
-from kraby_study.plan.campaign import Campaign, Stage, stage_config, stage_file
+from kraby_study.plan.campaign import Campaign, Stage, stage_file
 from kraby_study.plan.preview import Count, plan_count, stage_count
 from kraby_study.plan.spec import fingerprint
 from kraby_study.plan.sweep import expand_study
-from kraby_study.records import Outcome, StudyAttrs, Tally, counted, outcome, tally
+from kraby_study.records import (
+    SEEDING_TEXT,
+    Outcome,
+    StudyAttrs,
+    Tally,
+    counted,
+    outcome,
+    seed_text,
+    stored_seeding,
+    tally,
+)
 from kraby_study.store.rows import has_store, reading
 from kraby_study.store.url import shown_url
 
@@ -94,6 +105,10 @@ def count_lines(count: Count, stored: Tally | None) -> list[str]:
     lines = [f"{count.study}: {most}{count.trials} trials ({count.shape}), "
              f"{count.steps_per_trial:,} env steps each, {most}{count.env_steps:,} in all"
              + (" (raced: values worse than the best stop early)" if count.at_most else "")]
+    if count.definition is not None:
+        lines.append(f"  seeding {SEEDING_TEXT[stored_seeding(count.definition)]}")
+        if isinstance(count.definition.get("seeds"), list):
+            lines.append(f"  seeds {seed_text(count.definition['seeds'])}")
     if stored is None:
         lines.append(f"  not in the store yet: 0 complete, {most}{count.trials} to run")
     else:
@@ -164,7 +179,7 @@ def campaign_preview(campaign: Campaign) -> list[StagePreview]:
     for stage in campaign.stages:
         lookup = StoreWinners(names={s.study: s.name for s in campaign.before(stage)})
         try:
-            plan = expand_study(stage_config(campaign, stage, lookup))
+            plan = expand_study(resumed_stage(campaign, stage, lookup))
         except Unfinished:
             pending = [f"{s.parameter} from stage {s.number} ({s.study}), not selected yet"
                        for s in campaign.before(stage) if s.parameter != stage.parameter]

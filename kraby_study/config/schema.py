@@ -214,6 +214,10 @@ class ConfirmConfig:
     up to this many trials of its front, spread along it), or the sweep's best values."""
     seeds: int = 10
     """Fresh seeds per configuration, none used by the study's trials."""
+    seed: int | None = None
+    """First test seed: a confirm trains the first confirm.seeds seeds from here on that its
+    source study did not use. null: 1000 for a new confirm study (apart from every tuning
+    seed a command uses by default, 0 onwards), a stored confirm study's own first seed."""
     baselines: list[str] = field(default_factory=list)
     """ppo config names added as arms, e.g. [tuned]."""
     select: str | None = None
@@ -295,7 +299,13 @@ class KrabyConfig:
     db_retry_seconds: int = 60
     """How long a command keeps retrying a database it lost before it gives up."""
     seed: int = 0
-    """Seed of the first training run; run n of a study uses seed + n."""
+    """Seed of the first training run; run n of a study uses seed + n (a confirm's seeds are
+    confirm.seed's)."""
+    seeding: str | None = None
+    """How a run's seed gives each of its n_envs legs a random stream: streams (leg i draws
+    from child i of numpy's SeedSequence(seed): no two runs share a stream) or offset (leg i
+    seeded with seed + i: runs s and s + 1 share all legs but one; the scheme before streams);
+    null: a stored study's own scheme, streams for a new one."""
     save_models: bool = True
     """Keep each trial's final model (SB3 zip) beside the store."""
     models_dir: str | None = None

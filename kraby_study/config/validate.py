@@ -10,6 +10,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from kraby_envs.seeding import SCHEMES
 from kraby_study.config.schema import PPOConfig
 from kraby_study.errors import ConfigError
 from kraby_study.records import SelectRule
@@ -116,6 +117,13 @@ def validate(cfg: DictConfig) -> None:
     validate_executor(cfg)
     validate_tensorboard(cfg)
     _require(int(cfg.seed) >= 0, f"seed must be >= 0, got {cfg.seed}")
+    if cfg.seeding is not None:
+        _require(str(cfg.seeding) in SCHEMES,
+                 f"seeding must be one of {', '.join(SCHEMES)} (or null: a stored study's own), "
+                 f"got {cfg.seeding!r}")
+    if cfg.confirm.seed is not None:
+        _require(int(cfg.confirm.seed) >= 0,
+                 f"confirm.seed must be >= 0, got {cfg.confirm.seed}")
     _require(int(cfg.report.bootstrap) >= 100,
              f"report.bootstrap must be at least 100 resamples, got {cfg.report.bootstrap}")
     _require(int(cfg.report.min_seeds) >= 2,

@@ -2,8 +2,10 @@
 
 A search's best trial is the best of many noisy draws, an optimistic estimate. ``confirm``
 retrains the top configurations of a search (or the top values of a sweep), and any baseline
-config, on seeds no trial of the source used, at the source's budget. Pure: the arms come in
-already read from the store.
+config, on seeds no trial of the source used, at the source's budget. Its seeds start at
+``TEST_SEED`` (1000), apart from the tuning seeds every other command starts at 0, as ARLBench
+keeps its test seeds (100 on) apart from its tuning seeds (0-9). Pure: the arms come in already
+read from the store.
 """
 
 from __future__ import annotations
@@ -18,8 +20,11 @@ from omegaconf import DictConfig
 from kraby_study.errors import ConfigError
 from kraby_study.plan.racing import race_rules
 from kraby_study.plan.settings import model_path, settings_with_ppo, tensorboard_run
-from kraby_study.plan.spec import StudyPlan, TrialSpec
+from kraby_study.plan.spec import StudyPlan, TrialSpec, seeding_of, with_seeding
 from kraby_study.records import SelectRule, StudyKind, sweep_key
+
+TEST_SEED = 1000
+"""A new confirm study's first seed when confirm.seed is null."""
 
 PARAMETER = "config"
 """The Optuna parameter of a confirm study's trials: the arm's label."""
@@ -121,8 +126,10 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
         raise ConfigError("confirm needs --study-name NAME or at least one --baseline ppo=NAME")
     if len(set(labels)) != len(labels):
         raise ConfigError(f"confirm: two configurations are named alike ({', '.join(labels)})")
+    first = TEST_SEED if cfg.confirm.seed is None else int(cfg.confirm.seed)
     seeds = fresh_seeds(source.used_seeds if source else set(), int(cfg.confirm.seeds),
-                        first=int(cfg.seed))
+                        first=first)
+    scheme = seeding_of(cfg)
     racing = race_rules(cfg, seeds, "confirm.seeds")
     steps = source.steps if source else int(cfg.budget.steps)
     curve_every = source.curve_every if source else int(cfg.budget.curve_every)
@@ -131,7 +138,7 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
                        curve_every=curve_every, settings=arm.settings, value=arm.label,
                        model_path=model_path(cfg, name, sweep_key(index, seed)),
                        label=f"{arm.label} seed {seed}",
-                       tensorboard_run=tensorboard_run(cfg, name, arm.label))
+                       tensorboard_run=tensorboard_run(cfg, name, arm.label), seeding=scheme)
              for index, arm in enumerate(arms) for seed in seeds]
     definition = {
         "kind": StudyKind.CONFIRM.value, "parameter": PARAMETER, "values": labels,
@@ -145,5 +152,5 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
     if racing is not None:
         definition["racing"] = racing.stored()
     return StudyPlan(name=name, parameter=PARAMETER, values=labels, specs=specs,
-                     definition=definition, racing=racing,
+                     definition=with_seeding(definition, scheme), racing=racing,
                      select=confirm_rule(cfg, source).value)

@@ -13,6 +13,7 @@ from omegaconf import DictConfig
 from kraby_study.config.validate import rollout_size, to_container, validate_env, validate_ppo
 from kraby_study.errors import ConfigError
 from kraby_study.plan.settings import resolved_settings, with_value
+from kraby_study.plan.spec import seeding_of, with_seeding
 from kraby_study.records import check_objective, stored_objective, value_key
 
 SAMPLERS = ("tpe", "random", "nsga2")
@@ -219,9 +220,10 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
     if floor is not None:
         search["floor"] = floor
     settings = resolved_settings(cfg)
-    return {"kind": "search", "search": search, "settings": settings,
-            "steps": int(cfg.budget.steps), "seeds": int(cfg.budget.seeds),
-            "curve_every": int(cfg.budget.curve_every), "seed": int(cfg.seed)}
+    return with_seeding({"kind": "search", "search": search, "settings": settings,
+                         "steps": int(cfg.budget.steps), "seeds": int(cfg.budget.seeds),
+                         "curve_every": int(cfg.budget.curve_every), "seed": int(cfg.seed)},
+                        seeding_of(cfg))
 
 
 def fitted_params(cfg: DictConfig, settings: dict[str, Any]) -> dict[str, Any]:

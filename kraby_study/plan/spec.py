@@ -8,7 +8,7 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
-from kraby_study.records import StudyAttrs
+from kraby_study.records import LEGACY_SEEDING, SEEDING, StudyAttrs
 
 
 @dataclass(frozen=True)
@@ -38,6 +38,9 @@ class TrialSpec:
     and nothing within a seed (searches with the wilcoxon pruner, which pairs seeds)."""
     seeds: int = 1
     """Training runs, with seeds seed, seed + 1, ...; the score is their mean (searches)."""
+    seeding: str = "streams"
+    """How a run's seed gives each leg its random stream (:mod:`kraby_envs.seeding`):
+    streams (independent children of the seed) or offset (seed + leg, before streams)."""
     objective: str = "final_reward"
     """final_reward (mean reward over the last 10 % of training) or evaluation."""
     cost: str | None = None
@@ -141,6 +144,19 @@ class StudyPlan:
     def fingerprint(self) -> str:
         """Hash of the definition: the same study name must always mean the same sweep."""
         return fingerprint(self.definition)
+
+
+def seeding_of(cfg: Any) -> str:
+    """The seeding scheme a plan uses: ``seeding`` as the command settled it (the stored
+    study's, or the one given), streams while unset."""
+    return str(cfg.seeding) if cfg.seeding is not None else SEEDING
+
+
+def with_seeding(definition: dict[str, Any], scheme: str) -> dict[str, Any]:
+    """A definition as stored for ``scheme``: streams adds ``seeding: streams``; offset adds
+    nothing, so every study defined before streams existed keeps its fingerprint and
+    resumes, and an offset study defined today is that same study."""
+    return {**definition, "seeding": scheme} if scheme != LEGACY_SEEDING else dict(definition)
 
 
 def fingerprint(definition: dict[str, Any]) -> str:

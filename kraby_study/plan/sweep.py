@@ -14,7 +14,7 @@ from kraby_study.plan.settings import (
     tensorboard_run,
     with_value,
 )
-from kraby_study.plan.spec import StudyPlan, TrialSpec
+from kraby_study.plan.spec import StudyPlan, TrialSpec, seeding_of, with_seeding
 from kraby_study.records import StudyKind, param_name, sweep_key, value_key, value_label
 
 
@@ -34,6 +34,7 @@ def expand_study(cfg: DictConfig) -> StudyPlan:
     if len({value_key(v) for v in values}) != len(values):
         raise ConfigError(f"study {study.name!r} lists a value twice")
     racing = race_rules(cfg, run_seeds(cfg), "budget.seeds")
+    scheme = seeding_of(cfg)
     specs = []
     for index, value in enumerate(values):
         trial_cfg = with_value(cfg, study.parameter, value)
@@ -51,7 +52,7 @@ def expand_study(cfg: DictConfig) -> StudyPlan:
                 study=str(study.name), key=key, seed=seed, steps=int(cfg.budget.steps),
                 curve_every=int(cfg.budget.curve_every), settings=settings, value=value,
                 model_path=model_path(cfg, str(study.name), key),
-                label=f"{named} seed {seed}", tensorboard_run=logs))
+                label=f"{named} seed {seed}", tensorboard_run=logs, seeding=scheme))
     base = resolved_settings(cfg)
     root, leaf = str(study.parameter).split(".", 1)
     base[root].pop(leaf, None)
@@ -69,7 +70,8 @@ def expand_study(cfg: DictConfig) -> StudyPlan:
     if racing is not None:
         definition["racing"] = racing.stored()
     return StudyPlan(name=str(study.name), parameter=str(study.parameter), values=values,
-                     specs=specs, definition=definition, select=str(study.select),
+                     specs=specs, definition=with_seeding(definition, scheme),
+                     select=str(study.select),
                      racing=racing)
 
 

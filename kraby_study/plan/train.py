@@ -6,26 +6,29 @@ from omegaconf import DictConfig
 
 from kraby_study.config.validate import validate_env, validate_ppo
 from kraby_study.plan.settings import model_path, resolved_settings, tensorboard_run
-from kraby_study.plan.spec import StudyPlan, TrialSpec, fingerprint
+from kraby_study.plan.spec import StudyPlan, TrialSpec, fingerprint, seeding_of, with_seeding
 from kraby_study.records import StudyKind, train_key
 
 
 def train_plan(cfg: DictConfig) -> StudyPlan:
     """The plan of ``train``: one run at the configured settings and seed.
 
-    Runs with the same settings and budget share one study named train-<hash>, one trial per seed.
+    Runs with the same settings, budget and seeding share one study named train-<hash>, one
+    trial per seed (``seeding=offset`` finds the runs stored before streams existed).
     """
     validate_env(cfg.env)
     validate_ppo(cfg.ppo)
     settings = resolved_settings(cfg)
-    definition = {"kind": StudyKind.TRAIN.value, "settings": settings,
-                  "steps": int(cfg.budget.steps), "curve_every": int(cfg.budget.curve_every)}
+    scheme = seeding_of(cfg)
+    definition = with_seeding({"kind": StudyKind.TRAIN.value, "settings": settings,
+                               "steps": int(cfg.budget.steps),
+                               "curve_every": int(cfg.budget.curve_every)}, scheme)
     name = f"train-{fingerprint(definition)[:8]}"
     seed = int(cfg.seed)
     key = train_key(seed)
     spec = TrialSpec(study=name, key=key, seed=seed, steps=int(cfg.budget.steps),
                      curve_every=int(cfg.budget.curve_every), settings=settings,
                      model_path=model_path(cfg, name, key), label=f"seed {seed}",
-                     tensorboard_run=tensorboard_run(cfg, name, "train"))
+                     tensorboard_run=tensorboard_run(cfg, name, "train"), seeding=scheme)
     return StudyPlan(name=name, parameter="seed", values=[seed], specs=[spec],
                      definition=definition)

@@ -10,7 +10,7 @@ differ in a field that can move the numbers, a warning names the field and count
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +20,7 @@ from kraby_study.records import (
     StudyKind,
     TrialAttrs,
     outcome,
+    seed_text,
     trial_seeds,
 )
 from kraby_study.report.document import Block, Heading, Items, Table, Text, to_markdown
@@ -34,23 +35,6 @@ CHECKED = ("cpu", "cores", "platform", "kraby_study", "python", *PACKAGES, "git_
            "git_dirty")
 """Fields that can move a trial's numbers: trials that differ in one are warned about (the
 hostname, the folder and the command line may differ freely)."""
-
-
-def seed_text(seeds: Iterable[int]) -> str:
-    """Seeds as ranges, e.g. ``0-9, 12 (11 seeds)``; ``none`` when there are none."""
-    ordered = sorted(set(seeds))
-    if not ordered:
-        return "none"
-    parts: list[str] = []
-    start = prev = ordered[0]
-    for seed in [*ordered[1:], None]:
-        if seed is not None and seed == prev + 1:
-            prev = seed
-            continue
-        parts.append(str(start) if start == prev else f"{start}-{prev}")
-        if seed is not None:
-            start = prev = seed
-    return f"{', '.join(parts)} ({len(ordered)} seed{'s' if len(ordered) != 1 else ''})"
 
 
 def started(trials: Sequence[StoredTrial]) -> list[StoredTrial]:

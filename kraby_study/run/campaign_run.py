@@ -15,10 +15,11 @@ from typing import TextIO
 
 from omegaconf import DictConfig
 
+from kraby_study.answers.resumed import resumed_stage
 from kraby_study.answers.selected import sweep_selection
 from kraby_study.answers.winners import StoreWinners, Unfinished
 from kraby_study.errors import StoreError
-from kraby_study.plan.campaign import Campaign, Stage, stage_config
+from kraby_study.plan.campaign import Campaign, Stage
 from kraby_study.plan.spec import StudyPlan
 from kraby_study.plan.sweep import expand_study
 from kraby_study.records import StudyAttrs, Tally, param_name, value_label
@@ -33,7 +34,7 @@ RunStage = Callable[[DictConfig, StudyPlan], tuple[CommandRun, Tally]]
 def stage_plan(campaign: Campaign, stage: Stage) -> tuple[DictConfig, StudyPlan]:
     """A stage's config and plan, its earlier stages' winners read from the store."""
     lookup = StoreWinners(names={s.study: s.name for s in campaign.before(stage)})
-    cfg = stage_config(campaign, stage, lookup)
+    cfg = resumed_stage(campaign, stage, lookup)
     inputs = [i.stored() for i in lookup.inputs if i.setting != stage.parameter]
     plan = dataclasses.replace(expand_study(cfg), inputs=inputs,
                                campaign=campaign.record(stage))

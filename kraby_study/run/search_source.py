@@ -20,7 +20,7 @@ from kraby_study.plan.space import (
     search_floor,
     wilcoxon_seeds,
 )
-from kraby_study.plan.spec import TrialSpec, fingerprint
+from kraby_study.plan.spec import TrialSpec, fingerprint, seeding_of
 from kraby_study.records import (
     Failure,
     Outcome,
@@ -108,7 +108,8 @@ class SearchSource(StudySource):
             checkpoint_every=every, seed_scores=seed_scores, seeds=int(cfg.budget.seeds),
             objective=names[0], cost=names[1] if len(names) == 2 else None,
             eval_episodes=int(cfg.search.eval_episodes), label=short_label(params, key),
-            tensorboard_run=tensorboard_run(cfg, self.ledger.name, key))
+            tensorboard_run=tensorboard_run(cfg, self.ledger.name, key),
+            seeding=seeding_of(cfg))
 
     def checkpoint(self, number: int, step: int, value: float) -> bool:
         """Report an intermediate value to the pruner; False stops the trial."""

@@ -99,13 +99,14 @@ def tensorboard_folder(run: str, seed: int) -> Path:
 
 
 def make_env(spec: TrialSpec, seed: int, shards: int = 1) -> Any:
-    """The batched world of a spec: n_envs legs stepped in ``shards`` processes."""
+    """The batched world of a spec: n_envs legs stepped in ``shards`` processes, each leg on
+    its own stream of ``seed`` by the spec's seeding scheme."""
     from kraby_envs import make_batched
 
     env = dict(spec.settings["env"])
     max_steps = int(env.pop("max_episode_steps"))
     return make_batched(n_envs=int(spec.settings["ppo"]["n_envs"]), seed=seed,
-                        max_episode_steps=max_steps, shards=shards, **env)
+                        max_episode_steps=max_steps, shards=shards, seeding=spec.seeding, **env)
 
 
 @dataclass

@@ -157,6 +157,21 @@ class StoreReader:
         except sa.exc.SQLAlchemyError as err:
             raise StoreError(f"cannot read the store {self.url}: {first_line(err)}") from None
 
+    def study_attrs(self, name: str) -> StudyAttrs | None:
+        """The stored attributes of the study named ``name`` (its definition among them),
+        read without its trials; None when there is no such study.
+
+        Raises:
+            StoreError: The database failed while being read; one line.
+        """
+        try:
+            with self._engine.connect() as connection:
+                names, attrs, _ = _read_studies(connection)
+        except sa.exc.SQLAlchemyError as err:
+            raise StoreError(f"cannot read the store {self.url}: {first_line(err)}") from None
+        ids = {study_name: study_id for study_id, study_name in names.items()}
+        return attrs[ids[name]] if name in ids else None
+
     def curves(self, name: str, numbers: Collection[int] | None = None) -> pd.DataFrame:
         """Learning-curve points of a study read by :meth:`studies` (columns
         ``CURVE_COLUMNS``), of the given trials or all, sorted by trial and step."""

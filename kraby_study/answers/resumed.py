@@ -1,0 +1,52 @@
+"""What a stored study fixes for the command that resumes it: the settings the command left
+open (null) are taken from the study's stored definition, so a study stored before a default
+changed resumes exactly as it began; a new study gets today's default.
+
+- ``seeding``: the stored scheme (offset for a study stored before streams existed), else
+  streams.
+- ``confirm.seed`` (a confirm study): the first of its stored seeds, else 1000.
+
+A setting the command gives stays as given: if it differs from the stored study, the store
+refuses it as a changed definition, naming the setting.
+"""
+
+from __future__ import annotations
+
+from omegaconf import DictConfig, open_dict
+
+from kraby_study.config.winner import Lookup
+from kraby_study.plan.campaign import Campaign, Stage, stage_config
+from kraby_study.records import SEEDING, StudyAttrs, StudyKind, stored_seeding
+from kraby_study.store.rows import has_store, reading
+
+
+def stored_attrs(url: str, name: str) -> StudyAttrs | None:
+    """The stored attributes of study ``name``; None when the store or the study is not
+    there (nothing is created)."""
+    if not has_store(url):
+        return None
+    with reading(url) as reader:
+        return reader.study_attrs(name)
+
+
+def resumed(cfg: DictConfig, name: str) -> DictConfig:
+    """``cfg`` with ``seeding`` (and, for a confirm, ``confirm.seed``) settled for the study
+    named ``name`` in ``cfg.storage``: as given, else as stored, else the default."""
+    if cfg.seeding is not None and (cfg.confirm.seed is not None):
+        return cfg
+    attrs = stored_attrs(str(cfg.storage), name)
+    definition = attrs.definition if attrs is not None and attrs.fingerprint else None
+    out = cfg.copy()
+    with open_dict(out):
+        if out.seeding is None:
+            out.seeding = stored_seeding(definition) if definition is not None else SEEDING
+        if (out.confirm.seed is None and definition is not None
+                and definition.get("kind") == StudyKind.CONFIRM.value
+                and definition.get("seeds")):
+            out.confirm.seed = min(int(s) for s in definition["seeds"])
+    return out
+
+
+def resumed_stage(campaign: Campaign, stage: Stage, lookup: Lookup) -> DictConfig:
+    """A campaign stage's config (:func:`stage_config`), settled for its stored study."""
+    return resumed(stage_config(campaign, stage, lookup), stage.name)
