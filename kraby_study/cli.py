@@ -42,6 +42,9 @@ executor=local|ray: trials run in worker processes here, or as Ray actors on a c
 (ray.address=auto|host:port; null starts a Ray instance here); the command writes the store.
 tensorboard_dir=DIR: each run's SB3 logs in DIR/<study>/<value or trial>-seed<n>, for
 tensorboard --logdir DIR (pip install 'kraby-study[tensorboard]').
+seeding=streams|offset: how a run's seed gives each leg its stream (streams: independent
+children of the seed; offset: seed + leg, the scheme before streams); unset, a stored study
+keeps its own and a new one takes streams.
 Any setting can be overridden with key=value (ppo.gamma=0.8); a flag such as --storage URL is
 the same as its key=value form (storage=URL), on every command that takes it.
 Your own YAML files in ./conf/<group>/ extend these groups and win over packaged files of the
@@ -157,7 +160,8 @@ CONFIRM_FLAGS = [
          "confirm.select=RULE: final_score, auc or fastest_tied (default: fastest_tied for a "
          "two-objective search, final_score otherwise)", "RULE"),
     Flag("--seeds", "confirm.seeds", "fresh seeds per configuration, none used by the study, as "
-         "confirm.seeds=N (default 10)", "N", _at_least_two),
+         "confirm.seeds=N (default 10); they start at confirm.seed (default 1000, apart from "
+         "the tuning seeds 0, 1, ... of run and optuna)", "N", _at_least_two),
     STORAGE, WORKERS,
 ]
 

@@ -592,6 +592,13 @@ def trial_seeds(trial: StoredTrial, per_trial: int = 1) -> list[int]:
     return [] if seed is None else [int(seed) + i for i in range(per_trial)]
 
 
+def offset_leg_seeds(trial: StoredTrial, per_trial: int = 1) -> set[int]:
+    """Under offset seeding, the seed every leg of a trial's runs was reset with: s + i for
+    each of its seeds s and legs i < n_envs (two runs share a leg's stream where these meet)."""
+    n_envs = int(trial.user_attrs.get("settings", {}).get("ppo", {}).get("n_envs", 1))
+    return {seed + leg for seed in trial_seeds(trial, per_trial) for leg in range(n_envs)}
+
+
 # A search's objectives ------------------------------------------------------------------------
 
 REWARDS = ("final_reward", "evaluation")

@@ -179,3 +179,21 @@ def test_a_search_trial_equal_to_a_baseline_is_trained_once(folder: Path) -> Non
     labels = study.user_attrs["kraby_definition"]["values"]
     assert "t1 = ppo=start" in labels and len(labels) == 4
     assert len(study.trials) == 4 * 2
+
+
+def test_a_confirm_of_an_evaluation_search_scores_on_the_same_fixed_targets(
+        workdir: Path) -> None:
+    # The search scored its trials on the fixed targets; its confirm scores every arm on
+    # them too (a fixed test set), and stores the objective in its definition.
+    space = SPACE.replace("name: tiny", "name: evaluated").replace("trials: 4", "trials: 2")
+    finished_search(workdir, "evaluated", space, "optuna", "search=evaluated", "--workers",
+                    "2", *TINY, "search.objective=evaluation", "search.eval_episodes=4")
+    assert run_cli("confirm", "--study-name", "evaluated", "--top", "1", "--seeds", "2",
+                   "--workers", "2", *TINY) == 0
+    study = load(workdir / "studies" / "kraby.db", "evaluated-confirm")
+    definition = study.user_attrs["kraby_definition"]
+    assert definition["objective"] == "evaluation" and definition["eval_episodes"] == 4
+    for trial in study.trials:
+        # Scored by evaluation: the training reward is stored beside it and differs.
+        assert trial.value == trial.user_attrs["final_score"]
+        assert trial.value != trial.user_attrs["train_reward"]

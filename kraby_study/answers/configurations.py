@@ -10,9 +10,11 @@ from kraby_study.errors import StoreError
 from kraby_study.front import spread
 from kraby_study.plan.confirm import Arm, ConfirmedStudy
 from kraby_study.records import (
+    REWARDS,
     Outcome,
     StudyKind,
     counted,
+    objective_names,
     outcome,
     param_name,
     score,
@@ -63,10 +65,13 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
                          f"fewer than --top {top}")
     if not arms:
         raise StoreError(f"search {ledger.name!r} has no complete trial on its front yet")
+    search = definition.get("search", {}) if attrs.kind == StudyKind.SEARCH else {}
     return ConfirmedStudy(name=ledger.name, arms=arms[:top], used_seeds=used,
                           steps=int(definition["steps"]),
                           curve_every=int(definition["curve_every"]), env_keys=env_keys,
-                          two_objectives=front)
+                          two_objectives=front,
+                          objective=objective_names(search.get("objective", REWARDS[0]))[0],
+                          eval_episodes=int(search.get("eval_episodes", 16)))
 
 
 def _front_arms(name: str, done: list[Any], top: int, floor: str | None) -> list[Arm]:

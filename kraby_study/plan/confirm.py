@@ -21,7 +21,7 @@ from kraby_study.errors import ConfigError
 from kraby_study.plan.racing import race_rules
 from kraby_study.plan.settings import model_path, settings_with_ppo, tensorboard_run
 from kraby_study.plan.spec import StudyPlan, TrialSpec, seeding_of, with_seeding
-from kraby_study.records import SelectRule, StudyKind, sweep_key
+from kraby_study.records import REWARDS, SelectRule, StudyKind, sweep_key
 
 TEST_SEED = 1000
 """A new confirm study's first seed when confirm.seed is null."""
@@ -60,6 +60,11 @@ class ConfirmedStudy:
     """Env settings it varied (written with the ppo settings by ``best``)."""
     two_objectives: bool = False
     """A two-objective search: its arms are trials of its front, spread along it."""
+    objective: str = "final_reward"
+    """How its runs were scored, and so how the confirm scores its arms: final_reward, or
+    evaluation (a search's deterministic policy on the fixed targets: a fixed test set)."""
+    eval_episodes: int = 16
+    """Fixed targets of the evaluation objective."""
 
 
 def baseline_arm(name: str, overrides: Sequence[str]) -> Arm:
@@ -127,6 +132,8 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
     if len(set(labels)) != len(labels):
         raise ConfigError(f"confirm: two configurations are named alike ({', '.join(labels)})")
     first = TEST_SEED if cfg.confirm.seed is None else int(cfg.confirm.seed)
+    objective = source.objective if source else REWARDS[0]
+    episodes = source.eval_episodes if source else int(cfg.search.eval_episodes)
     seeds = fresh_seeds(source.used_seeds if source else set(), int(cfg.confirm.seeds),
                         first=first)
     scheme = seeding_of(cfg)
@@ -138,7 +145,8 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
                        curve_every=curve_every, settings=arm.settings, value=arm.label,
                        model_path=model_path(cfg, name, sweep_key(index, seed)),
                        label=f"{arm.label} seed {seed}",
-                       tensorboard_run=tensorboard_run(cfg, name, arm.label), seeding=scheme)
+                       tensorboard_run=tensorboard_run(cfg, name, arm.label), seeding=scheme,
+                       objective=objective, eval_episodes=episodes)
              for index, arm in enumerate(arms) for seed in seeds]
     definition = {
         "kind": StudyKind.CONFIRM.value, "parameter": PARAMETER, "values": labels,
@@ -149,6 +157,10 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
         "seeds": seeds, "steps": steps, "curve_every": curve_every,
         "env_keys": source.env_keys if source else [],
     }
+    if objective != REWARDS[0]:
+        # Only a confirm of an evaluation search stores its objective: every other confirm
+        # keeps the definition (and the fingerprint) it had before confirms scored that way.
+        definition.update(objective=objective, eval_episodes=episodes)
     if racing is not None:
         definition["racing"] = racing.stored()
     return StudyPlan(name=name, parameter=PARAMETER, values=labels, specs=specs,

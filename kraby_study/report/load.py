@@ -13,7 +13,16 @@ import pandas as pd
 from optuna.trial import FrozenTrial
 
 from kraby_study.errors import ConfigError, StoreError
-from kraby_study.records import StudyKind, Tally, counted, tally, trial_seeds
+from kraby_study.records import (
+    LEGACY_SEEDING,
+    StudyKind,
+    Tally,
+    counted,
+    offset_leg_seeds,
+    stored_seeding,
+    tally,
+    trial_seeds,
+)
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
 
@@ -37,6 +46,9 @@ class StudyData:
         provenance: What made its trials: each distinct provenance record, by key.
         source_seeds: A confirm study's source's seeds (the tuning seeds), None when it has
             no source or the source is not in the store.
+        source_seeding: That source's seeding scheme (None likewise).
+        source_legs: Under offset seeding of that source, the seed each leg of its runs was
+            reset with (:func:`kraby_study.records.offset_leg_seeds`); None otherwise.
     """
 
     name: str
@@ -49,6 +61,8 @@ class StudyData:
     replaced: int = 0
     provenance: dict[str, dict[str, str]] = field(default_factory=dict)
     source_seeds: list[int] | None = None
+    source_seeding: str | None = None
+    source_legs: set[int] | None = None
 
     @property
     def tally(self) -> Tally:
@@ -84,18 +98,25 @@ def load_study(store: Store, name: str) -> StudyData:
     return StudyData(name=name, kind=kind, ledger=ledger, definition=dict(attrs.definition),
                      trials=trials, curves=curves, planned=attrs.planned,
                      replaced=len(every) - len(trials), provenance=ledger.provenances(),
-                     source_seeds=_source_seeds(store, kind, attrs.definition))
+                     **_source(store, kind, attrs.definition))
 
 
-def _source_seeds(store: Store, kind: StudyKind, definition: dict[str, Any]) -> list[int] | None:
-    """The seeds a confirm study's source trained (its tuning seeds), if it is in the store."""
+def _source(store: Store, kind: StudyKind, definition: dict[str, Any]) -> dict[str, Any]:
+    """A confirm study's source as its reproducibility page reads it: the seeds it trained (its
+    tuning seeds), its seeding scheme and, under offset, its legs' seeds; nothing when it has no
+    source or the source is not in the store."""
     source = definition.get("source")
     if kind != StudyKind.CONFIRM or not source or source not in store.study_names():
-        return None
+        return {}
     ledger = store.load(str(source))
     attrs = ledger.attrs
     per_trial = int(attrs.definition.get("seeds", 1)) if attrs.kind == StudyKind.SEARCH else 1
-    return sorted({seed for t in counted(ledger.trials()) for seed in trial_seeds(t, per_trial)})
+    trials = counted(ledger.trials())
+    seeding = stored_seeding(attrs.definition)
+    legs = ({leg for t in trials for leg in offset_leg_seeds(t, per_trial)}
+            if seeding == LEGACY_SEEDING else None)
+    return {"source_seeds": sorted({seed for t in trials for seed in trial_seeds(t, per_trial)}),
+            "source_seeding": seeding, "source_legs": legs}
 
 
 def check_format(fmt: str) -> str:

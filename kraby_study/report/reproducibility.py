@@ -15,12 +15,16 @@ from pathlib import Path
 from typing import Any
 
 from kraby_study.records import (
+    LEGACY_SEEDING,
+    SEEDING_TEXT,
     Outcome,
     StoredTrial,
     StudyKind,
     TrialAttrs,
+    offset_leg_seeds,
     outcome,
     seed_text,
+    stored_seeding,
     trial_seeds,
 )
 from kraby_study.report.document import Block, Heading, Items, Table, Text, to_markdown
@@ -84,12 +88,14 @@ def warnings(trials: Sequence[StoredTrial], records: dict[str, dict[str, str]]) 
 def _seeds_block(data: StudyData, trials: Sequence[StoredTrial]) -> list[str]:
     per_trial = int(data.definition.get("seeds", 1)) if data.kind == StudyKind.SEARCH else 1
     own = {seed for t in trials for seed in trial_seeds(t, per_trial)}
+    seeding = stored_seeding(data.definition)
+    scheme = f"Seeding: {SEEDING_TEXT[seeding]}."
     if data.kind != StudyKind.CONFIRM:
         return [f"Tuning seeds (the seeds this study's runs trained): {seed_text(own)}.",
-                "Test seeds: none in this study; `kraby-study confirm` retrains chosen "
+                scheme, "Test seeds: none in this study; `kraby-study confirm` retrains chosen "
                 "settings on fresh seeds."]
     planned = [int(s) for s in data.definition.get("seeds", [])] or sorted(own)
-    lines = [f"Test seeds (fresh seeds of this confirm study): {seed_text(planned)}."]
+    lines = [f"Test seeds (fresh seeds of this confirm study): {seed_text(planned)}.", scheme]
     source = data.definition.get("source")
     if not source:
         lines.append("No source study (baselines only): no tuning seeds to keep apart.")
@@ -102,7 +108,24 @@ def _seeds_block(data: StudyData, trials: Sequence[StoredTrial]) -> list[str]:
                      f"{seed_text(data.source_seeds)}.")
         lines.append("Test and tuning seeds are disjoint." if not shared else
                      f"Warning: test and tuning seeds share {seed_text(shared)}.")
+        lines += _shared_streams(data, trials, seeding)
     return lines
+
+
+def _shared_streams(data: StudyData, trials: Sequence[StoredTrial], seeding: str) -> list[str]:
+    """Whether test runs reset legs on the streams of tuning runs: only where both studies
+    seed by offset (s + i), whose runs share streams with every run less than n_envs apart."""
+    if data.source_seeding is None:
+        return []
+    if seeding != LEGACY_SEEDING or data.source_legs is None:
+        return ["Test and tuning runs share no leg's stream (one of the two studies seeds by "
+                "streams)."]
+    reusing = [t for t in trials if offset_leg_seeds(t) & data.source_legs]
+    if not reusing:
+        return ["Test and tuning runs share no leg's stream."]
+    return [f"Warning: {len(reusing)} of {len(trials)} test runs reset some of their legs on "
+            "the same streams as tuning runs (both studies seed by offset), so their episodes "
+            "are partly those the settings were chosen on."]
 
 
 def _flat(settings: dict[str, Any], prefix: str = "") -> list[str]:
