@@ -32,7 +32,7 @@ def stored_attrs(url: str, name: str) -> StudyAttrs | None:
 def resumed(cfg: DictConfig, name: str) -> DictConfig:
     """``cfg`` with ``seeding`` (and, for a confirm, ``confirm.seed``) settled for the study
     named ``name`` in ``cfg.storage``: as given, else as stored, else the default."""
-    if cfg.seeding is not None and (cfg.confirm.seed is not None):
+    if cfg.seeding is not None and cfg.confirm.seed is not None:
         return cfg
     attrs = stored_attrs(str(cfg.storage), name)
     definition = attrs.definition if attrs is not None and attrs.fingerprint else None

@@ -10,7 +10,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from kraby_envs.seeding import SCHEMES
+from kraby_envs.seeding import check_scheme
 from kraby_study.config.schema import PPOConfig
 from kraby_study.errors import ConfigError
 from kraby_study.records import SelectRule
@@ -118,9 +118,10 @@ def validate(cfg: DictConfig) -> None:
     validate_tensorboard(cfg)
     _require(int(cfg.seed) >= 0, f"seed must be >= 0, got {cfg.seed}")
     if cfg.seeding is not None:
-        _require(str(cfg.seeding) in SCHEMES,
-                 f"seeding must be one of {', '.join(SCHEMES)} (or null: a stored study's own), "
-                 f"got {cfg.seeding!r}")
+        try:
+            check_scheme(str(cfg.seeding))
+        except ValueError as err:
+            raise ConfigError(f"{err} (or null: a stored study's own)") from None
     if cfg.confirm.seed is not None:
         _require(int(cfg.confirm.seed) >= 0,
                  f"confirm.seed must be >= 0, got {cfg.confirm.seed}")

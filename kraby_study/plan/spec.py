@@ -38,7 +38,7 @@ class TrialSpec:
     and nothing within a seed (searches with the wilcoxon pruner, which pairs seeds)."""
     seeds: int = 1
     """Training runs, with seeds seed, seed + 1, ...; the score is their mean (searches)."""
-    seeding: str = "streams"
+    seeding: str = SEEDING
     """How a run's seed gives each leg its random stream (:mod:`kraby_envs.seeding`):
     streams (independent children of the seed) or offset (seed + leg, before streams)."""
     objective: str = "final_reward"

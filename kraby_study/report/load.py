@@ -46,9 +46,9 @@ class StudyData:
         provenance: What made its trials: each distinct provenance record, by key.
         source_seeds: A confirm study's source's seeds (the tuning seeds), None when it has
             no source or the source is not in the store.
-        source_seeding: That source's seeding scheme (None likewise).
         source_legs: Under offset seeding of that source, the seed each leg of its runs was
-            reset with (:func:`kraby_study.records.offset_leg_seeds`); None otherwise.
+            reset with (:func:`kraby_study.records.offset_leg_seeds`); None otherwise (no
+            source, or a source seeded by streams).
     """
 
     name: str
@@ -61,7 +61,6 @@ class StudyData:
     replaced: int = 0
     provenance: dict[str, dict[str, str]] = field(default_factory=dict)
     source_seeds: list[int] | None = None
-    source_seeding: str | None = None
     source_legs: set[int] | None = None
 
     @property
@@ -103,8 +102,8 @@ def load_study(store: Store, name: str) -> StudyData:
 
 def _source(store: Store, kind: StudyKind, definition: dict[str, Any]) -> dict[str, Any]:
     """A confirm study's source as its reproducibility page reads it: the seeds it trained (its
-    tuning seeds), its seeding scheme and, under offset, its legs' seeds; nothing when it has no
-    source or the source is not in the store."""
+    tuning seeds) and, under offset seeding, its legs' seeds; nothing when it has no source or
+    the source is not in the store."""
     source = definition.get("source")
     if kind != StudyKind.CONFIRM or not source or source not in store.study_names():
         return {}
@@ -112,11 +111,10 @@ def _source(store: Store, kind: StudyKind, definition: dict[str, Any]) -> dict[s
     attrs = ledger.attrs
     per_trial = int(attrs.definition.get("seeds", 1)) if attrs.kind == StudyKind.SEARCH else 1
     trials = counted(ledger.trials())
-    seeding = stored_seeding(attrs.definition)
     legs = ({leg for t in trials for leg in offset_leg_seeds(t, per_trial)}
-            if seeding == LEGACY_SEEDING else None)
+            if stored_seeding(attrs.definition) == LEGACY_SEEDING else None)
     return {"source_seeds": sorted({seed for t in trials for seed in trial_seeds(t, per_trial)}),
-            "source_seeding": seeding, "source_legs": legs}
+            "source_legs": legs}
 
 
 def check_format(fmt: str) -> str:

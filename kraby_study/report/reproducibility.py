@@ -115,8 +115,6 @@ def _seeds_block(data: StudyData, trials: Sequence[StoredTrial]) -> list[str]:
 def _shared_streams(data: StudyData, trials: Sequence[StoredTrial], seeding: str) -> list[str]:
     """Whether test runs reset legs on the streams of tuning runs: only where both studies
     seed by offset (s + i), whose runs share streams with every run less than n_envs apart."""
-    if data.source_seeding is None:
-        return []
     if seeding != LEGACY_SEEDING or data.source_legs is None:
         return ["Test and tuning runs share no leg's stream (one of the two studies seeds by "
                 "streams)."]
