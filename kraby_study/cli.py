@@ -420,6 +420,7 @@ def cmd_best(args: argparse.Namespace) -> int:
 
     from kraby_study.answers.campaign import campaign_selection
     from kraby_study.answers.selected import require_selection
+    from kraby_study.comparison import CompareOptions
     from kraby_study.config.conf_dirs import USER_CONF_DIR
     from kraby_study.config.ppo_file import write_ppo_config
     from kraby_study.store.store import opened
@@ -432,9 +433,10 @@ def cmd_best(args: argparse.Namespace) -> int:
     config_name = args.name or (f"campaign_{args.campaign}" if args.campaign else f"best_{name}")
     if not config_name.replace("_", "").replace("-", "").isalnum():
         raise ConfigError(f"--name {config_name!r}: use letters, digits, _ and -")
+    options = CompareOptions.of(cfg)
     with opened(cfg.storage, create=False, writer=False) as store:
-        chosen = (campaign_selection(store, args.campaign) if args.campaign
-                  else require_selection(store.load(name)))
+        chosen = (campaign_selection(store, args.campaign, options) if args.campaign
+                  else require_selection(store.load(name), options))
     path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
     write_ppo_config(chosen.settings, chosen.env_keys, chosen.description, path)
     for line in chosen.front:
@@ -447,12 +449,20 @@ def cmd_best(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Redraw the figures and tables of the stored studies."""
+    from types import SimpleNamespace
+
+    from omegaconf import OmegaConf
+
     from kraby_study.report import run_report
 
     chosen, overrides = stored_study(flag_overrides(args, [STORAGE, REPORTED, OUT]))
     cfg = compose_config(overrides)
+    # The report's options with the comparison's: a report may re-analyse any study at any
+    # margin, and read another rule than the stored one (compare.select).
+    options = SimpleNamespace(**OmegaConf.to_container(cfg.report), margin=cfg.compare.margin,
+                              select=cfg.compare.select)
     return run_report(cfg.storage, cfg.out, study=chosen, fmt=args.format, stream=sys.stdout,
-                      policy=not args.no_policy, options=cfg.report)
+                      policy=not args.no_policy, options=options)
 
 
 class _Parser(argparse.ArgumentParser):

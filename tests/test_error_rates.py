@@ -64,13 +64,13 @@ def test_float_noise_is_not_a_difference() -> None:
 
 def test_step_down_on_a_hand_worked_case() -> None:
     # Three values of 3 seeds, each with sd 1: means -3, 4, 4.5. One-sided Welch t of j over g:
-    # (m_j - m_g) / sqrt(2 / 3). Equal n, so Welch-Satterthwaite's df:
-    # (1/3 + 1/3)^2 / ((1/3)^2 / 2 + (1/3)^2 / 2) = 4.
+    # (m_j - m_g) / sqrt(2 / 3). Equal n below 4 seeds, so min(n) - 1 = 2 df (Welch-
+    # Satterthwaite's would be 4, and over-rejects at 2-3 seeds with unequal spreads).
     final = {0: [-4.0, -3.0, -2.0], 1: [3.0, 4.0, 5.0], 2: [3.5, 4.5, 5.5]}
     se = math.sqrt(2 / 3)
-    pi0 = 2 * stats.t.sf(7.5 / se, 4)  # beaten hardest by 2: (k - 1) * p
-    pi1 = 2 * stats.t.sf(0.5 / se, 4)
-    pi2 = 2 * stats.t.sf(-0.5 / se, 4)  # 1 against 2: below the mean, p > 0.5
+    pi0 = 2 * stats.t.sf(7.5 / se, 2)  # beaten hardest by 2: (k - 1) * p
+    pi1 = 2 * stats.t.sf(0.5 / se, 2)
+    pi2 = 2 * stats.t.sf(-0.5 / se, 2)  # 1 against 2: below the mean, p > 0.5
     assert pi0 < pi1 < min(1.0, pi2)
     adjusted0 = 3 * pi0  # Holm, smallest first: x3
     adjusted1 = max(adjusted0, 2 * pi1)

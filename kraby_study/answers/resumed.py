@@ -30,9 +30,12 @@ def stored_attrs(url: str, name: str) -> StudyAttrs | None:
 
 
 def resumed(cfg: DictConfig, name: str) -> DictConfig:
-    """``cfg`` with ``seeding`` (and, for a confirm, ``confirm.seed``) settled for the study
-    named ``name`` in ``cfg.storage``: as given, else as stored, else the default."""
-    if cfg.seeding is not None and (cfg.confirm.seed is not None):
+    """``cfg`` with ``seeding`` (and, for a confirm, ``confirm.seed`` and ``confirm.select``)
+    settled for the study named ``name`` in ``cfg.storage``: as given, else as stored, else
+    the default. A stored confirm keeps its rule unless one is given, so resuming it never
+    changes what it selects."""
+    if cfg.seeding is not None and cfg.confirm.seed is not None and (
+            cfg.confirm.select is not None):
         return cfg
     attrs = stored_attrs(str(cfg.storage), name)
     definition = attrs.definition if attrs is not None and attrs.fingerprint else None
@@ -44,6 +47,9 @@ def resumed(cfg: DictConfig, name: str) -> DictConfig:
                 and definition.get("kind") == StudyKind.CONFIRM.value
                 and definition.get("seeds")):
             out.confirm.seed = min(int(s) for s in definition["seeds"])
+        if (out.confirm.select is None and definition is not None and attrs is not None
+                and definition.get("kind") == StudyKind.CONFIRM.value and attrs.select):
+            out.confirm.select = str(attrs.select)
     return out
 
 
