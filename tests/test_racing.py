@@ -371,15 +371,16 @@ def test_a_raced_study_is_never_mixed_with_the_same_study_run_fixed(
     assert len(err.strip().splitlines()) == 1 and file_digest(db) == before
 
 
-def test_a_race_is_never_resumed_with_another_test(
-        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize("changed", ["racing.paired=true", "compare.margin=0.1"])
+def test_a_race_is_never_resumed_with_another_test_or_margin(
+        workdir: Path, capsys: pytest.CaptureFixture[str], changed: str) -> None:
     write_study_file(workdir, "pair", "ppo.clip_range", "[0.1, 0.3]")
     raced = ["run", "study=pair", *TINY, "budget.seeds=2", "--racing", "racing.min_seeds=2"]
     assert run_cli(*raced) == 0
     db = workdir / "studies" / "kraby.db"
     before = file_digest(db)
     capsys.readouterr()
-    assert run_cli(*raced, "racing.paired=true") == 2
+    assert run_cli(*raced, changed) == 2
     err = capsys.readouterr().err
     assert "defined differently" in err and "racing" in err
     assert len(err.strip().splitlines()) == 1 and file_digest(db) == before

@@ -6,6 +6,7 @@ import math
 import sqlite3
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import optuna
@@ -541,3 +542,16 @@ def test_a_wilcoxon_search_captions_its_intermediate_values_as_seed_scores() -> 
     assert caption(search("wilcoxon"), "intermediate") == SEED_SCORES_CAPTION
     assert caption(search("median"), "intermediate") == CAPTIONS["intermediate"]
     assert caption(search("wilcoxon"), "history") == CAPTIONS["history"]
+
+
+def test_a_report_at_margin_zero_reads_as_before(raced_store: str, tmp_path: Path) -> None:
+    # compare.margin=0: no value can be equivalent, and the verdict is the earlier releases'.
+    index = write_report(raced_store, tmp_path / "zero", policy=False,
+                         options=SimpleNamespace(margin=0.0))
+    text = (index.out / "clip_range" / "summary.md").read_text()
+    verdict = text.split("\n\n")[1]
+    assert "tied (not significantly worse, closed Holm-Welch step-down, alpha 0.05): 0.2)" \
+        in verdict and "equivalent (shown within" not in verdict
+    summary = _read_summary(index.out, "clip_range")
+    assert list(summary["answer"]) == ["best", "undecided", "worse"]
+    assert (summary["margin"] == 0).all() and summary["p_equivalent"].dropna().eq(1.0).all()
