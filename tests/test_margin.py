@@ -30,25 +30,31 @@ def _five(mean: float, scale: float = 0.05) -> list[float]:
 
 
 def test_the_four_answers_by_hand() -> None:
-    # Four values of 5 seeds, equal spreads: every difference has se 0.05 and, at equal n of 5
-    # with equal variances, Welch-Satterthwaite's df (2 x 2.5)^2 / (2 x 2.5^2 / 4) = 8.
-    # Margin 0.2 x |best mean -1.0| = 0.2 in score units; k - 1 = 3 comparisons.
+    # Four values of 5 seeds with equal spreads: each mean's squared standard error is
+    # s = 2.5 x 0.05^2 / 5 = 0.00125. The margin is 0.2 x |best mean -1.0| = 0.2 in score
+    # units; as a fraction of the reference's |mean|, "j above g by more than it" is the
+    # contrast 1.2 mu_j - mu_g > 0 (scores below 0), with se sqrt(1.44 s + s) = 0.05523 and
+    # Welch-Satterthwaite's df (2.44 s)^2 / ((1.44 s)^2 / 4 + s^2 / 4) = 7.75.
     final = {"A": _five(-1.0), "B": _five(-1.01), "C": _five(-1.5), "D": _five(-1.12)}
     result = compare(final, 0.2)
     assert result.best == "A" and result.margin == pytest.approx(0.2)
-    # B, 0.01 below A: "mu_A - mu_B < 0.2" at t = (0.01 - 0.2) / 0.05 = -3.8; against C and D
-    # B is above, so A's p is the largest: 3 x t.cdf(-3.8, 8) = 0.0157 < 0.05: equivalent.
-    assert result.p_equivalent["B"] == pytest.approx(3 * stats.t.cdf(-3.8, 8), rel=1e-6)
-    # C, 0.5 below: "mu_A - mu_C > 0.2" at t = 6, pi_C = 3 x t.sf(6, 8), first in Holm's order
-    # of the four pi's: x 4. D, 0.12 below, is neither: t = -1.6 each way.
-    assert result.p_worse["C"] == pytest.approx(4 * 3 * stats.t.sf(6.0, 8), rel=1e-6)
-    assert result.p_equivalent["D"] == pytest.approx(3 * stats.t.cdf(-1.6, 8), rel=1e-6)
+    s = 2.5 * 0.05 ** 2 / 5
+    se = math.sqrt(2.44 * s)
+    df = (2.44 * s) ** 2 / ((1.44 * s) ** 2 / 4 + s ** 2 / 4)
+    # B: against A the contrast is -1.2 + 1.01 = -0.19, the largest of its three (C and D lie
+    # below B), so p_equivalent = 3 x t.cdf(-0.19 / se, df) = 0.014 < 0.05: equivalent.
+    assert result.p_equivalent["B"] == pytest.approx(3 * stats.t.cdf(-0.19 / se, df), rel=1e-6)
+    # C: A's contrast -1.2 + 1.5 = 0.3 beats it hardest, pi_C = 3 x t.sf(0.3 / se, df), the
+    # smallest of the four pi's, so x 4 in Holm's order: worse. D: A's contrast -1.2 + 1.12 =
+    # -0.08 shows neither (p_equivalent 3 x t.cdf(-0.08 / se, df) = 0.28): undecided.
+    assert result.p_worse["C"] == pytest.approx(4 * 3 * stats.t.sf(0.3 / se, df), rel=1e-6)
+    assert result.p_equivalent["D"] == pytest.approx(3 * stats.t.cdf(-0.08 / se, df), rel=1e-6)
     assert result.p_worse["D"] > 0.5
     assert result.answers == {"A": Answer.BEST, "B": Answer.EQUIVALENT, "C": Answer.WORSE,
                               "D": Answer.UNDECIDED}
     assert (result.equivalent, result.worse, result.undecided) == (["B"], ["C"], ["D"])
-    # The smallest margin these seeds resolve: (t(1 - 0.05 / 3, 8) + t(0.8, 8)) x 0.05.
-    resolvable = (stats.t.ppf(1 - 0.05 / 3, 8) + stats.t.ppf(0.8, 8)) * 0.05
+    # The smallest margin these seeds resolve: (t(1 - 0.05 / 3, df) + t(0.8, df)) x se.
+    resolvable = (stats.t.ppf(1 - 0.05 / 3, df) + stats.t.ppf(0.8, df)) * se
     assert result.resolvable["B"] == pytest.approx(resolvable, rel=1e-6)
     assert not result.below_resolution and "margin 0.2 in score units" in result.margin_text()
     # At a margin below it, the comparison says so.
@@ -114,8 +120,12 @@ def test_the_noisy_cheap_candidate_is_not_selected() -> None:
     # Worse at margin 0: Holm over two pi's, the smallest x 2: 2 x t.sf(0.004 / se, df).
     assert result.p_adjusted[1] == pytest.approx(2 * stats.t.sf(0.004 / se, df), rel=1e-6)
     assert result.p_adjusted[1] > 0.05  # not shown worse: the old rule's "tie"
-    # Equivalent: t.cdf((0.004 - 0.0028) / se, df) > 0.5: no evidence at all.
-    assert result.p_equivalent[1] == pytest.approx(stats.t.cdf(0.0012 / se, df), rel=1e-6)
+    # Equivalent: the contrast 1.2 x (-0.0140) + 0.0180 = 0.0012 > 0, with se
+    # sqrt((1.44 x 0.001^2 + 0.007^2) / 10) and its Welch-Satterthwaite df: p > 0.5, no
+    # evidence at all.
+    a, b = 1.44 * 0.001 ** 2 / 10, 0.007 ** 2 / 10
+    p = stats.t.cdf(0.0012 / math.sqrt(a + b), (a + b) ** 2 / (a ** 2 / 9 + b ** 2 / 9))
+    assert result.p_equivalent[1] == pytest.approx(p, rel=1e-6) and p > 0.5
     assert result.answers[1] == Answer.UNDECIDED
     tied = front_choice(front, seeds, "fastest_tied")
     evidence = front_choice(front, seeds, "fastest_equivalent")
