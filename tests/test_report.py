@@ -440,7 +440,7 @@ def test_a_raced_verdict_says_what_the_race_saved(raced_report: ReportIndex) -> 
     # undecided, and the dropped value counts as worse.
     assert ("margin 0.2 in score units (0.2 x the best's |mean| 1): equivalent (shown within "
             "the margin of the best): none; undecided: 0.2; worse (shown below the best by "
-            "more than the margin): 0.3;") in verdict
+            "more than the margin): 0.3 (every value answered by") in verdict
     assert "warning: the margin 0.2 is below what these seeds resolve" in verdict
     # The table says where the race dropped it, and the notes what a dropped row shows.
     header = next(line for line in text.splitlines() if line.startswith("| clip_range |"))

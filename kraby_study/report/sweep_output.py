@@ -237,8 +237,8 @@ def answers_text(sweep: Sweep) -> str:
     worse = [*compared.worse, *sorted(sweep.dropped)]
     text = (f"{compared.margin_text()}: equivalent (shown within the margin of the best): "
             f"{named(compared.equivalent)}; undecided: {named(compared.undecided)}; worse "
-            f"(shown below the best by more than the margin): {named(worse)}; every {noun} "
-            f"{answers_name(compared.alpha)}")
+            f"(shown below the best by more than the margin): {named(worse)} (every {noun} "
+            f"answered by {answers_name(compared.alpha)})")
     warning = compared.resolution_text()
     return text + (f"; warning: {warning}" if warning else "")
 
