@@ -42,6 +42,9 @@ executor=local|ray: trials run in worker processes here, or as Ray actors on a c
 (ray.address=auto|host:port; null starts a Ray instance here); the command writes the store.
 tensorboard_dir=DIR: each run's SB3 logs in DIR/<study>/<value or trial>-seed<n>, for
 tensorboard --logdir DIR (pip install 'kraby-study[tensorboard]').
+compare.margin=F (default 0.2): the smallest difference that matters, F x the best's |mean|;
+each value is best, equivalent (within it), worse (below the best by more) or undecided.
+compare.select=RULE: best, report and ${winner:...} apply RULE instead of a study's stored one.
 Any setting can be overridden with key=value (ppo.gamma=0.8); a flag such as --storage URL is
 the same as its key=value form (storage=URL), on every command that takes it.
 Your own YAML files in ./conf/<group>/ extend these groups and win over packaged files of the
@@ -154,8 +157,9 @@ CONFIRM_FLAGS = [
          "score, the cheapest, the rest evenly in cost order) or the sweep's best values, as "
          "confirm.top=K (default 5)", "K", _positive_int),
     Flag("--select", "confirm.select", "the confirm study's selection rule, as "
-         "confirm.select=RULE: final_score, auc or fastest_tied (default: fastest_tied for a "
-         "two-objective search, final_score otherwise)", "RULE"),
+         "confirm.select=RULE: final_score, auc, fastest_equivalent or fastest_tied (default: "
+         "fastest_equivalent for a two-objective search, final_score otherwise; a stored "
+         "confirm keeps its own)", "RULE"),
     Flag("--seeds", "confirm.seeds", "fresh seeds per configuration, none used by the study, as "
          "confirm.seeds=N (default 10)", "N", _at_least_two),
     STORAGE, WORKERS,
@@ -526,7 +530,8 @@ def build_parser() -> argparse.ArgumentParser:
         "configuration (ppo=tuned unless you choose; it is enqueued) is infeasible: off the "
         "front and out of the sampler's good trials, so the search looks for settings as good "
         "as the floor at less cost. list, best and the report show the front; "
-        "best writes its cheapest trial tied with the best score, and confirm --study-name "
+        "best writes its cheapest trial shown equivalent to the best score (within "
+        "compare.margin; a search stored before keeps fastest_tied), and confirm --study-name "
         "retrains --top trials spread along it.\n\n" + EPILOG)
     for name in ("run", "optuna", "confirm"):
         parsers[name].add_argument(
@@ -540,7 +545,9 @@ def build_parser() -> argparse.ArgumentParser:
     for name in ("run", "confirm"):
         parsers[name].add_argument(
             "--racing", action="store_true",
-            help="run seeds in rounds and stop the values significantly worse than the best "
+            help="run seeds in rounds; a value leaves once shown worse than the best by more "
+            "than compare.margin, or shown equivalent to it (stored with the race; margin 0: "
+            "only values shown worse leave) "
             "(as racing.enabled=true; racing.min_seeds, default 3, racing.alpha, default "
             "0.05, and racing.paired, default false, tune it); budget.seeds (confirm: --seeds) "
             "is the most any value gets")
@@ -553,8 +560,10 @@ def build_parser() -> argparse.ArgumentParser:
         "budget=quick for baselines alone), with seeds no trial of the study used. The study "
         "NAME-confirm is resumable like run; report it, then `kraby-study best --study-name "
         "NAME-confirm` writes the confirmed winner's settings, selected by --select (of a "
-        "two-objective search's front by default fastest_tied: the cheapest in CPU seconds "
-        "among the arms tied with the best).\n\n" + EPILOG)
+        "two-objective search's front by default fastest_equivalent: the cheapest in CPU "
+        "seconds among the best arm and those shown equivalent to it). `kraby-study best "
+        "--study-name NAME-confirm compare.select=RULE` re-selects a stored confirm by another "
+        "rule without retraining.\n\n" + EPILOG)
     parsers["best"].add_argument("--name", help="config name to write in ./conf/ppo/ (default "
                                  "best_<study>, or campaign_<NAME>)")
     parsers["best"].add_argument("--campaign", metavar="NAME",
