@@ -428,12 +428,17 @@ class CompareOptions:
                    select=None if select is None else str(select))
 
 
+def seeds_needed(min_seeds: int) -> int:
+    """The seeds a value needs to be in the family: ``min_seeds``, at least 2 (a test needs
+    two). The one place the setting is clamped."""
+    return max(2, int(min_seeds))
+
+
 def evidence(scores: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS
              ) -> tuple[int, dict[K, np.ndarray], dict[K, int]]:
-    """The seeds a value needs (``min_seeds``, at least 2: the one place it is clamped), the
-    values that have them (the family, NaN dropped), and the others that have some: their
-    count of seeds."""
-    need = max(2, int(min_seeds))
+    """The seeds a value needs (:func:`seeds_needed`), the values that have them (the family,
+    NaN dropped), and the others that have some: their count of seeds."""
+    need = seeds_needed(min_seeds)
     clean = {g: _clean(v) for g, v in scores.items()}
     family = {g: x for g, x in clean.items() if len(x) >= need}
     left_out = {g: len(x) for g, x in clean.items() if 0 < len(x) < need}

@@ -202,3 +202,18 @@ def test_options_come_from_the_config() -> None:
     assert CompareOptions.of(cfg) == CompareOptions(margin=0.1, min_seeds=3,
                                                     select="fastest_equivalent")
     assert CompareOptions.of(SimpleNamespace()) == CompareOptions()
+
+
+def test_low_measured_coverage_is_printed_from_five_seeds_on() -> None:
+    # From 5 seeds on, the rows of kraby_study/coverage.csv below 0.93 (lognormal sigma 1, a
+    # failing seed) are printed beside intervals from that many seeds; the others are not.
+    from kraby_study.coverage import LOW, coverage_note, coverage_table
+
+    table = coverage_table()
+    at_ten = table[table["n"] == 10]
+    low = at_ten[at_ten["coverage"] < LOW]
+    assert set(low["distribution"]) >= {"lognormal 1", "failing seed 0.1"}
+    note = coverage_note([10, 10])
+    assert note is not None and "At n = 10 " in note
+    for row in at_ten.itertuples(index=False):
+        assert (f"{row.coverage:.3f} {row.distribution}" in note) == (row.coverage < LOW)

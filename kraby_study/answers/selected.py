@@ -21,7 +21,7 @@ from kraby_study.answers.search_front import (
     front_short,
     search_front,
 )
-from kraby_study.comparison import CompareOptions, compare
+from kraby_study.comparison import CompareOptions, compare, seeds_needed
 from kraby_study.errors import StoreError
 from kraby_study.records import (
     Outcome,
@@ -247,7 +247,7 @@ def require_selection(ledger: StudyLedger, options: CompareOptions | None = None
         done = tally(counted(ledger.trials())).complete
         if done and StudyKind.of(ledger.attrs.kind).swept:
             raise StoreError(f"study {ledger.name!r} selects nothing yet: no value has the "
-                             f"{max(2, options.min_seeds)} complete seeds a selection needs "
+                             f"{seeds_needed(options.min_seeds)} complete seeds a selection needs "
                              f"({done} complete trial(s) in all)")
         raise StoreError(f"study {ledger.name!r} has no complete trial yet")
     if not best.settings:
