@@ -155,6 +155,9 @@ class SweepSelection:
     answer: str = "best"
     """The selected value's answer against the best: best or equivalent (or, under the
     rules that need no evidence, undecided)."""
+    warning: str | None = None
+    """The comparison's warning when the margin is below what the seeds resolve (rules that
+    read the answers only)."""
 
     @property
     def finished(self) -> bool:
@@ -203,7 +206,8 @@ def selected_value(attrs: StudyAttrs, trials: Sequence[StoredTrial], curves: Cur
     mean = sum(float(t.value) for t in done) / len(done)  # type: ignore[arg-type]
     return SweepSelection(value=values[index], rule=rule, mean=mean, trials=done,
                           tally=tally(trials, attrs.planned), margin=comparison.margin,
-                          answer=str(comparison.answers.get(index, "best")))
+                          answer=str(comparison.answers.get(index, "best")),
+                          warning=comparison.resolution_text() if RULES[rule].tests else None)
 
 
 def value_text(attrs: StudyAttrs, chosen: SweepSelection) -> str:
@@ -215,11 +219,15 @@ def value_text(attrs: StudyAttrs, chosen: SweepSelection) -> str:
 
 
 def answer_text(chosen: SweepSelection) -> str:
-    """``; equivalent to the best within 0.0028`` for a selection other than the best (the
-    margin in score units); empty for the best."""
-    if chosen.answer == "best":
+    """The selection's answer against the best with the margin in score units, for the rules
+    that read the answers (``; the best itself (margin 0.0028 in score units)``), and the
+    warning when the margin is below what the seeds resolve; empty for the other rules."""
+    if chosen.rule not in (SelectRule.FASTEST_EQUIVALENT, SelectRule.FASTEST_TIED):
         return ""
-    return f"; {chosen.answer} against the best (margin {chosen.margin:.3g} in score units)"
+    answer = ("the best itself" if chosen.answer == "best"
+              else f"answered {chosen.answer} against the best")
+    warning = f"; warning: {chosen.warning}" if chosen.warning else ""
+    return f"; {answer} (margin {chosen.margin:.3g} in score units){warning}"
 
 
 def rule_text(chosen: SweepSelection) -> str:
