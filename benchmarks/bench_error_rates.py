@@ -369,6 +369,26 @@ def race_selection(job: tuple[int, int, str, str, int, int, float]
             used / (simulations * k * n), truncated / simulations)
 
 
+def noisy_cheap(job: tuple[int, int, int, float]) -> tuple[int, float, float, float]:
+    """The reviewer's front (issue 35): six candidates, five of the best mean with sd 1, and a
+    cheap one 1.5 sd below them with sd 3. P(the cheap one is selected) by fastest_tied (among
+    the values not shown worse) and by fastest_equivalent (among those shown within the
+    margin, 1 sd here), and how often it is the best, which every rule then selects; selecting
+    it is wrong, it is beyond the margin."""
+    n, simulations, seed, fraction = job
+    rng = np.random.default_rng(seed)
+    tied = evidence = best = 0
+    for _ in range(simulations):
+        scores = {g: LOCATION + rng.normal(size=n) for g in range(5)}
+        scores[5] = LOCATION - 1.5 + 3.0 * rng.normal(size=n)
+        result = compare(scores, fraction)
+        # It is the cheapest, so each rule selects it when it admits it, or when it is best.
+        tied += result.best == 5 or 5 in result.tied
+        evidence += result.best == 5 or 5 in result.equivalent
+        best += result.best == 5
+    return n, tied / simulations, evidence / simulations, best / simulations
+
+
 def table(frame: pd.DataFrame) -> str:
     columns = list(frame.columns)
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
@@ -470,6 +490,11 @@ def main() -> None:
           "simulations each):")
     print(table(pd.DataFrame(found, columns=["values x seeds", "noise", "power"]).pivot_table(
         index="values x seeds", columns="noise", values="power", sort=False).reset_index()))
+    cheap = [noisy_cheap((n, sims, SEED + 1500 + n, margin)) for n in (3, 10)]
+    print("\nThe noisy cheap candidate: six front trials, the cheap one 1.5 sd below the five "
+          f"others with three times their sd; P(it is selected) ({sims:,} simulations each):")
+    print(table(pd.DataFrame(cheap, columns=["seeds", "fastest_tied", "fastest_equivalent",
+                                             "final_score (it is the best)"])))
     race_frame = pd.DataFrame(raced, columns=["values x seeds", "noise", "means",
                                               "margin (sd)", "P(selection outside the margin)",
                                               "runs used / fixed", "truncated"])

@@ -40,8 +40,11 @@ The tests are one-sided Welch t-tests, or paired t-tests on the seeds two values
 (``paired``; seeds as blocks, as in Nelson and Matejcik's common random numbers). Welch's
 degrees of freedom are Welch-Satterthwaite's between values of equal n from
 :data:`SATTERTHWAITE_FROM` seeds on, and the conservative min(n_i, n_j) - 1 otherwise
-(:func:`welch_df`). The margin in score units is delta = fraction x |mean of the best|, read
-from the same data; its own noise is not corrected for (measured with the error rates).
+(:func:`welch_df`). The margin is a fraction f of the reference's |mean| (reported in score
+units as f x |mean of the best|), so "j above g by more than the margin" is the contrast
+(1 - f sign(mu_j)) mu_j - mu_g > 0, and every test against the margin is a t-test of that
+contrast, whose standard error counts the noise of the mean that sets the margin
+(:func:`margin_weights`).
 
 Values with fewer than ``min_seeds`` complete seeds are left out of the family: they are
 never best, equivalent, undecided or worse.
@@ -57,7 +60,7 @@ from enum import StrEnum
 from typing import Generic, TypeVar
 
 import numpy as np
-import scipy  # its submodules load on first use: list and best pay for scipy.special only to test
+import scipy  # submodules load on first use: `list` loads none for a rule that needs no test
 
 from kraby_study.records import best_group
 

@@ -16,11 +16,13 @@ See docs/statistics.md for what each one means and why it was chosen.
   Agarwal et al., "Deep Reinforcement Learning at the Edge of the Statistical Precipice"
   (NeurIPS 2021), with Newcombe's (2006) 95 % score-type interval.
 - Best value: the highest mean final score among the values with at least ``min_seeds``
-  complete seeds (:func:`kraby_study.comparison.compare_with_best`).
-- "Worse than the best" and "tied": :func:`kraby_study.comparison.compare_with_best`, a closed
-  Holm step-down over one-sided Welch t-tests whose family-wise error holds although the best
-  is chosen from the same data. :func:`compare_to_best` gives the raw two-sided Welch p-values
-  against the best, for information only.
+  complete seeds (:func:`kraby_study.comparison.compare`).
+- Every other value's answer at the margin, equivalent, worse or undecided:
+  :func:`kraby_study.comparison.compare`, one comparison the verdict (:func:`verdict`), the
+  table and the selection rules read; "worse" is a closed Holm step-down over one-sided Welch
+  t-tests whose family-wise error holds although the best is chosen from the same data.
+  :func:`compare_to_best` gives the raw two-sided Welch p-values against the best, for
+  information only.
 """
 
 from __future__ import annotations
