@@ -458,8 +458,9 @@ def test_a_raced_campaign_races_every_stage(workdir: Path) -> None:
     db = sqlite_url(workdir / "studies" / "kraby.db")
     for stage in ("trio-c1", "trio-c2", "trio-c3"):
         attrs = StudyAttrs.of(load(db, stage).user_attrs)
+        # The race stores the margin it began with, compare.margin's default.
         assert attrs.definition["racing"] == {"seeds": 3, "min_seeds": 2, "alpha": 0.05,
-                                              "round_seeds": [0, 1, 2]}
+                                              "round_seeds": [0, 1, 2], "margin": 0.2}
         _race_consistent(db, stage)
 
 
