@@ -6,6 +6,7 @@ on whether the source study's winner is the confirmed winner.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -240,7 +241,13 @@ def answers_text(sweep: Sweep) -> str:
             f"(shown below the best by more than the margin): {named(worse)} (every {noun} "
             f"answered by {answers_name(compared.alpha)})")
     warning = compared.resolution_text()
-    return text + (f"; warning: {warning}" if warning else "")
+    if warning:
+        return text + f"; warning: {warning}"
+    if math.isfinite(compared.resolution):
+        text += (f"; these seeds resolve a margin of about {compared.resolution:.3g} (median "
+                 "over the values of (t + t_0.8) x the standard error of the contrast with the "
+                 "best)")
+    return text
 
 
 def _label(sweep: Sweep, vi: int) -> str:
