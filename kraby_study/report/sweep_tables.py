@@ -254,7 +254,8 @@ def summarise(trials: pd.DataFrame, labels: list[str],
               dropped: Mapping[int, Drop] | None = None,
               look_alpha: float = math.nan, time_attr: str = "wall_time",
               comparison: Comparison[int] | None = None,
-              settled: Mapping[int, Drop] | None = None) -> pd.DataFrame:
+              settled: Mapping[int, Drop] | None = None,
+              final: Mapping[int, list[float]] | None = None) -> pd.DataFrame:
     """One row per value: run counts; the round after which a race dropped it
     (``dropped_at``, empty for a survivor and in a study that did not race); the complete
     seeds' final score (mean, sd, interval of the mean, :func:`kraby_study.stats.mean_interval`
@@ -276,7 +277,9 @@ def summarise(trials: pd.DataFrame, labels: list[str],
     None: compared here at margin 0. ``dropped`` (by value index) are the values a race
     dropped as worse, at per-look level ``look_alpha``: they are left out of the comparison
     (never best or equivalent, ``p_holm`` empty, answer worse); ``settled``, those it settled
-    as equivalent, which stay in it.
+    as equivalent, which stay in it. ``final``: each value's complete seeds' final scores from
+    the pass every decision reads (:func:`kraby_study.selection.samples`); None: read from
+    ``trials``.
     """
     dropped = dict(dropped or {})
     settled = dict(settled or {})
@@ -284,7 +287,8 @@ def summarise(trials: pd.DataFrame, labels: list[str],
     score = describe(done, "vi", "final_score", bootstrap=bootstrap)
     time = describe(done, "vi", time_attr, bootstrap=bootstrap)
     counts = pd.crosstab(trials["vi"], trials["outcome"])
-    scores = _finals(done)
+    # A run whose value cannot be read ("?") is described but never in the decisions' pass.
+    scores = {**_finals(done), **(final or {})}
     survivors = {vi: finals for vi, finals in scores.items() if vi not in dropped}
     if comparison is None:
         comparison = compare(survivors, 0.0, min_seeds=min_seeds)
@@ -553,7 +557,7 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     comparison = compare({vi: v for vi, v in final.items() if vi not in dropped},
                          judged.margin, judged.alpha, judged.min_seeds)
     summary = summarise(trials, labels, bootstrap, comparison.min_seeds, dropped, look_alpha,
-                        time_attr, comparison, settled)
+                        time_attr, comparison, settled, final)
     threshold, is_default, untrained = study_threshold(curves, summary, chosen)
     seeds = seed_metrics(trials, curves, threshold)
     summary = add_curve_metrics(summary, seeds, bootstrap)
