@@ -2,25 +2,31 @@
 
 Two parts:
 
-- ``--store URL``: replays racing (``kraby_study.race.race``, the rules ``racing.*`` would use)
-  on every complete fixed-design sweep of a store (every value with all its seeds) and prints,
-  per study, the runs the race uses against the fixed design's, the values it drops and when,
-  and whether the raced selection (the study's own rule, on the survivors' raced seeds) lies
-  in the fixed design's tie set (the best value and the values tied with it under the closed
-  Holm-Welch step-down, alpha 0.05, on all seeds). A replay runs rounds in lockstep: a live
-  race may also run up to one round ahead on idle workers (docs/studies.md, Racing).
+- ``--store URL``: replays racing (``kraby_study.race.race``, the rules ``racing.*`` and
+  ``compare.margin`` would use; ``--margin``, default ``compare.margin``'s 0.2) on every
+  complete fixed-design sweep of a store (every value with all its seeds) and prints, per
+  study, the runs the race uses against the fixed design's, the values it drops (shown worse)
+  and settles (shown equivalent) and when, the raced selection (the study's own rule, or
+  ``--rule``, among the values not dropped, on the seeds the race ran) and whether it lies
+  within the margin of the fixed design's best by the fixed design's own means (all seeds;
+  the margin in score units: the fraction x the fixed best's |mean|), and the fixed design's
+  tie set (the best value and those not shown worse at margin 0). A replay runs rounds in
+  lockstep: a live race may also run up to one round ahead on idle workers (docs/studies.md,
+  Racing).
 - ``--simulations N``: the race's family-wise error under the global null (every value from
   one distribution, so any drop is false) and its savings and error when one value is 1 or 2 sd
   better, over a grid of shapes and noises (normal or skewed, with or without a part that a
   seed gives every value alike), each with ``N`` simulated races.
 
 Both race with Welch's tests, the default; ``--paired`` races with paired t-tests
-(``racing.paired=true``).
+(``racing.paired=true``). The simulations race at margin 0 (their scores are centred on 0, where
+a margin relative to the best's |mean| means nothing): ``benchmarks/bench_error_rates.py``
+measures races at a margin.
 
 Usage::
 
-    python benchmarks/bench_racing.py --store sqlite:///quick10.db [--min-seeds 3]
-        [--alpha 0.05] [--simulations 2000] [--paired]
+    python benchmarks/bench_racing.py --store sqlite:///quick10.db [--margin 0.2]
+        [--rule final_score] [--min-seeds 3] [--alpha 0.05] [--simulations 2000] [--paired]
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kraby_study.comparison import compare_with_best
+from kraby_study.comparison import MARGIN, compare_with_best
 from kraby_study.plan.spec import RaceRules
 from kraby_study.race import race
 from kraby_study.records import (
@@ -67,6 +73,14 @@ class Replay:
     dropped: list[str]
     raced_selection: str
     fixed_tie_set: list[str]
+    settled: list[str]
+    """Values the race settled as equivalent, with the round (value@round)."""
+    margin: float
+    """The margin in score units: the fraction x the fixed design's best |mean|."""
+    within: bool
+    """The raced selection's fixed-design mean is within the margin of the fixed best's."""
+    gap: float
+    """The fixed best's mean minus the raced selection's (both on all seeds)."""
     seed_share: float
     """The share of a score's variance that its seed gives every value alike (values with a
     failed run left out): :func:`seed_share`, what paired looks exploit (``rho`` of the
@@ -78,7 +92,8 @@ class Replay:
         return self.raced_selection in self.fixed_tie_set
 
 
-def replay_store(url: str, min_seeds: int, alpha: float, paired: bool = False) -> list[Replay]:
+def replay_store(url: str, min_seeds: int, alpha: float, paired: bool = False,
+                 margin: float = MARGIN, rule: str | None = None) -> list[Replay]:
     """Replay racing on every sweep of the store whose values all have the same number (>= 2)
     of seeds, every run complete or failed."""
     out = []
@@ -88,14 +103,15 @@ def replay_store(url: str, min_seeds: int, alpha: float, paired: bool = False) -
             attrs = ledger.attrs
             if StudyKind.of(attrs.kind) != StudyKind.SWEEP or attrs.definition.get("racing"):
                 continue
-            found = replay_study(ledger, min_seeds, alpha, paired)
+            found = replay_study(ledger, min_seeds, alpha, paired, margin, rule)
             if found is not None:
                 out.append(found)
     return out
 
 
 def replay_study(ledger, min_seeds: int, alpha: float,  # noqa: ANN001
-                 paired: bool = False) -> Replay | None:
+                 paired: bool = False, margin: float = MARGIN,
+                 rule_name: str | None = None) -> Replay | None:
     """Replay one fixed-design sweep; None when it is not complete (or not rectangular)."""
     attrs = ledger.attrs
     values = list(attrs.definition["values"])
@@ -123,11 +139,11 @@ def replay_study(ledger, min_seeds: int, alpha: float,  # noqa: ANN001
         return None
     by_round = {v: {i: runs[v][s] for i, s in enumerate(order)} for v in runs}
     rules = RaceRules(seeds=n, round_seeds=tuple(order), min_seeds=min(min_seeds, n),
-                      alpha=alpha, paired=paired)
+                      alpha=alpha, paired=paired, margin=margin)
     state = race(list(range(len(values))), by_round, rules)
-    used = {v: state.dropped[v].round if v in state.dropped else state.rounds
-            for v in range(len(values))}
-    rule = SelectRule.of(attrs.select)
+    left = {**state.dropped, **state.settled}
+    used = {v: left[v].round if v in left else state.rounds for v in range(len(values))}
+    rule = SelectRule.check(rule_name, "--rule") if rule_name else SelectRule.of(attrs.select)
     curves = (ledger.curves([t.number for t in trials]) if rule == SelectRule.AUC else None)
 
     def pick(per_value: dict[int, int]) -> int | None:
@@ -141,12 +157,16 @@ def replay_study(ledger, min_seeds: int, alpha: float,  # noqa: ANN001
                     points = curves[curves["number"] == numbers[v][order[i]]]
                     if len(points):
                         aucs[v].append(auc(points["mean_reward"].to_numpy(dtype=float)))
-        return select(rule, final, aucs, secs)
+        return select(rule, final, aucs, secs, margin=margin)
 
-    raced = pick({v: used[v] for v in state.survivors})
+    raced = pick({v: used[v] for v in state.candidates})
     full = {v: [x for x in by_round[v].values() if not math.isnan(x)] for v in by_round}
     fixed = compare_with_best(full)
     tie_set = [fixed.best, *fixed.tied] if fixed.best is not None else []
+    means = {v: float(np.mean(x)) if len(x) else math.nan for v, x in full.items()}
+    best_mean = means[fixed.best] if fixed.best is not None else math.nan
+    units = margin * abs(best_mean)
+    gap = best_mean - means[raced] if raced is not None else math.nan
     label = {v: value_label(values[v]) for v in range(len(values))}
     scores = np.array([[by_round[v][i] for i in range(n)] for v in sorted(by_round)])
     return Replay(
@@ -155,6 +175,8 @@ def replay_study(ledger, min_seeds: int, alpha: float,  # noqa: ANN001
         dropped=[f"{label[v]}@{d.round}" for v, d in state.dropped.items()],
         raced_selection=label[raced] if raced is not None else "-",
         fixed_tie_set=[label[v] for v in tie_set],
+        settled=[f"{label[v]}@{d.round}" for v, d in state.settled.items()],
+        margin=units, within=bool(gap <= units + 1e-12), gap=gap,
         seed_share=seed_share(scores[~np.isnan(scores).any(axis=1)]))
 
 
@@ -221,6 +243,12 @@ def simulate(job: tuple[int, int, float, str, float, bool, int, int, int, float]
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--store", help="a store with complete fixed-design sweeps")
+    parser.add_argument("--margin", type=float, default=MARGIN,
+                        help="the race's margin as a fraction of the best's |mean| "
+                        f"(compare.margin; default {MARGIN:g}, 0: races that drop only values "
+                        "shown worse)")
+    parser.add_argument("--rule", default=None,
+                        help="select by this rule instead of each study's stored one")
     parser.add_argument("--min-seeds", type=int, default=3)
     parser.add_argument("--alpha", type=float, default=0.05)
     parser.add_argument("--simulations", type=int, default=0,
@@ -233,23 +261,29 @@ def main() -> None:
     test = "paired t-tests" if paired else "Welch tests"
     if args.store:
         start = time.perf_counter()
-        replays = replay_store(args.store, args.min_seeds, args.alpha, paired)
+        replays = replay_store(args.store, args.min_seeds, args.alpha, paired, args.margin,
+                               args.rule)
         print(f"racing replayed on {args.store} ({test}, min_seeds {args.min_seeds}, alpha "
-              f"{args.alpha:g}, spent equally over the looks):\n")
+              f"{args.alpha:g}, spent equally over the looks; margin {args.margin:g} x the "
+              "best's |mean|):\n")
         print("| study | values x seeds | fixed runs | raced runs | share | dropped (after "
-              "round) | raced selection | fixed tie set | inside | seed share |")
-        print("|---|---|---:|---:|---:|---|---|---|---|---:|")
+              "round) | settled equivalent (after round) | raced selection | fixed best minus "
+              "it (margin, score units) | within the margin | fixed tie set | seed share |")
+        print("|---|---|---:|---:|---:|---|---|---|---|---|---|---:|")
         for r in replays:
             print(f"| {r.study} | {r.values} x {r.seeds} | {r.fixed_runs} | {r.raced_runs} | "
                   f"{100 * r.raced_runs / r.fixed_runs:.0f} % | {', '.join(r.dropped) or '-'} "
-                  f"| {r.raced_selection} | {', '.join(r.fixed_tie_set)} | "
-                  f"{'yes' if r.inside else 'NO'} | {r.seed_share:.2f} |")
+                  f"| {', '.join(r.settled) or '-'} | {r.raced_selection} | {r.gap:.4g} "
+                  f"({r.margin:.3g}) | {'yes' if r.within else 'NO'} | "
+                  f"{', '.join(r.fixed_tie_set)} | {r.seed_share:.2f} |")
         fixed = sum(r.fixed_runs for r in replays)
         raced = sum(r.raced_runs for r in replays)
         if replays:
             print(f"\ntogether: {raced} of {fixed} runs ({100 * raced / fixed:.0f} %); raced "
-                  f"selection inside the fixed tie set in {sum(r.inside for r in replays)} of "
-                  f"{len(replays)} studies ({time.perf_counter() - start:.1f} s)")
+                  f"selection within the margin of the fixed best in "
+                  f"{sum(r.within for r in replays)} of {len(replays)} studies, inside the "
+                  f"fixed tie set in {sum(r.inside for r in replays)} "
+                  f"({time.perf_counter() - start:.1f} s)")
         else:
             print("no complete fixed-design sweep in the store")
     if args.simulations:

@@ -45,6 +45,9 @@ tensorboard --logdir DIR (pip install 'kraby-study[tensorboard]').
 seeding=streams|offset: how a run's seed gives each leg its stream (streams: independent
 children of the seed; offset: seed + leg, the scheme before streams); unset, a stored study
 keeps its own and a new one takes streams.
+compare.margin=F (default 0.2): the smallest difference that matters, F x the best's |mean|;
+each value is best, equivalent (within it), worse (below the best by more) or undecided.
+compare.select=RULE: best, report and ${winner:...} apply RULE instead of a study's stored one.
 Any setting can be overridden with key=value (ppo.gamma=0.8); a flag such as --storage URL is
 the same as its key=value form (storage=URL), on every command that takes it.
 Your own YAML files in ./conf/<group>/ extend these groups and win over packaged files of the
@@ -157,8 +160,9 @@ CONFIRM_FLAGS = [
          "score, the cheapest, the rest evenly in cost order) or the sweep's best values, as "
          "confirm.top=K (default 5)", "K", _positive_int),
     Flag("--select", "confirm.select", "the confirm study's selection rule, as "
-         "confirm.select=RULE: final_score, auc or fastest_tied (default: fastest_tied for a "
-         "two-objective search, final_score otherwise)", "RULE"),
+         "confirm.select=RULE: final_score, auc, fastest_equivalent or fastest_tied (default: "
+         "fastest_equivalent for a two-objective search, final_score otherwise; a stored "
+         "confirm keeps its own)", "RULE"),
     Flag("--seeds", "confirm.seeds", "fresh seeds per configuration, none used by the study, as "
          "confirm.seeds=N (default 10); they start at confirm.seed (default 1000, apart from "
          "the tuning seeds 0, 1, ... of run and optuna)", "N", _at_least_two),
@@ -424,6 +428,7 @@ def cmd_best(args: argparse.Namespace) -> int:
 
     from kraby_study.answers.campaign import campaign_selection
     from kraby_study.answers.selected import require_selection
+    from kraby_study.comparison import CompareOptions
     from kraby_study.config.conf_dirs import USER_CONF_DIR
     from kraby_study.config.ppo_file import write_ppo_config
     from kraby_study.store.store import opened
@@ -436,9 +441,10 @@ def cmd_best(args: argparse.Namespace) -> int:
     config_name = args.name or (f"campaign_{args.campaign}" if args.campaign else f"best_{name}")
     if not config_name.replace("_", "").replace("-", "").isalnum():
         raise ConfigError(f"--name {config_name!r}: use letters, digits, _ and -")
+    options = CompareOptions.of(cfg)
     with opened(cfg.storage, create=False, writer=False) as store:
-        chosen = (campaign_selection(store, args.campaign) if args.campaign
-                  else require_selection(store.load(name)))
+        chosen = (campaign_selection(store, args.campaign, options) if args.campaign
+                  else require_selection(store.load(name), options))
     path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
     write_ppo_config(chosen.settings, chosen.env_keys, chosen.description, path)
     for line in chosen.front:
@@ -451,12 +457,20 @@ def cmd_best(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Redraw the figures and tables of the stored studies."""
+    from types import SimpleNamespace
+
+    from omegaconf import OmegaConf
+
     from kraby_study.report import run_report
 
     chosen, overrides = stored_study(flag_overrides(args, [STORAGE, REPORTED, OUT]))
     cfg = compose_config(overrides)
+    # The report's options with the comparison's: a report may re-analyse any study at any
+    # margin, and read another rule than the stored one (compare.select).
+    options = SimpleNamespace(**OmegaConf.to_container(cfg.report), margin=cfg.compare.margin,
+                              select=cfg.compare.select)
     return run_report(cfg.storage, cfg.out, study=chosen, fmt=args.format, stream=sys.stdout,
-                      policy=not args.no_policy, options=cfg.report)
+                      policy=not args.no_policy, options=options)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -520,7 +534,8 @@ def build_parser() -> argparse.ArgumentParser:
         "configuration (ppo=tuned unless you choose; it is enqueued) is infeasible: off the "
         "front and out of the sampler's good trials, so the search looks for settings as good "
         "as the floor at less cost. list, best and the report show the front; "
-        "best writes its cheapest trial tied with the best score, and confirm --study-name "
+        "best writes its cheapest trial shown equivalent to the best score (within "
+        "compare.margin; a search stored before keeps fastest_tied), and confirm --study-name "
         "retrains --top trials spread along it.\n\n" + EPILOG)
     for name in ("run", "optuna", "confirm"):
         parsers[name].add_argument(
@@ -534,7 +549,9 @@ def build_parser() -> argparse.ArgumentParser:
     for name in ("run", "confirm"):
         parsers[name].add_argument(
             "--racing", action="store_true",
-            help="run seeds in rounds and stop the values significantly worse than the best "
+            help="run seeds in rounds; a value leaves once shown worse than the best by more "
+            "than compare.margin, or shown equivalent to it (stored with the race; margin 0: "
+            "only values shown worse leave) "
             "(as racing.enabled=true; racing.min_seeds, default 3, racing.alpha, default "
             "0.05, and racing.paired, default false, tune it); budget.seeds (confirm: --seeds) "
             "is the most any value gets")
@@ -547,8 +564,10 @@ def build_parser() -> argparse.ArgumentParser:
         "budget=quick for baselines alone), with seeds no trial of the study used. The study "
         "NAME-confirm is resumable like run; report it, then `kraby-study best --study-name "
         "NAME-confirm` writes the confirmed winner's settings, selected by --select (of a "
-        "two-objective search's front by default fastest_tied: the cheapest in CPU seconds "
-        "among the arms tied with the best).\n\n" + EPILOG)
+        "two-objective search's front by default fastest_equivalent: the cheapest in CPU "
+        "seconds among the best arm and those shown equivalent to it). `kraby-study best "
+        "--study-name NAME-confirm compare.select=RULE` re-selects a stored confirm by another "
+        "rule without retraining.\n\n" + EPILOG)
     parsers["best"].add_argument("--name", help="config name to write in ./conf/ppo/ (default "
                                  "best_<study>, or campaign_<NAME>)")
     parsers["best"].add_argument("--campaign", metavar="NAME",

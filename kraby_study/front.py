@@ -4,13 +4,14 @@ A two-objective search maximises a score and minimises a cost (CPU seconds per s
 is on the front when no other complete trial is at least as good on both and better on one.
 Two choices are made from it:
 
-- :func:`cheapest_tied`, the search's selection (``best``, ``list``, the report): among the
-  front's trials, the best score and those tied with it (not worse under the closed
-  Holm-Welch step-down, alpha 0.05, on the trials' seed scores:
-  :func:`kraby_study.comparison.compare_with_best`), the cheapest. The family is the front,
-  not every trial: the best score is always on it, every trial off it is matched or beaten on
-  both objectives by one on it, and a family of 50 trials would tie nearly every one of them
-  at 3 seeds (the test's power falls with the family's size). With fewer than
+- :func:`front_choice`, the search's selection (``best``, ``list``, the report): the front's
+  trials are compared on their seed scores (:func:`kraby_study.comparison.compare`), and the
+  search's rule picks the cheapest of the best score and the trials it admits:
+  ``fastest_equivalent`` (a new two-objective search's rule) those shown within the margin of
+  the best, ``fastest_tied`` (the rule of earlier releases, kept for searches stored before)
+  those not shown worse at margin 0. The family is the front, not every trial: the best score
+  is always on it, every trial off it is matched or beaten on both objectives by one on it,
+  and a family of 50 trials would leave the tests almost no power at 3 seeds. With fewer than
   ``min_seeds`` (2) seeds a trial there is no test, and the rule falls back to the best score.
 - :func:`spread`, what ``confirm`` retrains: up to K trials spread along the front.
 """
@@ -21,16 +22,15 @@ from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
-from kraby_study.comparison import ALPHA, MIN_SEEDS, compare_with_best, procedure_name
+from kraby_study.comparison import CompareOptions, Comparison, compare
+from kraby_study.records import SelectRule
 
 K = TypeVar("K", bound=Hashable)
 
-FASTEST_TIED_TEXT = ("fastest_tied: the lowest cost (CPU s per seed) among the front's trials "
-                     f"tied with its best score (not worse under the {procedure_name(ALPHA)}, "
-                     "on each trial's seed scores)")
-"""The search's selection rule, as ``best`` and the report name it."""
-UNTESTED_TEXT = ("the best score: with fewer than 2 seeds a trial no tie can be tested, so "
-                 "fastest_tied falls back to final_score")
+FRONT_RULES = (SelectRule.FASTEST_EQUIVALENT, SelectRule.FASTEST_TIED, SelectRule.FINAL_SCORE)
+"""The rules a front can be selected by (the cost is the time they compare)."""
+UNTESTED_TEXT = ("the best score: with fewer than 2 seeds a trial no comparison can be made, so "
+                 "the rule falls back to final_score")
 """What the rule becomes when the trials have too few seeds for a test."""
 
 
@@ -89,36 +89,64 @@ class FrontChoice(Generic[K]):
     best: Point[K]
     """The front's best score."""
     tied: list[K] = field(default_factory=list)
-    """The front's trials tied with the best (the best excluded)."""
+    """The front's trials the rule admitted beside the best (the best excluded): shown
+    equivalent under fastest_equivalent, not shown worse under fastest_tied."""
     tested: bool = True
     """False when the trials had too few seeds for a test: the chosen is then the best."""
+    rule: str = SelectRule.FASTEST_TIED
+    comparison: Comparison[K] | None = None
+    """The comparison the rule read (None when untested)."""
 
     @property
-    def rule(self) -> str:
+    def rule_text(self) -> str:
         """The rule that chose, in words."""
-        return FASTEST_TIED_TEXT if self.tested else UNTESTED_TEXT
+        if not self.tested:
+            return UNTESTED_TEXT
+        admitted = ("shown equivalent to its best score (within the margin)"
+                    if self.rule == SelectRule.FASTEST_EQUIVALENT else
+                    "not shown worse than its best score (margin 0)"
+                    if self.rule == SelectRule.FASTEST_TIED else None)
+        if admitted is None:
+            return f"{self.rule}: the front's best score"
+        margin = f"; {self.comparison.margin_text()}" if self.comparison is not None else ""
+        return (f"{self.rule}: the lowest cost (CPU s per seed) among the front's trials "
+                f"{admitted}, on each trial's seed scores{margin}")
 
 
-def cheapest_tied(front: Sequence[Point[K]], seed_scores: Mapping[K, Sequence[float]],
-                  min_seeds: int = MIN_SEEDS) -> FrontChoice[K] | None:
-    """The cheapest of the front's best score and the front's trials tied with it; None for an
-    empty front.
+def front_choice(front: Sequence[Point[K]], seed_scores: Mapping[K, Sequence[float]],
+                 rule: str = SelectRule.FASTEST_EQUIVALENT,
+                 options: CompareOptions | None = None) -> FrontChoice[K] | None:
+    """The cheapest of the front's best score and the front's trials ``rule`` admits; None for
+    an empty front.
 
     Args:
         front: The front (:func:`pareto_front`).
         seed_scores: Each trial's seed scores, by key; a trial with fewer than ``min_seeds``
             is in no test.
-        min_seeds: Fewest seeds a trial needs to be tested (at least 2).
+        rule: fastest_equivalent, fastest_tied or final_score.
+        options: Margin and seeds of the comparison (defaults: ``compare.margin``'s default,
+            2 seeds).
     """
     if not front:
         return None
+    options = options or CompareOptions()
     best_score = max(front, key=lambda p: p.score)
     by_key = {p.key: p for p in front}
-    comparison = compare_with_best({p.key: list(seed_scores.get(p.key, [])) for p in front},
-                                   min_seeds=min_seeds)
+    comparison = compare({p.key: list(seed_scores.get(p.key, [])) for p in front},
+                         options.margin, options.alpha, options.min_seeds)
     if comparison.best is None:
-        return FrontChoice(chosen=best_score, best=best_score, tested=False)
+        return FrontChoice(chosen=best_score, best=best_score, tested=False, rule=rule)
     best = by_key[comparison.best]
-    candidates = [best, *(by_key[k] for k in comparison.tied)]
+    admitted = (comparison.equivalent if rule == SelectRule.FASTEST_EQUIVALENT else
+                comparison.tied if rule == SelectRule.FASTEST_TIED else [])
+    candidates = [best, *(by_key[k] for k in admitted)]
     chosen = min(candidates, key=lambda p: (p.cost, -p.score))
-    return FrontChoice(chosen=chosen, best=best, tied=list(comparison.tied))
+    return FrontChoice(chosen=chosen, best=best, tied=list(admitted), rule=rule,
+                       comparison=comparison)
+
+
+def cheapest_tied(front: Sequence[Point[K]], seed_scores: Mapping[K, Sequence[float]],
+                  min_seeds: int = 2) -> FrontChoice[K] | None:
+    """:func:`front_choice` under fastest_tied (the rule of earlier releases)."""
+    return front_choice(front, seed_scores, SelectRule.FASTEST_TIED,
+                        CompareOptions(min_seeds=min_seeds))

@@ -151,7 +151,11 @@ class SelectRule(StrEnum):
     AUC = "auc"
     """The highest mean AUC (sample efficiency)."""
     FASTEST_TIED = "fastest_tied"
-    """The lowest mean training time among the values tied with the best final score."""
+    """The lowest mean training time among the best and the values not shown worse than it
+    (at margin 0): the rule of earlier releases, which a noisy value enters by its spread."""
+    FASTEST_EQUIVALENT = "fastest_equivalent"
+    """The lowest mean training time among the best and the values shown equivalent to it
+    (within the margin): a value needs evidence to be selected."""
 
     @classmethod
     def of(cls, stored: str | None) -> SelectRule:

@@ -1,37 +1,42 @@
 """Which value of a finished sweep is selected: the rules a campaign carries forward.
 
-One implementation serves the report's ``selected`` column, ``${winner:...}`` and ``best``. The
-rules read the same per-seed numbers the report shows, and the ties are the report's ties
-(:func:`kraby_study.comparison.compare_with_best`, closed Holm-Welch step-down, alpha 0.05):
+"Best" is the highest mean final score only; "selected" is what a rule picks. Every rule is a
+named :class:`Rule` that reads one :class:`kraby_study.comparison.Comparison` (the report's
+answers, the same object its table column shows) and the values' mean AUC and training time:
 
-- ``final_score``: the highest mean final score (the report's "best").
+- ``final_score``: the best value.
 - ``auc``: the highest mean AUC over the seeds with a curve (the most sample-efficient).
-- ``fastest_tied``: among the best value and the values tied with it (not worse than the best
-  under the closed Holm-Welch step-down, alpha 0.05), the lowest mean training time in
-  seconds: the documented "good compromise" when a slower value is not measurably better.
+- ``fastest_equivalent``: among the best and the values shown equivalent to it (within the
+  margin, :func:`kraby_study.comparison.compare`), the lowest mean training time: a slower
+  value is not worth its time when a faster one is shown as good within the margin, and a
+  value needs evidence to be selected, so spread cannot buy a place.
+- ``fastest_tied``: among the best and the values not shown worse at margin 0 (the closed
+  Holm-Welch step-down, alpha 0.05), the lowest mean training time. The rule of earlier
+  releases, kept so stored studies select as before: a noisy, cheap, truly worse value enters
+  by its spread.
 
-Every rule considers only values with at least ``min_seeds`` complete seeds (default 2, the
-report's ``report.min_seeds`` default), so one lucky seed is never selected. Ties inside a rule
-go to the first group in order; NaN never wins.
+Every rule considers only the comparison's family: values with at least ``min_seeds``
+complete seeds (``report.min_seeds``, default 2), so one lucky seed is never selected. Ties
+inside a rule go to the first value in order; NaN never wins.
 
-In a raced study (:mod:`kraby_study.race`) every rule considers only the race's survivors: the
-caller passes the dropped values (``dropped``), which are never best, tied or selected, and the
-survivors are compared by the same procedure on all their seeds.
+In a raced study (:mod:`kraby_study.race`) every rule considers only the values the race did
+not drop as worse: the caller passes them (``dropped``), and the others are compared by the
+same procedure on all their seeds.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Hashable, Mapping, Sequence
+from collections.abc import Callable, Collection, Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from kraby_study.comparison import (
     ALPHA,
+    MARGIN,
     MIN_SEEDS,
-    best_with_evidence,
-    compare_with_best,
-    evidence,
+    Comparison,
+    compare,
     procedure_name,
 )
 from kraby_study.records import (
@@ -52,18 +57,80 @@ from kraby_study.stats import auc
 if TYPE_CHECKING:
     import pandas as pd
 
-RULE_TEXT = {
-    SelectRule.FINAL_SCORE: "highest mean final score",
-    SelectRule.AUC: "highest mean AUC (sample efficiency)",
-    SelectRule.FASTEST_TIED: ("lowest mean training time (wall-clock seconds; CPU seconds on "
-                              "a confirm study) among the values tied with the best final "
-                              f"score (not worse under the {procedure_name(ALPHA)})"),
-}
-
 K = TypeVar("K", bound=Hashable)
 
 
-def _means(groups: Mapping[K, Sequence[float]]) -> dict[K, float]:
+def _lowest(candidates: Sequence[K], values: Mapping[K, float], fallback: K) -> K:
+    """The candidate with the lowest value (first in order on ties, NaN never wins)."""
+    known = {g: [-values[g]] for g in candidates if g in values and not math.isnan(values[g])}
+    chosen = best_group(known)
+    return chosen if chosen is not None else fallback
+
+
+def _final_score(comparison: Comparison[K], aucs: Mapping[K, float],
+                 times: Mapping[K, float]) -> K | None:
+    return comparison.best
+
+
+def _auc(comparison: Comparison[K], aucs: Mapping[K, float],
+         times: Mapping[K, float]) -> K | None:
+    return best_group({g: [aucs[g]] for g in comparison.family
+                       if g in aucs and not math.isnan(aucs[g])})
+
+
+def _fastest_equivalent(comparison: Comparison[K], aucs: Mapping[K, float],
+                        times: Mapping[K, float]) -> K | None:
+    if comparison.best is None:
+        return None
+    return _lowest([comparison.best, *comparison.equivalent], times, comparison.best)
+
+
+def _fastest_tied(comparison: Comparison[K], aucs: Mapping[K, float],
+                  times: Mapping[K, float]) -> K | None:
+    if comparison.best is None:
+        return None
+    return _lowest([comparison.best, *comparison.tied], times, comparison.best)
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A selection rule: its name, what it selects in words, and the function that selects."""
+
+    name: SelectRule
+    description: str
+    pick: Callable[[Comparison[Any], Mapping[Any, float], Mapping[Any, float]], Any]
+    """(comparison, mean AUC by value, mean training time by value) -> the selected value."""
+    tests: bool = True
+    """Whether it reads the comparison's tests (False: the best and the family suffice)."""
+
+    def select(self, comparison: Comparison[K], aucs: Mapping[K, float],
+               times: Mapping[K, float]) -> K | None:
+        """The value this rule selects; None when the comparison has no best."""
+        return self.pick(comparison, aucs, times) if comparison.best is not None else None
+
+
+_TIME = "mean training time (wall-clock seconds; CPU seconds on a confirm study)"
+RULES: dict[SelectRule, Rule] = {r.name: r for r in (
+    Rule(SelectRule.FINAL_SCORE, "highest mean final score (the best)", _final_score, False),
+    Rule(SelectRule.AUC, "highest mean AUC (sample efficiency)", _auc, False),
+    Rule(SelectRule.FASTEST_EQUIVALENT,
+         f"lowest {_TIME} among the best and the values shown equivalent to it (within the "
+         "margin; multiple comparisons with the best, alpha 0.05)", _fastest_equivalent),
+    Rule(SelectRule.FASTEST_TIED,
+         f"lowest {_TIME} among the best and the values not shown worse at margin 0 (the "
+         f"{procedure_name(ALPHA)}; the rule of earlier releases: a noisy value ties by its "
+         "spread)", _fastest_tied),
+)}
+RULE_TEXT = {name: rule.description for name, rule in RULES.items()}
+
+
+def rule_of(name: str, where: str = "study.select") -> Rule:
+    """The rule named ``name``; ConfigError naming the known ones."""
+    return RULES[SelectRule.check(name, where)]
+
+
+def mean_by_value(groups: Mapping[K, Sequence[float]]) -> dict[K, float]:
+    """Each group's mean over its values (NaN ignored); a group without one is left out."""
     out = {}
     for group, values in groups.items():
         kept = [float(v) for v in values if not math.isnan(float(v))]
@@ -74,37 +141,22 @@ def _means(groups: Mapping[K, Sequence[float]]) -> dict[K, float]:
 
 def select(rule: str, final: Mapping[K, Sequence[float]], aucs: Mapping[K, Sequence[float]],
            seconds: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS,
-           dropped: Collection[K] = ()) -> K | None:
+           dropped: Collection[K] = (), margin: float = MARGIN) -> K | None:
     """The selected group under ``rule``; None when no group can be selected.
 
     Args:
-        rule: final_score, auc or fastest_tied.
+        rule: final_score, auc, fastest_equivalent or fastest_tied.
         final: Final scores of the complete seeds, by group, in the study's order.
         aucs: AUC of each complete seed with a curve, by group.
         seconds: Training time of each complete seed, by group.
-        min_seeds: Fewest complete seeds a group needs to be selected (at least 2).
-        dropped: Groups a race dropped: left out of every rule, as if never run.
+        min_seeds: Fewest complete seeds a group needs to be selected.
+        dropped: Groups a race dropped as worse: left out of every rule, as if never run.
+        margin: ``compare.margin``, the margin as a fraction of the best's |mean|.
     """
-    SelectRule.check(rule)
-    if dropped:
-        final = {g: vs for g, vs in final.items() if g not in dropped}
-        aucs = {g: vs for g, vs in aucs.items() if g not in dropped}
-        seconds = {g: vs for g, vs in seconds.items() if g not in dropped}
-    scores = {g: [float(v) for v in vs if not math.isnan(float(v))] for g, vs in final.items()}
-    if rule == SelectRule.FINAL_SCORE:
-        return best_with_evidence(scores, min_seeds)
-    if rule == SelectRule.AUC:
-        need, _, _ = evidence(scores, min_seeds)
-        return best_group({g: [m] for g, m in _means(aucs).items()
-                           if len(scores.get(g, [])) >= need})
-    comparison = compare_with_best(scores, min_seeds=min_seeds)
-    best = comparison.best
-    if best is None:
-        return None
-    tied = [best, *comparison.tied]
-    times = _means(seconds)
-    timed = {g: [-times[g]] for g in tied if g in times}
-    return best_group(timed) if timed else best
+    chosen = rule_of(rule)
+    comparison = compare({g: vs for g, vs in final.items() if g not in dropped}, margin,
+                         min_seeds=min_seeds, tests=chosen.tests)
+    return chosen.select(comparison, mean_by_value(aucs), mean_by_value(seconds))
 
 
 @dataclass(frozen=True)
@@ -170,9 +222,11 @@ def swept_values(kind: str, definition: Mapping[str, Any],
 
 def selected_index(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: str,
                    values: Sequence[Any], rule: str, min_seeds: int = MIN_SEEDS,
-                   dropped: Collection[int] = (), time_attr: str = "wall_time") -> int | None:
+                   dropped: Collection[int] = (), time_attr: str = "wall_time",
+                   margin: float = MARGIN) -> int | None:
     """Index in ``values`` of the value ``rule`` selects among the complete runs; None when
     no value has ``min_seeds`` complete seeds. ``dropped``: indices in ``values`` of the values
-    a race dropped (:func:`kraby_study.answers.raced.dropped_indices`), never selected."""
+    a race dropped as worse (:func:`kraby_study.answers.raced.dropped_indices`), never
+    selected."""
     found = samples(trials, curves, name, values, time_attr)
-    return select(rule, found.final, found.aucs, found.seconds, min_seeds, dropped)
+    return select(rule, found.final, found.aucs, found.seconds, min_seeds, dropped, margin)

@@ -16,15 +16,18 @@ See docs/statistics.md for what each one means and why it was chosen.
   Agarwal et al., "Deep Reinforcement Learning at the Edge of the Statistical Precipice"
   (NeurIPS 2021), with Newcombe's (2006) 95 % score-type interval.
 - Best value: the highest mean final score among the values with at least ``min_seeds``
-  complete seeds (:func:`kraby_study.comparison.compare_with_best`).
-- "Worse than the best" and "tied": :func:`kraby_study.comparison.compare_with_best`, a closed
-  Holm step-down over one-sided Welch t-tests whose family-wise error holds although the best
-  is chosen from the same data. :func:`compare_to_best` gives the raw two-sided Welch p-values
-  against the best, for information only.
+  complete seeds (:func:`kraby_study.comparison.compare`).
+- Every other value's answer at the margin, equivalent, worse or undecided:
+  :func:`kraby_study.comparison.compare`, one comparison the verdict (:func:`verdict`), the
+  table and the selection rules read; "worse" is a closed Holm step-down over one-sided Welch
+  t-tests whose family-wise error holds although the best is chosen from the same data.
+  :func:`compare_to_best` gives the raw two-sided Welch p-values against the best, for
+  information only.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import math
@@ -40,7 +43,9 @@ from kraby_study.comparison import (
     ALPHA,
     MIN_SEEDS,
     PROCEDURE,
+    Comparison,
     best_with_evidence,
+    compare,
     compare_with_best,
     procedure_name,
     welch_two_sided_p,
@@ -676,6 +681,9 @@ class Verdict:
     """The group with the lowest :func:`iqr_unbiased` of its final scores."""
     min_seeds: int = MIN_SEEDS
     """Fewest complete seeds a group needed to be any of the above."""
+    comparison: Comparison[int] | None = dataclasses.field(default=None, compare=False)
+    """The comparison the best and the answers come from (None: the verdict compared at
+    margin 0 itself)."""
 
 
 def _highest(values: Mapping[int, float]) -> int | None:
@@ -685,7 +693,8 @@ def _highest(values: Mapping[int, float]) -> int | None:
 
 def verdict(final: Mapping[int, Sequence[float]], auc_means: Mapping[int, float],
             seconds: Mapping[int, float], iqrs: Mapping[int, float],
-            p_holm: Mapping[int, float], min_seeds: int = MIN_SEEDS) -> Verdict:
+            p_holm: Mapping[int, float] | None = None, min_seeds: int = MIN_SEEDS,
+            comparison: Comparison[int] | None = None) -> Verdict:
     """The verdict of a sweep; NaN values never win, ties go to the first group in order.
 
     Args:
@@ -694,20 +703,27 @@ def verdict(final: Mapping[int, Sequence[float]], auc_means: Mapping[int, float]
         seconds: Restricted mean seconds to the threshold by group (a seed that never reached
             it at its run's end), NaN where no seed reached it.
         iqrs: Final-score IQR by group, comparable across n (:func:`iqr_unbiased`).
-        p_holm: Adjusted p against the best by group (:func:`holm_vs_best`; NaN for the best
-            itself or a group outside the family: such a group is not tied).
+        p_holm: Unused when ``comparison`` is given; else the adjusted p against the best by
+            group (:func:`holm_vs_best`; NaN for the best itself or a group outside the
+            family: such a group is not tied).
         min_seeds: Fewest complete seeds a group needs to be any answer (at least 2).
+        comparison: The study's one comparison (:func:`kraby_study.comparison.compare`): the
+            best, the ties and the four answers are read from it, and its family is the
+            groups that may be any answer.
 
     Returns:
         The :class:`Verdict`.
     """
-    need = max(2, int(min_seeds))
-    scores = {g: [float(v) for v in vs if not math.isnan(v)] for g, vs in final.items()}
-    enough = {g for g, v in scores.items() if len(v) >= need}
-    best = best_with_evidence(scores, need)
-    # NaN >= ALPHA is False: a group without a test is not tied.
-    tied = [g for g in scores if best is not None and g != best and g in enough
-            and float(p_holm.get(g, math.nan)) >= ALPHA]
+    if comparison is None:
+        comparison = compare(final, 0.0, min_seeds=min_seeds)
+        if p_holm is not None:  # the caller's adjusted p (NaN is not tied: no test)
+            comparison = dataclasses.replace(comparison, tied=[
+                g for g in comparison.family if g != comparison.best
+                and float(p_holm.get(g, math.nan)) >= ALPHA])
+    need = comparison.min_seeds
+    enough = set(comparison.family)
+    best = comparison.best
+    tied = list(comparison.tied)
 
     def among(values: Mapping[int, float], sign: float = 1.0) -> dict[int, float]:
         return {g: sign * float(v) for g, v in values.items() if g in enough}
@@ -715,4 +731,5 @@ def verdict(final: Mapping[int, Sequence[float]], auc_means: Mapping[int, float]
     return Verdict(best=best, tied=tied,
                    most_sample_efficient=_highest(among(auc_means)),
                    fastest=_highest(among(seconds, -1.0)),
-                   most_repeatable=_highest(among(iqrs, -1.0)), min_seeds=need)
+                   most_repeatable=_highest(among(iqrs, -1.0)), min_seeds=need,
+                   comparison=comparison)

@@ -379,8 +379,12 @@ def test_a_raced_campaign_goes_on_and_selects_among_each_stages_survivors(
     with open(index.out / "tri" / "campaign.csv", newline="") as handle:
         rows = list(csv.DictReader(handle))
     assert [r["selected"] for r in rows] == ["0.99", "0.3", "0.05"]
+    # The race began at the default compare.margin, 0.2, and says so in score units.
     rule = ("racing from round 2 of 3: closed Holm-Welch step-down at each look, alpha 0.05 "
-            "spent equally over 2 looks (0.025 each)")
+            "spent equally over 2 looks (0.025 each); a value leaves once shown worse by more "
+            "than the margin (0.2 x the look's best |mean|) or shown equivalent to the best "
+            "within it")
     for row, dropped in zip(rows, ("0.5", "0.1", "0"), strict=True):
-        assert (f"; raced ({rule}), selected among the survivors; dropped: {dropped} after "
-                "round 2; raced: 4 of 6 runs (67 %)") in row["notes"], row["notes"]
+        assert (f"; raced ({rule}), selected among the values it did not drop; dropped: "
+                f"{dropped} after round 2; raced: 4 of 6 runs (67 %)") in row["notes"], row["notes"]
+        assert "margin " in row["notes"] and "in score units" in row["notes"]

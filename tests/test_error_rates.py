@@ -64,13 +64,13 @@ def test_float_noise_is_not_a_difference() -> None:
 
 def test_step_down_on_a_hand_worked_case() -> None:
     # Three values of 3 seeds, each with sd 1: means -3, 4, 4.5. One-sided Welch t of j over g:
-    # (m_j - m_g) / sqrt(2 / 3). Equal n, so Welch-Satterthwaite's df:
-    # (1/3 + 1/3)^2 / ((1/3)^2 / 2 + (1/3)^2 / 2) = 4.
+    # (m_j - m_g) / sqrt(2 / 3). Equal n below 4 seeds, so min(n) - 1 = 2 df (Welch-
+    # Satterthwaite's would be 4, and over-rejects at 2-3 seeds with unequal spreads).
     final = {0: [-4.0, -3.0, -2.0], 1: [3.0, 4.0, 5.0], 2: [3.5, 4.5, 5.5]}
     se = math.sqrt(2 / 3)
-    pi0 = 2 * stats.t.sf(7.5 / se, 4)  # beaten hardest by 2: (k - 1) * p
-    pi1 = 2 * stats.t.sf(0.5 / se, 4)
-    pi2 = 2 * stats.t.sf(-0.5 / se, 4)  # 1 against 2: below the mean, p > 0.5
+    pi0 = 2 * stats.t.sf(7.5 / se, 2)  # beaten hardest by 2: (k - 1) * p
+    pi1 = 2 * stats.t.sf(0.5 / se, 2)
+    pi2 = 2 * stats.t.sf(-0.5 / se, 2)  # 1 against 2: below the mean, p > 0.5
     assert pi0 < pi1 < min(1.0, pi2)
     adjusted0 = 3 * pi0  # Holm, smallest first: x3
     adjusted1 = max(adjusted0, 2 * pi1)
@@ -131,3 +131,61 @@ def test_mean_interval_covers_at_five_seeds_and_more(shape: str, n: int) -> None
     assert coverage >= 0.93 - 3 * se
     if shape == "normal":
         assert coverage <= 0.95 + 3 * math.sqrt(0.95 * 0.05 / simulations)
+
+
+def _bench_error_rates(monkeypatch: pytest.MonkeyPatch) -> object:
+    """benchmarks/bench_error_rates.py as a module: the slow tier holds its measurements."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).parents[1] / "benchmarks" / "bench_error_rates.py"
+    spec = importlib.util.spec_from_file_location("bench_error_rates", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, "bench_error_rates", module)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("ns", [[2, 2], [3, 3], [2, 2, 2]])
+def test_the_bound_holds_at_two_and_three_seeds_with_unequal_spreads(ns: list[int]) -> None:
+    # Equal means, sd 1 against 10: Welch-Satterthwaite's df gave 0.063 at 2 x 2 and 0.056 at
+    # 2 x 3; min(n) - 1 below 4 seeds holds alpha.
+    simulations = 4000
+    rng = np.random.default_rng(35)
+    sds = [1.0] * (len(ns) - 1) + [10.0]
+    false_calls = sum(bool(compare_with_best({g: rng.normal(0, sds[g], n)
+                                              for g, n in enumerate(ns)}).worse)
+                      for _ in range(simulations))
+    se = math.sqrt(0.05 * 0.95 / simulations)
+    assert false_calls / simulations <= 0.05 + 3 * se
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("k", "n"), [(2, 5), (2, 10), (5, 10)])
+@pytest.mark.parametrize("noise", ["normal", "heavy-tailed t3", "failing seed"])
+def test_the_equivalence_error_is_at_most_alpha(monkeypatch: pytest.MonkeyPatch, k: int,
+                                                n: int, noise: str) -> None:
+    # The benchmark's measurement (its last line's "max equivalence error"), smaller: every
+    # other value exactly one margin (0.2 x |best mean|) below the best.
+    bench = _bench_error_rates(monkeypatch)
+    simulations = 1500
+    _, _, error, anything = bench.equivalence_error(  # type: ignore[attr-defined]
+        (k, n, noise, simulations, 35, 0.2))
+    assert error <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / simulations)
+    assert anything <= 0.10 + 3 * math.sqrt(0.10 * 0.90 / simulations)  # the joint bound
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("config", ["slippage", "spaced"])
+def test_a_race_selects_within_the_margin(monkeypatch: pytest.MonkeyPatch, config: str) -> None:
+    # Races of 5 values to 10 seeds at three times the default margin, where they settle and
+    # drop values: the selection is within the margin of the best at least 1 - alpha of the
+    # time, truncation at 10 seeds included.
+    bench = _bench_error_rates(monkeypatch)
+    races = 300
+    found = bench.race_selection((5, 10, "skewed", config, races, 35, 0.6))  # type: ignore[attr-defined]
+    outside = found[4]
+    assert outside <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / races)

@@ -7,6 +7,7 @@ import io
 import math
 import os
 import signal
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -371,15 +372,16 @@ def test_a_raced_study_is_never_mixed_with_the_same_study_run_fixed(
     assert len(err.strip().splitlines()) == 1 and file_digest(db) == before
 
 
-def test_a_race_is_never_resumed_with_another_test(
-        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize("changed", ["racing.paired=true", "compare.margin=0.1"])
+def test_a_race_is_never_resumed_with_another_test_or_margin(
+        workdir: Path, capsys: pytest.CaptureFixture[str], changed: str) -> None:
     write_study_file(workdir, "pair", "ppo.clip_range", "[0.1, 0.3]")
     raced = ["run", "study=pair", *TINY, "budget.seeds=2", "--racing", "racing.min_seeds=2"]
     assert run_cli(*raced) == 0
     db = workdir / "studies" / "kraby.db"
     before = file_digest(db)
     capsys.readouterr()
-    assert run_cli(*raced, "racing.paired=true") == 2
+    assert run_cli(*raced, changed) == 2
     err = capsys.readouterr().err
     assert "defined differently" in err and "racing" in err
     assert len(err.strip().splitlines()) == 1 and file_digest(db) == before
@@ -456,8 +458,9 @@ def test_a_raced_campaign_races_every_stage(workdir: Path) -> None:
     db = sqlite_url(workdir / "studies" / "kraby.db")
     for stage in ("trio-c1", "trio-c2", "trio-c3"):
         attrs = StudyAttrs.of(load(db, stage).user_attrs)
+        # The race stores the margin it began with, compare.margin's default.
         assert attrs.definition["racing"] == {"seeds": 3, "min_seeds": 2, "alpha": 0.05,
-                                              "round_seeds": [0, 1, 2]}
+                                              "round_seeds": [0, 1, 2], "margin": 0.2}
         _race_consistent(db, stage)
 
 
@@ -479,3 +482,41 @@ def test_a_race_holds_its_family_wise_error_under_the_global_null(values: int, s
         false += bool(race(list(range(values)), {v: dict(enumerate(x[v])) for v in range(values)},
                            rules).dropped)
     assert false / sims <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / sims)
+
+
+def test_the_replay_races_a_stored_fixed_sweep_at_a_margin(
+        workdir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``bench_racing.py --store`` on a complete fixed sweep: 0.2 is within 0.01 of 0.1 with
+    tight seeds, so at the default margin (0.2 x |-1.0|) the look after round 3 settles it
+    and drops 0.3 (1.0 below); the race is then over after 9 of 18 runs and selects 0.1,
+    within the margin of the fixed best. At margin 0 it only drops 0.3."""
+    import importlib.util
+
+    from synthetic import Run, add_sweep
+
+    from kraby_study.store.store import Store
+
+    spec = importlib.util.spec_from_file_location(
+        "bench_racing", Path(__file__).parents[1] / "benchmarks" / "bench_racing.py")
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, "bench_racing", bench)  # its dataclasses look it up
+    spec.loader.exec_module(bench)
+    url = sqlite_url(workdir / "fixed.db")
+    store = Store(url)
+    try:
+        finals = {0.1: [-1.0, -1.01, -0.99, -1.0, -1.02, -0.98],
+                  0.2: [-1.005, -0.995, -1.015, -1.0, -1.01, -1.02],
+                  0.3: [-2.0, -2.01, -1.99, -2.0, -2.0, -2.0]}
+        add_sweep(store, "fixed", "ppo.clip_range", list(finals), [
+            Run(value=v, seed=s, final_score=x, wall_time=10.0)
+            for v, xs in finals.items() for s, x in enumerate(xs)])
+    finally:
+        store.close()
+    (replay,) = bench.replay_store(url, min_seeds=3, alpha=0.05)
+    assert (replay.fixed_runs, replay.raced_runs) == (18, 9)
+    assert replay.settled == ["0.2@3"] and replay.dropped == ["0.3@3"]
+    assert replay.raced_selection == "0.1" and replay.within
+    assert replay.margin == pytest.approx(0.2 * 1.0, rel=0.02)
+    (old,) = bench.replay_store(url, min_seeds=3, alpha=0.05, margin=0.0)
+    assert old.settled == [] and old.dropped == ["0.3@3"] and old.raced_runs == 15

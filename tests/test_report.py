@@ -6,6 +6,7 @@ import math
 import sqlite3
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import optuna
@@ -368,12 +369,14 @@ def raced_report(raced_store: str, tmp_path_factory: pytest.TempPathFactory) -> 
 
 def _race_p() -> float:
     """The adjusted p of 0.3 at the look after round 3, by hand: the closed Holm-Welch
-    step-down over three values, each one-sided Welch test at equal n (SciPy's)."""
+    step-down over three values, each one-sided Welch t-test at equal n of 3 seeds, so with
+    min(n) - 1 = 2 degrees of freedom."""
     first = {v: RACE_FINALS[v][:3] for v in (0.1, 0.2, 0.3)}
 
     def beats(j: float, g: float) -> float:
-        return stats.ttest_ind(first[j], first[g], equal_var=False,
-                               alternative="greater").pvalue
+        a, b = np.asarray(first[j]), np.asarray(first[g])
+        se = math.sqrt(a.var(ddof=1) / 3 + b.var(ddof=1) / 3)
+        return float(stats.t.sf((a.mean() - b.mean()) / se, 2))
 
     pi = {g: min(1.0, 2 * min(beats(j, g) for j in first if j != g)) for g in first}
     assert pi[0.3] == min(pi.values())  # first in Holm's order: times 3
@@ -433,14 +436,18 @@ def test_a_raced_verdict_says_what_the_race_saved(raced_report: ReportIndex) -> 
     assert verdict.count(rule) == 1 and text.count(rule) == 1
     assert "dropped 0.3 after round 3 (adjusted p 0.00" in verdict
     assert verdict.startswith("clip_range: 0.1 best final score (")
-    assert "tied (not significantly worse, closed Holm-Welch step-down, alpha 0.05): 0.2)" \
-        in verdict
+    # At the default margin (0.2 x |mean 1.0| = 0.2) the survivors' wide spread leaves 0.2
+    # undecided, and the dropped value counts as worse.
+    assert ("margin 0.2 in score units (0.2 x the best's |mean| 1): equivalent (shown within "
+            "the margin of the best): none; undecided: 0.2; worse (shown below the best by "
+            "more than the margin): 0.3 (every value answered by") in verdict
+    assert "warning: the margin 0.2 is below what these seeds resolve" in verdict
     # The table says where the race dropped it, and the notes what a dropped row shows.
     header = next(line for line in text.splitlines() if line.startswith("| clip_range |"))
     assert "| pending | dropped after round | final score |" in header
     row = next(line for line in text.splitlines() if line.startswith("| 0.3 |"))
     assert "| 3 | 1 | 1 | 0 | 3 |" in row and "(race, round 3) |" in row
-    assert "| dropped | dropped by the race after round 3" in row
+    assert "| dropped | worse | dropped by the race after round 3" in row
     assert "a value the race dropped is never best, tied, selected" in text
 
 
@@ -535,3 +542,16 @@ def test_a_wilcoxon_search_captions_its_intermediate_values_as_seed_scores() -> 
     assert caption(search("wilcoxon"), "intermediate") == SEED_SCORES_CAPTION
     assert caption(search("median"), "intermediate") == CAPTIONS["intermediate"]
     assert caption(search("wilcoxon"), "history") == CAPTIONS["history"]
+
+
+def test_a_report_at_margin_zero_reads_as_before(raced_store: str, tmp_path: Path) -> None:
+    # compare.margin=0: no value can be equivalent, and the verdict is the earlier releases'.
+    index = write_report(raced_store, tmp_path / "zero", policy=False,
+                         options=SimpleNamespace(margin=0.0))
+    text = (index.out / "clip_range" / "summary.md").read_text()
+    verdict = text.split("\n\n")[1]
+    assert "tied (not significantly worse, closed Holm-Welch step-down, alpha 0.05): 0.2)" \
+        in verdict and "equivalent (shown within" not in verdict
+    summary = _read_summary(index.out, "clip_range")
+    assert list(summary["answer"]) == ["best", "undecided", "worse"]
+    assert (summary["margin"] == 0).all() and summary["p_equivalent"].dropna().eq(1.0).all()

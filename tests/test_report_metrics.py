@@ -262,8 +262,11 @@ def test_holm_ties_and_probability_of_improvement(report: ReportIndex) -> None:
 def test_verdict_sentence(report: ReportIndex) -> None:
     expected = ("learning_rate: 0.01 best final score (mean 5.5, 95 % CI [",
                 "n=4; IQM 5.5, 95 % trimmed-t CI [",
-                "tied (not significantly worse, closed Holm-Welch step-down, alpha 0.05): "
-                "0.001, 0.3)",
+                "margin 1.1 in score units (0.2 x the best's |mean| 5.5): equivalent (shown "
+                "within the margin of the best): none; undecided: 0.001, 0.3; worse (shown below "
+                "the best by more than the margin): none (every value answered by worse: closed "
+                "Holm-Welch step-down, alpha 0.05 against the margin;",
+                "warning: the margin 1.1 is below what these seeds resolve",
                 "; 0.3 most sample-efficient (AUC 3.75, 95 % CI [",
                 "fastest to threshold (",
                 "; 0.3 most repeatable (rescaled final IQR ",

@@ -54,7 +54,7 @@ def test_no_complete_run_selects_nothing_and_nan_never_wins() -> None:
 
 def test_an_unknown_rule_is_one_line() -> None:
     with pytest.raises(ConfigError, match="study.select must be one of final_score, auc, "
-                                          "fastest_tied, got 'best'"):
+                                          "fastest_tied, fastest_equivalent, got 'best'"):
         SelectRule.check("best")
 
 

@@ -6,12 +6,14 @@ from __future__ import annotations
 from typing import Any
 
 from kraby_study.answers.selected import Selection, sweep_selection
+from kraby_study.comparison import CompareOptions
 from kraby_study.errors import StoreError
 from kraby_study.records import param_name, value_label
 from kraby_study.store.store import Store
 
 
-def campaign_selection(store: Store, name: str) -> Selection:
+def campaign_selection(store: Store, name: str, options: CompareOptions | None = None
+                       ) -> Selection:
     """The settings a finished campaign ends with: its last stage's selected value's, with the
     env settings any stage or the start set.
 
@@ -28,7 +30,7 @@ def campaign_selection(store: Store, name: str) -> Selection:
     for number, stage in enumerate(stages, start=1):
         done = None
         if stage["name"] in store.study_names():
-            done = sweep_selection(store.load(str(stage["name"])))
+            done = sweep_selection(store.load(str(stage["name"])), options)
         if done is None or not done.finished:
             progress = (f"{done.tally.complete}/{done.tally.planned} complete" if done is not None
                         else "not run yet")
@@ -47,7 +49,8 @@ def campaign_selection(store: Store, name: str) -> Selection:
     return Selection(short=f"campaign {name}: {label}",
                 description=f"campaign {name!r} after its {len(stages)} stages (last: {label} "
                             f"in {last['name']}, mean final score {chosen.mean:.4g} over "
-                            f"{len(chosen.trials)} seed(s), {chosen.rule})",
+                            f"{len(chosen.trials)} seed(s), {chosen.rule}, margin "
+                            f"{chosen.margin:.3g} in score units)",
                 settings=chosen.trials[0].user_attrs.get("settings", {}), env_keys=env_keys)
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from kraby_study.plan.spec import RaceRules
@@ -59,7 +59,8 @@ class StudyRace:
 
     rules: RaceRules
     dropped: dict[int, Drop]
-    """The dropped values by their index in the caller's list, each with its round and p."""
+    """The values dropped as worse by their index in the caller's list, each with its round
+    and p."""
     runs: int
     """Runs the race made: ended complete or failed (a withdrawn retry is not a run)."""
     fixed_runs: int
@@ -67,7 +68,10 @@ class StudyRace:
     rounds: int
     """Rounds decided so far."""
     over: bool
-    """The race is over: one value is left, or every value left has all its seeds."""
+    """The race is over: one value is left racing, or every value left has all its seeds."""
+    settled: dict[int, Drop] = field(default_factory=dict)
+    """The values settled as equivalent, by their index in the caller's list: no more seeds,
+    still candidates."""
 
     @property
     def share(self) -> float:
@@ -90,17 +94,20 @@ def race_of(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
     planned = list(definition["values"])
     state, runs = replay(rules, len(planned), latest_by_key(trials))
     index = {value_key(v): i for i, v in enumerate(values)}
-    dropped = {index[value_key(planned[v])]: drop for v, drop in state.dropped.items()
-               if value_key(planned[v]) in index}
-    return StudyRace(rules=rules, dropped=dropped, runs=sum(len(r) for r in runs.values()),
+    def mapped(left: Mapping[int, Drop]) -> dict[int, Drop]:
+        return {index[value_key(planned[v])]: drop for v, drop in left.items()
+                if value_key(planned[v]) in index}
+
+    return StudyRace(rules=rules, dropped=mapped(state.dropped),
+                     runs=sum(len(r) for r in runs.values()),
                      fixed_runs=len(planned) * rules.seeds, rounds=state.rounds,
-                     over=state.over)
+                     over=state.over, settled=mapped(state.settled))
 
 
 def dropped_indices(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
                     values: Sequence[Any]) -> list[int]:
-    """Indices in ``values`` of the values a stored study's race dropped (none for a study
-    that did not race): the values no selection rule, best or tie may name."""
+    """Indices in ``values`` of the values a stored study's race dropped as worse (none for a
+    study that did not race): the values no selection rule, best or answer may name."""
     found = race_of(definition, trials, values)
     return sorted(found.dropped) if found is not None else []
 
@@ -114,6 +121,8 @@ def race_record(values: list[Any], state: Race[int], runs: dict[int, dict[int, f
         "fixed_runs": len(values) * state.rules.seeds,
         "values": [{"value": values[v], "seeds": len(runs.get(v, {})),
                     "dropped_at": state.dropped[v].round if v in state.dropped else None,
-                    "p": state.dropped[v].p if v in state.dropped else None}
+                    "p": state.dropped[v].p if v in state.dropped else None,
+                    **({"settled_at": state.settled[v].round, "p_equivalent": state.settled[v].p}
+                       if v in state.settled else {})}
                    for v in range(len(values))],
     }

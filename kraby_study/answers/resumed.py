@@ -5,6 +5,7 @@ changed resumes exactly as it began; a new study gets today's default.
 - ``seeding``: the stored scheme (offset for a study stored before streams existed), else
   streams.
 - ``confirm.seed`` (a confirm study): the first of its stored seeds, else 1000.
+- ``confirm.select`` (a confirm study): its stored selection rule, else the command's default.
 
 A setting the command gives stays as given: if it differs from the stored study, the store
 refuses it as a changed definition, naming the setting.
@@ -30,9 +31,12 @@ def stored_attrs(url: str, name: str) -> StudyAttrs | None:
 
 
 def resumed(cfg: DictConfig, name: str) -> DictConfig:
-    """``cfg`` with ``seeding`` (and, for a confirm, ``confirm.seed``) settled for the study
-    named ``name`` in ``cfg.storage``: as given, else as stored, else the default."""
-    if cfg.seeding is not None and cfg.confirm.seed is not None:
+    """``cfg`` with ``seeding`` (and, for a confirm, ``confirm.seed`` and ``confirm.select``)
+    settled for the study named ``name`` in ``cfg.storage``: as given, else as stored, else
+    the default. A stored confirm keeps its rule unless one is given, so resuming it never
+    changes what it selects."""
+    if cfg.seeding is not None and cfg.confirm.seed is not None and (
+            cfg.confirm.select is not None):
         return cfg
     attrs = stored_attrs(str(cfg.storage), name)
     definition = attrs.definition if attrs is not None and attrs.fingerprint else None
@@ -44,6 +48,9 @@ def resumed(cfg: DictConfig, name: str) -> DictConfig:
                 and definition.get("kind") == StudyKind.CONFIRM.value
                 and definition.get("seeds")):
             out.confirm.seed = min(int(s) for s in definition["seeds"])
+        if (out.confirm.select is None and definition is not None and attrs is not None
+                and definition.get("kind") == StudyKind.CONFIRM.value and attrs.select):
+            out.confirm.select = str(attrs.select)
     return out
 
 

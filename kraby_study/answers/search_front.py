@@ -6,9 +6,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from kraby_study.front import FrontChoice, Point, cheapest_tied, pareto_front
+from kraby_study.comparison import CompareOptions
+from kraby_study.errors import ConfigError
+from kraby_study.front import FRONT_RULES, FrontChoice, Point, front_choice, pareto_front
 from kraby_study.records import (
     Outcome,
+    SelectRule,
     StoredTrial,
     TrialAttrs,
     cost,
@@ -27,7 +30,7 @@ class SearchFront:
     front: list[Point[int]]
     """The trials on the front, cheapest first."""
     choice: FrontChoice[int] | None
-    """The cheapest trial tied with the front's best score; None when nothing is complete."""
+    """The trial the search's rule selects from the front; None when nothing is complete."""
     floor: str | None = None
     """The search's floor (an enqueued ppo config's name), if it has one."""
     floor_score: float | None = None
@@ -55,7 +58,27 @@ def seed_scores(trial: StoredTrial) -> list[float]:
     return [] if mean is None else [mean]
 
 
-def search_front(trials: Sequence[StoredTrial], floor: str | None = None) -> SearchFront:
+def front_rule(stored: str | None, options: CompareOptions | None = None) -> SelectRule:
+    """The rule a search's front is selected by: ``compare.select`` when given, else the rule
+    the search stored (a new two-objective search stores fastest_equivalent), else
+    fastest_tied, the rule of searches stored before rules were stored.
+
+    Raises:
+        ConfigError: ``compare.select`` names a rule a front cannot take (auc: a search
+            stores no curve per seed to compare).
+    """
+    if options is not None and options.select is not None:
+        rule = SelectRule.check(options.select, "compare.select")
+        if rule not in FRONT_RULES:
+            raise ConfigError(f"compare.select={rule} cannot select from a front: use one of "
+                              f"{', '.join(FRONT_RULES)}")
+        return rule
+    return SelectRule.of(stored) if stored is not None else SelectRule.FASTEST_TIED
+
+
+def search_front(trials: Sequence[StoredTrial], floor: str | None = None,
+                 rule: str = SelectRule.FASTEST_TIED,
+                 options: CompareOptions | None = None) -> SearchFront:
     """The front of a two-objective search's counted trials, and its selection.
 
     Args:
@@ -63,6 +86,8 @@ def search_front(trials: Sequence[StoredTrial], floor: str | None = None) -> Sea
         floor: Its floor (:func:`kraby_study.records.stored_floor`): once the floor's trial is
             complete, trials scoring below it are left out of the front (and so of the
             selection and of ``confirm``); they stay among ``points``.
+        rule: The front's rule (:func:`front_rule`).
+        options: The comparison's margin and seeds.
     """
     points = [Point(t.number, float(score(t)), float(cost(t)))  # type: ignore[arg-type]
               for t in trials if outcome(t) == Outcome.COMPLETE and score(t) is not None
@@ -72,8 +97,9 @@ def search_front(trials: Sequence[StoredTrial], floor: str | None = None) -> Sea
     front = pareto_front(feasible)
     on_front = {p.key for p in front}
     samples = {t.number: seed_scores(t) for t in trials if t.number in on_front}
-    return SearchFront(points=points, front=front, choice=cheapest_tied(front, samples),
-                       floor=floor, floor_score=measured)
+    return SearchFront(points=points, front=front,
+                       choice=front_choice(front, samples, rule, options), floor=floor,
+                       floor_score=measured)
 
 
 def point_text(point: Point[int]) -> str:
@@ -85,24 +111,30 @@ def front_short(found: SearchFront) -> str:
     """A two-objective search's standing for ``list``: the front's size and its selection."""
     if found.choice is None:
         return "-"
-    rule = "fastest_tied" if found.choice.tested else "best score, untested"
+    rule = found.choice.rule if found.choice.tested else "best score, untested"
     return f"front of {len(found.front)}; {point_text(found.choice.chosen)}, {rule}"
 
 
 def front_lines(found: SearchFront) -> list[str]:
-    """The front as ``best`` prints it: one line per trial (trial, score, cost), best score
-    and selection marked."""
+    """The front as ``best`` prints it: one line per trial (trial, score, cost), each trial's
+    answer against the best score and the selection marked."""
     choice = found.choice
     lines = [f"front ({len(found.front)} of {len(found.points)} complete trials; score, cost "
              "in CPU s per seed):"]
     if found.floor_text:
         lines.append(f"  ({found.floor_text})")
+    if choice is not None and choice.comparison is not None:
+        lines.append(f"  (answers against the best score: {choice.comparison.margin_text()})")
+        warning = choice.comparison.resolution_text()
+        if warning:
+            lines.append(f"  (warning: {warning})")
     for point in sorted(found.front, key=lambda p: -p.score):
         marks = []
+        compared = choice.comparison if choice is not None else None
         if choice is not None and point.key == choice.best.key:
             marks.append("best score")
-        if choice is not None and point.key in choice.tied:
-            marks.append("tied")
+        elif compared is not None and point.key in compared.answers:
+            marks.append(str(compared.answers[point.key]))
         if choice is not None and point.key == choice.chosen.key:
             marks.append("selected")
         mark = f"  [{', '.join(marks)}]" if marks else ""

@@ -2,7 +2,10 @@
 
 "Best" is the statistics' word: the highest mean final score (a sweep's value) or the highest
 score (a search's trial). "Selected" is what a study's rule picks (:mod:`kraby_study.selection`):
-under ``final_score`` the best value, under ``fastest_tied`` the fastest value tied with it.
+under ``final_score`` the best value, under ``fastest_equivalent`` the fastest value shown
+equivalent to it. Every function takes the command's
+:class:`kraby_study.comparison.CompareOptions` (margin, ``report.min_seeds`` and
+``compare.select``, a rule read instead of the stored one); the defaults without one.
 """
 
 from __future__ import annotations
@@ -12,8 +15,13 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from kraby_study.answers.raced import dropped_indices
-from kraby_study.answers.search_front import front_lines, front_short, search_front
-from kraby_study.comparison import MIN_SEEDS
+from kraby_study.answers.search_front import (
+    front_lines,
+    front_rule,
+    front_short,
+    search_front,
+)
+from kraby_study.comparison import CompareOptions, compare, seeds_needed
 from kraby_study.errors import StoreError
 from kraby_study.records import (
     Outcome,
@@ -34,7 +42,7 @@ from kraby_study.records import (
     value_key,
     value_label,
 )
-from kraby_study.selection import selected_index, swept_values, time_measure
+from kraby_study.selection import RULES, mean_by_value, samples, swept_values, time_measure
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -61,7 +69,8 @@ class Selection:
     """A two-objective search's front, one line per trial, for ``best`` to print first."""
 
 
-def selection_of(ledger: StudyLedger) -> Selection | None:
+def selection_of(ledger: StudyLedger, options: CompareOptions | None = None
+                 ) -> Selection | None:
     """A sweep's value its rule selects, or another study's best trial; None when no trial is
     complete."""
     attrs = ledger.attrs
@@ -69,7 +78,7 @@ def selection_of(ledger: StudyLedger) -> Selection | None:
     trials = counted(ledger.trials())
     if StudyKind.of(attrs.kind).swept:
         parameter = str(definition["parameter"])
-        chosen = selected_value(attrs, trials, ledger.curves)
+        chosen = selected_value(attrs, trials, ledger.curves, options)
         if chosen is None:
             return None
         env_keys = ([parameter.split(".", 1)[1]] if parameter.startswith("env.")
@@ -77,11 +86,12 @@ def selection_of(ledger: StudyLedger) -> Selection | None:
         return Selection(short=sweep_short(attrs, chosen),
                          description=f"{value_text(attrs, chosen)} of {attrs.kind} "
                                      f"{ledger.name!r}: mean final score {chosen.mean:.4g} over "
-                                     f"{len(chosen.trials)} seed(s){rule_text(chosen)}",
+                                     f"{len(chosen.trials)} seed(s){rule_text(chosen)}"
+                                     f"{answer_text(chosen)}",
                          settings=chosen.trials[0].user_attrs.get("settings", {}),
                          env_keys=env_keys)
     if attrs.kind == StudyKind.SEARCH and two_objectives(definition):
-        return front_selection(ledger.name, definition, trials)
+        return front_selection(ledger.name, definition, trials, attrs.select, options)
     trial = best_trial(trials, ledger.maximize)
     if trial is None:
         return None
@@ -94,12 +104,13 @@ def selection_of(ledger: StudyLedger) -> Selection | None:
                      settings=trial.user_attrs.get("settings", {}), env_keys=env_keys)
 
 
-def front_selection(name: str, definition: dict[str, Any],
-                    trials: Sequence[StoredTrial]) -> Selection | None:
-    """A two-objective search's selection: the cheapest trial of its front tied with the
-    front's best score (:func:`kraby_study.front.cheapest_tied`), with the front (above the
-    search's floor, if it has one)."""
-    found = search_front(trials, stored_floor(definition))
+def front_selection(name: str, definition: dict[str, Any], trials: Sequence[StoredTrial],
+                    select: str | None = None,
+                    options: CompareOptions | None = None) -> Selection | None:
+    """A two-objective search's selection by its rule (:func:`front_rule` of its stored
+    ``select``; :func:`kraby_study.front.front_choice`), with the front (above the search's
+    floor, if it has one)."""
+    found = search_front(trials, stored_floor(definition), front_rule(select, options), options)
     if found.choice is None:
         return None
     chosen = found.choice.chosen
@@ -108,20 +119,21 @@ def front_selection(name: str, definition: dict[str, Any],
     return Selection(short=front_short(found),
                      description=f"trial {chosen.key} of search {name!r}: score "
                                  f"{chosen.score:.4g}, cost {chosen.cost:.3g} CPU s per seed "
-                                 f"({params}); selected by {found.choice.rule}",
+                                 f"({params}); selected by {found.choice.rule_text}",
                      settings=trial.user_attrs.get("settings", {}),
                      env_keys=searched_env_keys(definition), front=front_lines(found))
 
 
 def selected_short(attrs: StudyAttrs, trials: Sequence[StoredTrial], maximize: bool,
-                   curves: Curves) -> str:
+                   curves: Curves, options: CompareOptions | None = None) -> str:
     """What a study selects so far, as ``list`` shows it (:attr:`Selection.short`), from its
     counted trials; ``-`` when it selects nothing yet."""
     if StudyKind.of(attrs.kind).swept:
-        chosen = selected_value(attrs, trials, curves)
+        chosen = selected_value(attrs, trials, curves, options)
         return sweep_short(attrs, chosen) if chosen is not None else "-"
     if attrs.kind == StudyKind.SEARCH and two_objectives(attrs.definition):
-        return front_short(search_front(trials, stored_floor(attrs.definition)))
+        return front_short(search_front(trials, stored_floor(attrs.definition),
+                                        front_rule(attrs.select, options), options))
     trial = best_trial(trials, maximize)
     return trial_short(trial) if trial is not None else "-"
 
@@ -138,6 +150,14 @@ class SweepSelection:
     """Its complete counted trials."""
     tally: Tally
     """Outcomes of the study's counted trials, and the runs planned."""
+    margin: float = 0.0
+    """The comparison's margin in score units."""
+    answer: str = "best"
+    """The selected value's answer against the best: best or equivalent (or, under the
+    rules that need no evidence, undecided)."""
+    warning: str | None = None
+    """The comparison's warning when the margin is below what the seeds resolve (rules that
+    read the answers only)."""
 
     @property
     def finished(self) -> bool:
@@ -145,25 +165,39 @@ class SweepSelection:
         return self.tally.finished
 
 
-def sweep_selection(ledger: StudyLedger) -> SweepSelection | None:
+def sweep_selection(ledger: StudyLedger, options: CompareOptions | None = None
+                    ) -> SweepSelection | None:
     """What a swept study's stored rule (:mod:`kraby_study.selection`) selects among its
-    complete runs (of a raced study, among the race's survivors); None when none is
-    complete."""
-    return selected_value(ledger.attrs, counted(ledger.trials()), ledger.curves)
+    complete runs (of a raced study, among the values its race did not drop); None when none
+    is complete."""
+    return selected_value(ledger.attrs, counted(ledger.trials()), ledger.curves, options)
 
 
-def selected_value(attrs: StudyAttrs, trials: Sequence[StoredTrial],
-                   curves: Curves) -> SweepSelection | None:
-    """What a swept study's stored rule selects among its counted trials; None when no value
-    can be selected yet."""
-    rule = SelectRule.of(attrs.select)
+def study_rule(stored: str | None, options: CompareOptions | None = None) -> SelectRule:
+    """The rule a swept study selects by: ``compare.select`` when given, else its stored one
+    (final_score when none)."""
+    if options is not None and options.select is not None:
+        return SelectRule.check(options.select, "compare.select")
+    return SelectRule.of(stored)
+
+
+def selected_value(attrs: StudyAttrs, trials: Sequence[StoredTrial], curves: Curves,
+                   options: CompareOptions | None = None) -> SweepSelection | None:
+    """What a swept study's rule (:func:`study_rule`) selects among its counted trials; None
+    when no value can be selected yet."""
+    options = options or CompareOptions()
+    rule = study_rule(attrs.select, options)
     name, values = swept_values(str(attrs.kind), attrs.definition, trials)
     # Only the auc rule reads the curves.
     frame = curves([t.number for t in trials]) if rule == SelectRule.AUC else None
-    # A raced study selects among its survivors: a dropped value is never selected.
+    # A raced study selects among the values its race kept: one dropped as worse never is.
     dropped = dropped_indices(attrs.definition, trials, values)
-    index = selected_index(trials, frame, name, values, rule, dropped=dropped,
-                           time_attr=time_measure(attrs.kind))
+    found = samples(trials, frame, name, values, time_measure(attrs.kind))
+    comparison = compare({vi: v for vi, v in found.final.items() if vi not in dropped},
+                         options.margin, options.alpha, options.min_seeds,
+                         tests=RULES[rule].tests)
+    index = RULES[rule].select(comparison, mean_by_value(found.aucs),
+                               mean_by_value(found.seconds))
     if index is None:
         return None
     key = value_key(values[index])
@@ -171,7 +205,9 @@ def selected_value(attrs: StudyAttrs, trials: Sequence[StoredTrial],
             and value_key(swept_value(t, name, values)) == key]
     mean = sum(float(t.value) for t in done) / len(done)  # type: ignore[arg-type]
     return SweepSelection(value=values[index], rule=rule, mean=mean, trials=done,
-                          tally=tally(trials, attrs.planned))
+                          tally=tally(trials, attrs.planned), margin=comparison.margin,
+                          answer=str(comparison.answers.get(index, "best")),
+                          warning=comparison.resolution_text() if RULES[rule].tests else None)
 
 
 def value_text(attrs: StudyAttrs, chosen: SweepSelection) -> str:
@@ -180,6 +216,18 @@ def value_text(attrs: StudyAttrs, chosen: SweepSelection) -> str:
     if attrs.kind == StudyKind.CONFIRM:
         return value_label(chosen.value)
     return f"{param_name(str(attrs.definition['parameter']))}={value_label(chosen.value)}"
+
+
+def answer_text(chosen: SweepSelection) -> str:
+    """The selection's answer against the best with the margin in score units, for the rules
+    that read the answers (``; the best itself (margin 0.0028 in score units)``), and the
+    warning when the margin is below what the seeds resolve; empty for the other rules."""
+    if chosen.rule not in (SelectRule.FASTEST_EQUIVALENT, SelectRule.FASTEST_TIED):
+        return ""
+    answer = ("the best itself" if chosen.answer == "best"
+              else f"answered {chosen.answer} against the best")
+    warning = f"; warning: {chosen.warning}" if chosen.warning else ""
+    return f"; {answer} (margin {chosen.margin:.3g} in score units){warning}"
 
 
 def rule_text(chosen: SweepSelection) -> str:
@@ -198,15 +246,17 @@ def trial_short(trial: StoredTrial) -> str:
     return f"trial {trial.number} ({float(score(trial)):.4g})"  # type: ignore[arg-type]
 
 
-def require_selection(ledger: StudyLedger) -> Selection:
+def require_selection(ledger: StudyLedger, options: CompareOptions | None = None
+                      ) -> Selection:
     """The selection of a study that must have one; StoreError otherwise."""
-    best = selection_of(ledger)
+    options = options or CompareOptions()
+    best = selection_of(ledger, options)
     if best is None:
         done = tally(counted(ledger.trials())).complete
         if done and StudyKind.of(ledger.attrs.kind).swept:
             raise StoreError(f"study {ledger.name!r} selects nothing yet: no value has the "
-                             f"{MIN_SEEDS} complete seeds a selection needs ({done} complete "
-                             "trial(s) in all)")
+                             f"{seeds_needed(options.min_seeds)} complete seeds a selection needs "
+                             f"({done} complete trial(s) in all)")
         raise StoreError(f"study {ledger.name!r} has no complete trial yet")
     if not best.settings:
         raise StoreError(f"study {ledger.name!r} stores no settings for its best trial (not "

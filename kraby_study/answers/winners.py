@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from omegaconf import DictConfig
 
+from kraby_study.comparison import CompareOptions
 from kraby_study.errors import ConfigError, StoreError
 from kraby_study.records import StudyKind, counted, tally, value_label
 
@@ -86,15 +87,18 @@ class StoreWinners:
     def __call__(self, study: str, setting: str, root: DictConfig) -> Any:
         name = self.stored_name(study, setting, root)
         if name not in self._cache:
-            self._cache[name] = _read(str(root.storage), name, f"{setting}: ${{winner:{study}}}")
+            self._cache[name] = _read(str(root.storage), name, f"{setting}: ${{winner:{study}}}",
+                                      CompareOptions.of(root))
         selected, parameter, definition = self._cache[name]
         value = carried(selected, parameter, definition)
         self.inputs.append(Input(setting=setting, value=value, study=name, rule=selected.rule))
         return value
 
 
-def _read(url: str, name: str, where: str) -> tuple[SweepSelection, str, dict[str, Any]]:
-    """The selection of a finished stored sweep, its parameter and definition.
+def _read(url: str, name: str, where: str, options: CompareOptions
+          ) -> tuple[SweepSelection, str, dict[str, Any]]:
+    """The selection of a finished stored sweep (under the command's margin, seeds and
+    ``compare.select``), its parameter and definition.
 
     Raises:
         Unfinished: The study is not stored, or has runs still to come.
@@ -117,7 +121,7 @@ def _read(url: str, name: str, where: str) -> tuple[SweepSelection, str, dict[st
         if not counts.finished:
             raise Unfinished(f"{where}: study {name!r} is incomplete ({counts.complete}/{planned}"
                              " complete); finish it first")
-        selected = sweep_selection(ledger)
+        selected = sweep_selection(ledger, options)
     if selected is None:
         raise StoreError(f"{where}: study {name!r} has no selectable value (0/{planned} complete,"
                          f" {counts.failed} failed, {counts.pruned} pruned)")

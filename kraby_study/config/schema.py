@@ -77,8 +77,9 @@ class StudyConfig:
     select: str = "final_score"
     """How the study's value is selected once it is finished (the report's ``selected`` column,
     ``${winner:NAME}``, ``best``): final_score (highest mean final score), auc (highest mean
-    AUC) or fastest_tied (lowest mean training time among the values tied with the best final
-    score). See docs/campaigns.md."""
+    AUC), fastest_equivalent (lowest mean training time among the best and the values shown
+    equivalent to it, within compare.margin) or fastest_tied (the same among the values not
+    shown worse, the rule of earlier releases). See docs/campaigns.md."""
 
 
 @dataclass
@@ -189,11 +190,27 @@ class ReportConfig:
 
 
 @dataclass
+class CompareConfig:
+    """How values are compared with the best (see docs/statistics.md, Four answers)."""
+
+    margin: float = 0.2
+    """The smallest difference in mean final score that matters, as a fraction of the best
+    value's |mean| (0 .. 1): a value is equivalent when shown within it of the best, worse
+    when shown below the best by more than it. 0: no value can be equivalent, and worse means
+    shown worse at all (the answers of earlier releases). A race stores it; a report may
+    re-analyse a finished study at any margin."""
+    select: str | None = None
+    """A selection rule that ``best``, ``report`` and ``${winner:...}`` apply instead of
+    each study's stored one (re-selection without retraining); null: the study's own."""
+
+
+@dataclass
 class RacingConfig:
     """Racing a sweep's or a confirm study's seeds (see docs/studies.md, Racing)."""
 
     enabled: bool = False
-    """Run seeds in rounds and stop the values significantly worse than the best."""
+    """Run seeds in rounds: a value leaves once shown worse than the best (by more than
+    compare.margin) or shown equivalent to it."""
     min_seeds: int = 3
     """Seeds every value gets before a value can be dropped (2 .. the most seeds)."""
     alpha: float = 0.05
@@ -221,9 +238,10 @@ class ConfirmConfig:
     baselines: list[str] = field(default_factory=list)
     """ppo config names added as arms, e.g. [tuned]."""
     select: str | None = None
-    """The confirm study's selection rule (final_score, auc or fastest_tied, as a sweep's
-    study.select); null: fastest_tied for a two-objective search's front, final_score
-    otherwise. fastest_tied reads CPU seconds on a confirm study."""
+    """The confirm study's selection rule (final_score, auc, fastest_equivalent or
+    fastest_tied, as a sweep's study.select); null: fastest_equivalent for a two-objective
+    search's front, final_score otherwise. The fastest rules read CPU seconds on a confirm
+    study."""
 
 
 @dataclass
@@ -280,6 +298,7 @@ class KrabyConfig:
     report: ReportConfig = field(default_factory=ReportConfig)
     confirm: ConfirmConfig = field(default_factory=ConfirmConfig)
     racing: RacingConfig = field(default_factory=RacingConfig)
+    compare: CompareConfig = field(default_factory=CompareConfig)
     storage: str = "sqlite:///studies/kraby.db"
     """Database URL: a SQLite file (created on demand) or postgresql+psycopg://user@host/db."""
     executor: str = "local"

@@ -134,6 +134,14 @@ def validate(cfg: DictConfig) -> None:
     _require(int(cfg.confirm.seeds) >= 2,
              f"confirm.seeds must be at least 2 (an interval needs two), got {cfg.confirm.seeds}")
     validate_racing(cfg.racing)
+    margin = float(cfg.compare.margin)
+    _require(math.isfinite(margin) and margin >= 0,
+             f"compare.margin must be at least 0 (a fraction of the best's |mean|), got "
+             f"{cfg.compare.margin}")
+    _require(margin <= 1, f"compare.margin is a fraction of the best's |mean|: at most 1, got "
+             f"{cfg.compare.margin}")
+    if cfg.compare.select is not None:
+        SelectRule.check(str(cfg.compare.select), "compare.select")
     if cfg.report.threshold is not None:
         _finite("report.threshold", float(cfg.report.threshold))
         # The reward is minus a squared distance: no episode scores above 0.

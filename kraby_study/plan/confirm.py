@@ -103,13 +103,13 @@ def distinct_arms(arms: Sequence[Arm]) -> list[Arm]:
 
 
 def confirm_rule(cfg: DictConfig, source: ConfirmedStudy | None) -> SelectRule:
-    """The confirm study's selection rule: ``confirm.select``, or fastest_tied for a
-    two-objective search's front (the cheapest settings tied with the best, on fresh seeds)
-    and final_score otherwise; ConfigError for a name that is not a rule."""
+    """The confirm study's selection rule: ``confirm.select``, or fastest_equivalent for a
+    two-objective search's front (the cheapest settings shown equivalent to the best, on
+    fresh seeds) and final_score otherwise; ConfigError for a name that is not a rule."""
     if cfg.confirm.select is not None:
         return SelectRule.check(str(cfg.confirm.select), "confirm.select")
     if source is not None and source.two_objectives:
-        return SelectRule.FASTEST_TIED
+        return SelectRule.FASTEST_EQUIVALENT
     return SelectRule.FINAL_SCORE
 
 

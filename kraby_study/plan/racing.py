@@ -21,4 +21,4 @@ def race_rules(cfg: DictConfig, seeds: list[int], where: str) -> RaceRules | Non
         return None
     return RaceRules(seeds=len(seeds), round_seeds=tuple(seeds),
                      min_seeds=int(cfg.racing.min_seeds), alpha=float(cfg.racing.alpha),
-                     paired=bool(cfg.racing.paired))
+                     paired=bool(cfg.racing.paired), margin=float(cfg.compare.margin))

@@ -76,6 +76,10 @@ class RaceRules:
     paired: bool = False
     """Each look compares values by paired t-tests on their common seeds (seeds as blocks);
     False: Welch's unpaired tests, the report's own."""
+    margin: float = 0.0
+    """``compare.margin`` when the race began: a value shown within it of the look's best
+    leaves as equivalent, one shown below the best by more than it as worse; 0: only values
+    shown worse leave (races before margins)."""
 
     @property
     def looks(self) -> int:
@@ -92,17 +96,22 @@ class RaceRules:
         over 8 looks (0.00625 each)'."""
         test = ("closed Holm step-down over paired t-tests (seeds as blocks)" if self.paired
                 else "closed Holm-Welch step-down")
+        leaves = (f"; a value leaves once shown worse by more than the margin ({self.margin:g} x "
+                  "the look's best |mean|) or shown equivalent to the best within it"
+                  if self.margin > 0 else "")
         return (f"racing from round {self.min_seeds} of {self.seeds}: {test} at each look, "
                 f"alpha {self.alpha:g} spent equally over {self.looks} looks "
-                f"({self.look_alpha:.3g} each)")
+                f"({self.look_alpha:.3g} each){leaves}")
 
     def stored(self) -> dict[str, float | int | bool | list[int]]:
         """The rules as a study's definition stores them: a race is never extended or mixed
         with a fixed design under one name (changing them would change past drops). An
-        unpaired race stores no ``paired`` key, as every race did before pairing existed, so
-        those resume unchanged."""
+        unpaired race stores no ``paired`` key, as every race did before pairing existed, and
+        a race at margin 0 no ``margin`` key, so those resume unchanged; a race resumed at
+        another margin is a changed definition, refused."""
         return {"seeds": self.seeds, "min_seeds": self.min_seeds, "alpha": self.alpha,
-                "round_seeds": list(self.round_seeds), **({"paired": True} if self.paired else {})}
+                "round_seeds": list(self.round_seeds), **({"paired": True} if self.paired else {}),
+                **({"margin": self.margin} if self.margin > 0 else {})}
 
     @classmethod
     def of(cls, definition: dict[str, Any]) -> RaceRules | None:
@@ -113,7 +122,8 @@ class RaceRules:
         return cls(seeds=int(stored["seeds"]),
                    round_seeds=tuple(int(s) for s in stored["round_seeds"]),
                    min_seeds=int(stored["min_seeds"]), alpha=float(stored["alpha"]),
-                   paired=bool(stored.get("paired", False)))
+                   paired=bool(stored.get("paired", False)),
+                   margin=float(stored.get("margin", 0.0)))
 
 
 @dataclass(frozen=True)

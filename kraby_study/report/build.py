@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
+from kraby_study.comparison import seeds_needed
 from kraby_study.errors import ConfigError, first_line
 from kraby_study.records import StudyKind
 from kraby_study.report import search_output, sweep_output
@@ -110,7 +111,7 @@ def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
         report.blocks = [Heading(data.name, 2)]
         candidates = []
     else:
-        search = build_search(data)
+        search = build_search(data, options)
         report = search_output.write_search(search, folder, rel, fmt)
         candidates = search_output.policy_candidates(search)
     if policy and (data.kind != StudyKind.OPTUNA or candidates):
@@ -221,7 +222,7 @@ def write_report(url: str, out: Path | str, study: str | None = None, fmt: str =
         chain_files += files
     blocks = index_blocks(url, reports, int(option(options, "bootstrap",
                                                    BOOTSTRAP_REPETITIONS)), chains,
-                          max(2, int(option(options, "min_seeds", 2))))
+                          seeds_needed(int(option(options, "min_seeds", 2))))
     markdown, html = out / "index.md", out / "index.html"
     markdown.write_text(to_markdown(blocks), encoding="utf-8")
     html.write_text(to_html(blocks, TITLE), encoding="utf-8")

@@ -12,6 +12,8 @@ from typing import Any
 
 import pandas as pd
 
+from kraby_study.comparison import answers_name
+from kraby_study.race import Drop
 from kraby_study.records import Outcome, value_key, value_label
 from kraby_study.report.document import Block, Heading, Links, Table, Text, write_csvs
 from kraby_study.report.sweep_tables import Sweep, note_part
@@ -58,15 +60,24 @@ def stage_notes(sweep: Sweep | None) -> str:
     for too few seeds."""
     if sweep is None:
         return ""
-    text = (f"best and ties: {PROCEDURE_NAME}; only values with at least {sweep.min_seeds} "
-            "complete seeds can be selected")
+    compared = sweep.comparison
+    if compared is not None and compared.fraction > 0:
+        text = (f"best and answers ({answers_name(compared.alpha)}): {compared.margin_text()}; "
+                f"only values with at least {sweep.min_seeds} complete seeds can be selected")
+    else:
+        text = (f"best and ties: {PROCEDURE_NAME}; only values with at least "
+                f"{sweep.min_seeds} complete seeds can be selected")
     race = sweep.race
     if race is not None:
-        dropped = ", ".join(f"{sweep.labels[vi]} after round {drop.round}"
-                            for vi, drop in sorted(sweep.dropped.items(),
-                                                   key=lambda item: (item[1].round, item[0])))
-        text += (f"; raced ({race.rules.describe()}), selected among the survivors; dropped: "
-                 f"{dropped or 'none'}; {race.saved_text()}")
+        def when(left: dict[int, Drop]) -> str:
+            return ", ".join(f"{sweep.labels[vi]} after round {drop.round}"
+                             for vi, drop in sorted(left.items(),
+                                                    key=lambda item: (item[1].round, item[0])))
+
+        among = ("the values it did not drop" if race.rules.margin > 0 else "the survivors")
+        settled = (f"; settled equivalent: {when(race.settled)}" if race.settled else "")
+        text += (f"; raced ({race.rules.describe()}), selected among {among}; dropped: "
+                 f"{when(sweep.dropped) or 'none'}{settled}; {race.saved_text()}")
     left = ([(r["value"], r["complete"]) for _, r in sweep.summary.iterrows()
              if note_part(r["note"], "left out: ")] if "note" in sweep.summary else [])
     if left:

@@ -110,19 +110,17 @@ def verdict(search: Search) -> str:
     return (f"Front: {len(search.front.front)} of {len(search.front.points)} complete trials"
             f"{floor}. "
             f"Best score: trial {choice.best.key}, {number(choice.best.score)} at "
-            f"{choice.best.cost:.3g} CPU s per seed. Selected by {choice.rule}: trial "
+            f"{choice.best.cost:.3g} CPU s per seed. Selected by {choice.rule_text}: trial "
             f"{chosen.key}, score {number(chosen.score)} at {chosen.cost:.3g} CPU s per seed.")
 
 
 def front_cells(search: Search) -> Table:
     """The front as formatted cells, best score first; the selected trial marked best."""
     frame = front_table(search)
-    header = ["trial", "score", "cost (CPU s/seed)", "enqueued", "tie test", *search.params]
+    header = ["trial", "score", "cost (CPU s/seed)", "enqueued", "answer", *search.params]
     rows, marks = [], []
     for _, row in frame.iterrows():
-        test = ("best score" if row["best"] else "tied" if row["tied"] else "worse"
-                if search.front is not None and search.front.choice is not None
-                and search.front.choice.tested else "-")
+        test = "best score" if row["best"] else (row["answer"] or "-")
         rows.append([str(row["trial"]) + (" (selected)" if row["selected"] else ""),
                      _cell(row["score"]), f"{row['cost']:.3g}", str(row["enqueued"] or "-"),
                      test,

@@ -24,7 +24,9 @@ from optuna.distributions import (
 )
 from optuna.trial import FrozenTrial
 
-from kraby_study.answers.search_front import SearchFront, search_front
+from kraby_study.answers.search_front import SearchFront, front_rule, search_front
+from kraby_study.comparison import MARGIN, MIN_SEEDS, CompareOptions
+from kraby_study.front import FrontChoice
 from kraby_study.records import (
     Outcome,
     StudyKind,
@@ -37,6 +39,7 @@ from kraby_study.records import (
     two_objectives,
 )
 from kraby_study.report.load import StudyData
+from kraby_study.report.sweep_tables import option
 
 TOP = 10
 """Rows of the top-trials table."""
@@ -172,16 +175,22 @@ def _duration(trial: FrozenTrial) -> float | None:
     return (trial.datetime_complete - trial.datetime_start).total_seconds()
 
 
-def build_search(data: StudyData) -> Search:
-    """The tables of a search study."""
+def build_search(data: StudyData, options: Any = None) -> Search:
+    """The tables of a search study; ``options``: the report's (``margin``: compare.margin,
+    ``select``: compare.select, ``min_seeds``), None for the defaults."""
     maximize = data.ledger.maximize
     params, distributions = param_columns(data.trials)
     imp, note = importances(maximize, data.trials, params)
     two = is_two_objective(data)
+    judged = CompareOptions(margin=float(option(options, "margin", MARGIN)),
+                            min_seeds=int(option(options, "min_seeds", MIN_SEEDS)),
+                            select=option(options, "select", None))
     return Search(data=data, maximize=maximize, trials=trial_rows(data.trials, params, two),
                   params=params, distributions=distributions, importances=imp,
                   importance_note=note,
-                  front=search_front(data.trials, stored_floor(data.definition)) if two else None)
+                  front=(search_front(data.trials, stored_floor(data.definition),
+                                      front_rule(data.ledger.attrs.select, judged), judged)
+                         if two else None))
 
 
 def is_two_objective(data: StudyData) -> bool:
@@ -192,8 +201,9 @@ def is_two_objective(data: StudyData) -> bool:
 
 def front_table(search: Search) -> pd.DataFrame:
     """The front's trials, best score first: number, score, cost, the configuration it was
-    enqueued as, whether it is the best score, tied with it or selected, and its parameters
-    (pareto.csv)."""
+    enqueued as, whether it is the best score, admitted by the rule beside it (``tied``: shown
+    equivalent under fastest_equivalent, not shown worse under fastest_tied) or selected, its
+    answer against the best score, and its parameters (pareto.csv)."""
     assert search.front is not None
     choice = search.front.choice
     rows = search.trials.set_index("number")
@@ -206,9 +216,18 @@ def front_table(search: Search) -> pd.DataFrame:
             "best": choice is not None and point.key == choice.best.key,
             "tied": choice is not None and point.key in choice.tied,
             "selected": choice is not None and point.key == choice.chosen.key,
+            "answer": answer_of(choice, point.key),
             **{name: row[name] for name in search.params}})
     return pd.DataFrame(out, columns=["trial", "score", "cost", "enqueued", "best", "tied",
-                                      "selected", *search.params])
+                                      "selected", "answer", *search.params])
+
+
+def answer_of(choice: FrontChoice[int] | None, key: int) -> str:
+    """A front trial's answer against the best score (empty when untested)."""
+    compared = choice.comparison if choice is not None else None
+    if compared is None or key not in compared.answers:
+        return ""
+    return str(compared.answers[key])
 
 
 def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:

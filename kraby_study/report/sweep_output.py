@@ -6,13 +6,15 @@ on whether the source study's winner is the confirmed winner.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from kraby_study.coverage import FEW_SEEDS, coverage_note
+from kraby_study.comparison import answers_name
+from kraby_study.coverage import coverage_note
 from kraby_study.records import Outcome, StudyKind, value_label
 from kraby_study.report import sweep_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
@@ -120,7 +122,7 @@ def summary_table(sweep: Sweep) -> Table:
               "env steps to threshold", "seconds to threshold", "reached",
               f"training time ({sweep.time_unit})",
               "Welch p vs best", "adjusted p (step-down)", "P(best > value) [95 % Newcombe CI]", "",
-              "note"]
+              "answer", "note"]
     rows = []
     for vi, row in sweep.summary.iterrows():
         dropped = vi in sweep.dropped
@@ -140,7 +142,8 @@ def summary_table(sweep: Sweep) -> Table:
             "-" if row["mark"] == "best" else
             _with_interval(row["p_improvement"], row["p_improvement_low"],
                            row["p_improvement_high"]),
-            "dropped" if dropped else MARK_TEXT[row["mark"]], str(row["note"] or "")])
+            "dropped" if dropped else MARK_TEXT[row["mark"]], str(row.get("answer") or "-"),
+            str(row["note"] or "")])
     return Table(header, rows, marks=list(sweep.summary["mark"]))
 
 
@@ -180,14 +183,17 @@ def metric_notes(bootstrap: int, min_seeds: int = 2, raced: bool = False) -> str
             f"Welch p vs best: {TEST_NAME}. Adjusted p and the '\u2248 best' marks: "
             f"{HOLM_NAME}. Best, ties, most sample-efficient, fastest and most repeatable count "
             f"only values with at least report.min_seeds = {min_seeds} complete seeds. "
-            f"P(best > value): {p_improvement_name()}.{race}")
+            f"P(best > value): {p_improvement_name()}. Answer: best; equivalent (shown within "
+            "the margin of the best, compare.margin in score units); worse (shown below the "
+            "best by more than the margin, or dropped by a race); undecided (neither); left "
+            f"out (too few seeds); {answers_name()}.{race}")
 
 
 def few_seeds_note(sweep: Sweep) -> str | None:
-    """The measured coverage of the intervals drawn from fewer than 5 seeds in this sweep
-    (:func:`kraby_study.coverage.coverage_note`); None when every interval has 5 or more."""
-    ns = [int(n) for n in sweep.summary["complete"] if 2 <= int(n) < FEW_SEEDS]
-    return coverage_note(ns)
+    """The measured coverage of the intervals drawn from fewer than 5 seeds in this sweep, and
+    of those from more where skewed data were covered less than 93 % of the time
+    (:func:`kraby_study.coverage.coverage_note`); None when neither is drawn here."""
+    return coverage_note(int(n) for n in sweep.summary["complete"] if int(n) >= 2)
 
 
 def left_out_text(sweep: Sweep) -> str | None:
@@ -217,6 +223,31 @@ def race_text(sweep: Sweep) -> str | None:
             + (f"dropped {dropped}" if dropped else "nothing dropped")
             + f"; {state}; {race.saved_text()}. Best, ties and the selection are among the "
             "survivors.")
+
+
+def answers_text(sweep: Sweep) -> str:
+    """The four answers in words, with the margin in score units and, when it is below what
+    the seeds resolve, the warning."""
+    compared = sweep.verdict.comparison
+    assert compared is not None
+    noun = "configuration" if sweep.kind == StudyKind.CONFIRM else "value"
+
+    def named(values: list[int]) -> str:
+        return ", ".join(_label(sweep, vi) for vi in values) or "none"
+
+    worse = [*compared.worse, *sorted(sweep.dropped)]
+    text = (f"{compared.margin_text()}: equivalent (shown within the margin of the best): "
+            f"{named(compared.equivalent)}; undecided: {named(compared.undecided)}; worse "
+            f"(shown below the best by more than the margin): {named(worse)} (every {noun} "
+            f"answered by {answers_name(compared.alpha)})")
+    warning = compared.resolution_text()
+    if warning:
+        return text + f"; warning: {warning}"
+    if math.isfinite(compared.resolution):
+        text += (f"; these seeds resolve a margin of about {compared.resolution:.3g} (median "
+                 "over the values of (t + t_0.8) x the standard error of the contrast with the "
+                 "best)")
+    return text
 
 
 def _label(sweep: Sweep, vi: int) -> str:
@@ -262,7 +293,10 @@ def verdict(sweep: Sweep) -> str:
         return text + "; no seed reached the threshold."
     parts = []
     first = f"{_label(sweep, result.best)} best final score ({_final_text(best)}"
-    if result.tied:
+    compared = result.comparison
+    if compared is not None and compared.fraction > 0:
+        first += "; " + answers_text(sweep)
+    elif result.tied:
         first += (f"; tied (not significantly worse, {PROCEDURE_NAME}): "
                   f"{', '.join(_label(sweep, vi) for vi in result.tied)}")
     elif len(sweep.values) > 1 and (summary["p_holm"].notna().any() or sweep.dropped):
@@ -333,7 +367,13 @@ def winner_text(sweep: Sweep) -> str | None:
         return text + (f" The race dropped {winner} after round "
                        f"{sweep.dropped[index].round}.")
     mark = sweep.summary.iloc[index]["mark"]
-    if mark == "tie":
+    answer = str(sweep.summary.iloc[index].get("answer") or "")
+    compared = sweep.comparison
+    if compared is not None and compared.fraction > 0 and answer in ("equivalent", "undecided"):
+        text += (f" {winner} is {answer} against it ({compared.margin_text()})"
+                 + (": within the margin." if answer == "equivalent" else
+                    ": neither shown within the margin nor below it."))
+    elif mark == "tie":
         text += (f" The two cannot be told apart ({PROCEDURE_NAME}), so {winner} "
                  "may still be as good.")
     return text

@@ -5,9 +5,15 @@ Figures and metrics draw from the complete runs only; failed runs are counted an
 still to come are counted as pending, and nothing is dropped without a trace. A confirm study
 is a sweep whose values are the labels of the configurations it retrains (in the order given).
 
-In a raced study (:mod:`kraby_study.race`) the values the race dropped are never best, tied,
-selected or any answer of the verdict: they are shown as worse, with the round and the adjusted
-p of the look that dropped them, and the survivors are compared on all their seeds.
+Every decision of the report (the summary's answers and marks, the verdict, the ``selected``
+column) reads one :class:`kraby_study.comparison.Comparison`, made once per study from the seed
+scores :func:`kraby_study.selection.samples` extracts, the same pass ``best``,
+``${winner:...}`` and campaigns read.
+
+In a raced study (:mod:`kraby_study.race`) the values the race dropped are never best,
+equivalent, selected or any answer of the verdict: they are shown as worse, with the round and
+the adjusted p of the look that dropped them, and the others (those still racing and those it
+settled as equivalent) are compared on all their seeds.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from kraby_study.answers.raced import StudyRace, race_of
-from kraby_study.comparison import MIN_SEEDS, compare_with_best, evidence
+from kraby_study.comparison import MARGIN, MIN_SEEDS, CompareOptions, Comparison, compare
 from kraby_study.race import Drop
 from kraby_study.records import (
     Outcome,
@@ -34,7 +40,7 @@ from kraby_study.records import (
 )
 from kraby_study.report.load import StudyData
 from kraby_study.report.style import value_colours
-from kraby_study.selection import selected_index, swept_values, time_measure
+from kraby_study.selection import RULES, mean_by_value, samples, swept_values, time_measure
 from kraby_study.stats import (
     BOOTSTRAP_REPETITIONS,
     Verdict,
@@ -112,9 +118,11 @@ class Sweep:
     min_seeds: int = MIN_SEEDS
     """Fewest complete seeds a value needs to be best, tied or any answer of the verdict."""
     rule: str = SelectRule.FINAL_SCORE
-    """The study's selection rule; the summary's ``selected`` column marks the value it
-    selects once no run is pending."""
+    """The study's selection rule (its stored one, or ``compare.select``); the summary's
+    ``selected`` column marks the value it selects once no run is pending."""
     race: StudyRace | None = None
+    comparison: Comparison[int] | None = None
+    """The study's one comparison: the summary's answers, the verdict and the selection."""
 
     @property
     def dropped(self) -> dict[int, Drop]:
@@ -221,6 +229,16 @@ def dropped_note(drop: Drop, look_alpha: float) -> str:
             f"race's per-look alpha {look_alpha:.3g}")
 
 
+SETTLED_PREFIX = "settled equivalent by the race"
+"""How the summary's note of a value the race settled as equivalent begins."""
+
+
+def settled_note(drop: Drop, look_alpha: float) -> str:
+    """Why a value got no more seeds although it is a candidate: the look that settled it."""
+    return (f"{SETTLED_PREFIX} after round {drop.round} (p {_p_short(drop.p)} at the race's "
+            f"per-look alpha {look_alpha:.3g}); compared on its {drop.round} seeds")
+
+
 def _p_short(p: float) -> str:
     return "< 0.001" if p < 0.001 else f"{p:.3f}"
 
@@ -234,7 +252,10 @@ def note_part(note: str, prefix: str) -> str | None:
 def summarise(trials: pd.DataFrame, labels: list[str],
               bootstrap: int = BOOTSTRAP_REPETITIONS, min_seeds: int = MIN_SEEDS,
               dropped: Mapping[int, Drop] | None = None,
-              look_alpha: float = math.nan, time_attr: str = "wall_time") -> pd.DataFrame:
+              look_alpha: float = math.nan, time_attr: str = "wall_time",
+              comparison: Comparison[int] | None = None,
+              settled: Mapping[int, Drop] | None = None,
+              final: Mapping[int, list[float]] | None = None) -> pd.DataFrame:
     """One row per value: run counts; the round after which a race dropped it
     (``dropped_at``, empty for a survivor and in a study that did not race); the complete
     seeds' final score (mean, sd, interval of the mean, :func:`kraby_study.stats.mean_interval`
@@ -244,28 +265,38 @@ def summarise(trials: pd.DataFrame, labels: list[str],
     value (``p_vs_best``) and the adjusted p of the closed Holm-Welch step-down (``p_holm``,
     :func:`kraby_study.comparison.compare_with_best`); the probability that the best value
     beats this one, with its Newcombe score-type interval; a mark: ``best``, ``tie`` (adjusted
-    p >= 0.05: not significantly worse than the best) or empty; and a note naming why a value
-    with fewer than ``min_seeds`` complete seeds is left out, or which look of the race dropped
-    it. The curve metrics are added by
-    :func:`add_curve_metrics`.
+    p >= 0.05: not shown worse at margin 0) or empty; the ``answer`` of the comparison, written
+    out (best, equivalent, worse, undecided; ``left out`` for a value with too few seeds,
+    empty for one without any), with ``p_worse`` and ``p_equivalent``, the margin in score
+    units (``margin``, the same on every row) and the smallest margin its seeds resolve
+    (``margin_resolvable``); and a note naming why a value with fewer than ``min_seeds``
+    complete seeds is left out, or which look of the race dropped or settled it. The curve
+    metrics are added by :func:`add_curve_metrics`.
 
-    ``dropped`` (by value index) are the values a race dropped, at per-look level
-    ``look_alpha``: they are left out of the comparison (never best or tied, ``p_holm``
-    empty), which the survivors make on all their seeds.
+    ``comparison`` is the study's one comparison (:func:`kraby_study.comparison.compare`);
+    None: compared here at margin 0. ``dropped`` (by value index) are the values a race
+    dropped as worse, at per-look level ``look_alpha``: they are left out of the comparison
+    (never best or equivalent, ``p_holm`` empty, answer worse); ``settled``, those it settled
+    as equivalent, which stay in it. ``final``: each value's complete seeds' final scores from
+    the pass every decision reads (:func:`kraby_study.selection.samples`); None: read from
+    ``trials``.
     """
     dropped = dict(dropped or {})
+    settled = dict(settled or {})
     done = trials[trials["outcome"] == Outcome.COMPLETE]
     score = describe(done, "vi", "final_score", bootstrap=bootstrap)
     time = describe(done, "vi", time_attr, bootstrap=bootstrap)
     counts = pd.crosstab(trials["vi"], trials["outcome"])
-    scores = _finals(done)
+    # A run whose value cannot be read ("?") is described but never in the decisions' pass.
+    scores = {**_finals(done), **(final or {})}
     survivors = {vi: finals for vi, finals in scores.items() if vi not in dropped}
-    comparison = compare_with_best(survivors, min_seeds=min_seeds)
+    if comparison is None:
+        comparison = compare(survivors, 0.0, min_seeds=min_seeds)
     best = comparison.best
-    _, pvalues = compare_to_best(survivors, min_seeds=min_seeds)
+    _, pvalues = compare_to_best(survivors, min_seeds=comparison.min_seeds)
     if best is not None:  # for information, as for any value: no mark uses it
         pvalues.update({vi: welch_p(scores[best], scores[vi]) for vi in dropped if vi in scores})
-    _, _, left_out = evidence(scores, min_seeds)
+    left_out = comparison.left_out
     raw = [pvalues.get(vi, np.nan) for vi in range(len(labels))]
     adjusted = [comparison.p_adjusted.get(vi, np.nan) for vi in range(len(labels))]
     rows = []
@@ -285,8 +316,13 @@ def summarise(trials: pd.DataFrame, labels: list[str],
             improvement_low, improvement_high = p_improvement_interval(scores[best], finals)
         drop = dropped.get(vi)
         notes = [dropped_note(drop, look_alpha)] if drop is not None else []
+        if vi in settled:
+            notes.append(settled_note(settled[vi], look_alpha))
         if vi in left_out:
             notes.append(left_out_note(len(finals), comparison.min_seeds))
+        answer = ("worse" if drop is not None else
+                  str(comparison.answers[vi]) if vi in comparison.answers else
+                  "left out" if vi in left_out else "")
         rows.append({
             "value": label,
             "complete": int(count.get(Outcome.COMPLETE, 0)),
@@ -310,10 +346,15 @@ def summarise(trials: pd.DataFrame, labels: list[str],
             "env_steps": float(steps.mean()) if len(steps) else np.nan,
             "p_vs_best": raw[vi],
             "p_holm": p_holm,
+            "p_worse": comparison.p_worse.get(vi, np.nan),
+            "p_equivalent": comparison.p_equivalent.get(vi, np.nan),
             "p_improvement": improvement,
             "p_improvement_low": improvement_low,
             "p_improvement_high": improvement_high,
             "mark": mark,
+            "answer": answer,
+            "margin": comparison.margin,
+            "margin_resolvable": comparison.resolvable.get(vi, np.nan),
             "note": "; ".join(notes),
         })
     frame = pd.DataFrame(rows)
@@ -420,11 +461,13 @@ def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame,
 
 
 def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
-                  min_seeds: int = MIN_SEEDS, dropped: Collection[int] = ()) -> Verdict:
+                  min_seeds: int = MIN_SEEDS, dropped: Collection[int] = (),
+                  comparison: Comparison[int] | None = None) -> Verdict:
     """The verdict of :func:`kraby_study.stats.verdict` from the summary rows and the seeds'
-    final scores. The fastest is by the restricted mean seconds (a seed that never reached the
-    threshold counts at its run's end); the rescaled IQR (``final_iqr_unbiased``) decides the
-    most repeatable. Values a race dropped (``dropped``, by index) are no answer."""
+    final scores, reading the study's one ``comparison`` when given. The fastest is by the
+    restricted mean seconds (a seed that never reached the threshold counts at its run's end);
+    the rescaled IQR (``final_iqr_unbiased``) decides the most repeatable. Values a race dropped
+    (``dropped``, by index) are no answer."""
     final = {int(vi): group["final_score"].tolist() for vi, group in seeds.groupby("vi")
              if int(vi) not in dropped}
 
@@ -432,7 +475,8 @@ def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
         return {vi: v for vi, v in summary[column].to_dict().items() if vi not in dropped}
 
     return verdict(final, auc_means=kept("auc_mean"), seconds=kept("seconds_to_threshold"),
-                   iqrs=kept("final_iqr_unbiased"), p_holm=kept("p_holm"), min_seeds=min_seeds)
+                   iqrs=kept("final_iqr_unbiased"), p_holm=kept("p_holm"), min_seeds=min_seeds,
+                   comparison=comparison)
 
 
 def arms_frame(sweep: Sweep) -> pd.DataFrame:
@@ -454,10 +498,12 @@ def arms_frame(sweep: Sweep) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def study_rule(data: StudyData) -> str:
-    """The stored selection rule of a study (final_score when none or unknown)."""
-    rule = data.ledger.attrs.select
-    return SelectRule.of(rule)
+def study_rule(data: StudyData, override: str | None = None) -> str:
+    """The selection rule of a study: ``override`` (``compare.select``) when given, else its
+    stored one (final_score when none or unknown)."""
+    if override is not None:
+        return SelectRule.check(str(override), "compare.select")
+    return SelectRule.of(data.ledger.attrs.select)
 
 
 def option(options: Any, name: str, default: Any) -> Any:
@@ -476,10 +522,13 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
         options: The report's options (``bootstrap``: resamples of the bootstrap-t interval
             of a mean, ``threshold``: reward to reach
             or None for the default, ``min_seeds``: fewest complete seeds of a value in any
-            comparison); None for the defaults.
+            comparison, ``margin``: ``compare.margin``, ``select``: ``compare.select``); None
+            for the defaults.
     """
     bootstrap = int(option(options, "bootstrap", BOOTSTRAP_REPETITIONS))
-    min_seeds = max(2, int(option(options, "min_seeds", MIN_SEEDS)))
+    judged = CompareOptions(margin=float(option(options, "margin", MARGIN)),
+                            min_seeds=int(option(options, "min_seeds", MIN_SEEDS)),
+                            select=option(options, "select", None))
     chosen = option(options, "threshold", None)
     definition = data.definition
     if data.kind.swept:
@@ -495,25 +544,35 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     # The race's dropped values by their index here (the report's order), matched by value.
     race = race_of(definition, data.trials, values) if data.kind.swept else None
     dropped = race.dropped if race is not None else {}
+    settled = race.settled if race is not None else {}
     look_alpha = race.rules.look_alpha if race is not None else math.nan
     complete = trials[trials["outcome"] == Outcome.COMPLETE][["vi", "seed", "number"]]
     curves = data.curves.merge(complete, on="number", how="inner")
     time_attr = time_measure(data.kind)  # the training time the summary shows and the rule reads
-    summary = summarise(trials, labels, bootstrap, min_seeds, dropped, look_alpha, time_attr)
+    # The one pass over the seed scores every decision reads, and the one comparison.
+    found = (samples(data.trials, data.curves, name, values, time_attr) if name
+             else None)
+    final = found.final if found is not None else _finals(
+        trials[trials["outcome"] == Outcome.COMPLETE])
+    comparison = compare({vi: v for vi, v in final.items() if vi not in dropped},
+                         judged.margin, judged.alpha, judged.min_seeds)
+    summary = summarise(trials, labels, bootstrap, comparison.min_seeds, dropped, look_alpha,
+                        time_attr, comparison, settled, final)
     threshold, is_default, untrained = study_threshold(curves, summary, chosen)
     seeds = seed_metrics(trials, curves, threshold)
     summary = add_curve_metrics(summary, seeds, bootstrap)
     colours = value_colours(labels if data.kind == StudyKind.CONFIRM else values)
     sweep = Sweep(data=data, parameter=parameter, name=name or SINGLE_LABEL, values=values,
-                 rule=study_rule(data),
+                 rule=study_rule(data, judged.select),
                  labels=labels, colours=colours, trials=trials, curves=curves,
                  bands=curve_bands(curves), summary=summary, seeds=seeds, threshold=threshold,
                  threshold_default=is_default, untrained=untrained, bootstrap=bootstrap,
-                 verdict=study_verdict(summary, seeds, min_seeds, list(dropped)),
-                 min_seeds=min_seeds, race=race)
-    chosen = (selected_index(data.trials, data.curves, name, values, sweep.rule, min_seeds,
-                             dropped=list(dropped), time_attr=time_attr)
-              if name and sweep.finished else None)
+                 verdict=study_verdict(summary, seeds, comparison.min_seeds, list(dropped),
+                                       comparison),
+                 min_seeds=comparison.min_seeds, race=race, comparison=comparison)
+    chosen = (RULES[SelectRule(sweep.rule)].select(comparison, mean_by_value(found.aucs),
+                                                   mean_by_value(found.seconds))
+              if found is not None and sweep.finished else None)
     sweep.summary["selected"] = [vi == chosen for vi in sweep.summary.index]
     return sweep
 

@@ -18,6 +18,7 @@ from omegaconf import DictConfig
 from kraby_study.answers.resumed import resumed_stage
 from kraby_study.answers.selected import sweep_selection
 from kraby_study.answers.winners import StoreWinners, Unfinished
+from kraby_study.comparison import CompareOptions
 from kraby_study.errors import StoreError
 from kraby_study.plan.campaign import Campaign, Stage
 from kraby_study.plan.spec import StudyPlan
@@ -78,7 +79,7 @@ def check_stored(campaign: Campaign) -> None:
 def selected_text(cfg: DictConfig, stage: Stage) -> str:
     """``n_epochs=10 (fastest_tied; documented 30)`` from the stored stage."""
     with opened(str(cfg.storage), create=False, writer=False) as store:
-        chosen = sweep_selection(store.load(stage.name))
+        chosen = sweep_selection(store.load(stage.name), CompareOptions.of(cfg))
     if chosen is None:
         return "no selectable value"
     documented = ("" if stage.documented is None

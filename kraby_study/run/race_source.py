@@ -125,8 +125,11 @@ def race_line(ledger: StudyLedger) -> str:
     runs, fixed = int(stored.get("runs", 0)), int(stored.get("fixed_runs", 0))
     dropped = [f"{v['value']} after round {v['dropped_at']}" for v in stored.get("values", [])
                if v.get("dropped_at") is not None]
+    settled = [f"{v['value']} after round {v['settled_at']}" for v in stored.get("values", [])
+               if v.get("settled_at") is not None]
     share = f" ({100 * runs / fixed:.0f} %)" if fixed else ""
     return (f"race {ledger.name}: {runs} of {fixed} runs{share}, {stored.get('rounds', 0)} "
             f"round(s) decided, dropped: {', '.join(dropped) if dropped else 'none'}"
+            + (f", settled equivalent: {', '.join(settled)}" if settled else "")
             + ("; the race is over" if stored.get("over") else ""))
 

@@ -24,6 +24,7 @@ from kraby_study.plan.spec import TrialSpec, fingerprint, seeding_of
 from kraby_study.records import (
     Failure,
     Outcome,
+    SelectRule,
     StudyAttrs,
     TrialAttrs,
     TrialResult,
@@ -171,6 +172,10 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
                           directions=directions(cfg))
     ledger.update(StudyAttrs(sampler=str(cfg.search.sampler), sampler_seed=int(cfg.search.seed),
                              planned=int(cfg.search.trials)))
+    if len(objectives(cfg)) == 2 and ledger.attrs.select is None and not ledger.trials():
+        # A new front is selected by evidence; a search stored before rules were stored keeps
+        # fastest_tied (answers.search_front.front_rule), so it selects as it did.
+        ledger.update(StudyAttrs(select=SelectRule.FASTEST_EQUIVALENT.value))
     requeue_orphans(ledger, stream)
     queued = warm_start(ledger, cfg, starts)
     if queued:
