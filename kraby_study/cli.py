@@ -198,6 +198,26 @@ def compose_config(overrides: Sequence[str]) -> DictConfig:
     return compose(overrides)
 
 
+def checked_outputs(cfg: DictConfig) -> DictConfig:
+    """The config of a training command, once the folders it writes to are known writable."""
+    from kraby_study.plan.settings import validate_outputs
+
+    validate_outputs(cfg)
+    return cfg
+
+
+def ended(summary: CommandRun) -> int:
+    """A training command's exit code: 130 interrupted, 1 when runs ended in errors (said on
+    stderr, counted), else 0; a divergence is a result, not an error."""
+    if summary.interrupted:
+        return 130
+    line = summary.errors_line()
+    if line:
+        print(f"kraby-study: {line}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def open_writer(cfg: DictConfig):  # noqa: ANN201 - a context manager of Store
     """The store a command writes to, with the configured heartbeat timing."""
     from kraby_study.store.store import opened
@@ -227,8 +247,11 @@ def print_preview(cfg: DictConfig, counts: Sequence[Count],
 
     workers = (int(cfg.workers) if cfg.workers is not None
                else cores() if str(cfg.executor) == "local" else None)
+    from kraby_study.env import adapter_for
+
     lines = preview_lines(str(cfg.storage), counts, workers, notes)
     print(OmegaConf.to_yaml(cfg), end="")
+    print(f"env: {adapter_for(cfg.env).label(cfg.env)}")
     print("\n".join(lines))
     return 0
 
@@ -243,7 +266,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     overrides = flag_overrides(args, [STORAGE, WORKERS])
     lookup = StoreWinners()
     with winners_from(lookup):
-        cfg = compose_config(overrides)
+        cfg = checked_outputs(compose_config(overrides))
     if cfg.campaign is not None:
         if dry_run(args):
             return preview_campaign(cfg, overrides)
@@ -264,7 +287,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     with executor_for(cfg) as executor:
         summary, counts = run_stage(cfg, plan, executor)
     print(closing_line("study", plan, counts))
-    return 130 if summary.interrupted else 0
+    return ended(summary)
 
 
 def run_stage(cfg: DictConfig, plan: StudyPlan, executor: Executor) -> tuple[CommandRun, Tally]:
@@ -308,7 +331,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     from kraby_study.run.executor import executor_for
     from kraby_study.run.study_run import run_plan, train_outcome
 
-    cfg = compose_config(with_default(flag_overrides(args, [STORAGE]), "ppo", "tuned"))
+    cfg = checked_outputs(compose_config(with_default(flag_overrides(args, [STORAGE]), "ppo",
+                                                      "tuned")))
     if cfg.racing.enabled:
         raise ConfigError("racing is for run and confirm: train makes one run")
     plan = train_plan(cfg)
@@ -356,7 +380,10 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     from kraby_study.run.search_source import run_search
 
     overrides = with_default(flag_overrides(args, SEARCH_FLAGS), "budget", "quick")
-    cfg = compose_config(overrides)
+    if "env=gym" in overrides:
+        # The default space searches the leg's observation too; a gym env's space has no env.
+        overrides = with_default(overrides, "search", "gym")
+    cfg = checked_outputs(compose_config(overrides))
     if cfg.racing.enabled:
         raise ConfigError("racing is for run and confirm: a search races its trials' seeds "
                           "with --pruner wilcoxon")
@@ -376,7 +403,7 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     chosen = state.selected if len(objectives(cfg)) == 2 else f"best {state.selected}"
     print(f"search {state.name}: {counts.complete} complete, {counts.pruned} pruned, "
           f"{counts.failed} failed of {counts.planned}; {chosen}")
-    return 130 if summary.interrupted else 0
+    return ended(summary)
 
 
 def cmd_confirm(args: argparse.Namespace) -> int:
@@ -389,7 +416,7 @@ def cmd_confirm(args: argparse.Namespace) -> int:
     from kraby_study.store.store import opened, opened_for_reading
 
     overrides = flag_overrides(args, CONFIRM_FLAGS)
-    cfg = compose_config(with_default(overrides, "budget", "quick"))
+    cfg = checked_outputs(compose_config(with_default(overrides, "budget", "quick")))
     confirm_rule(cfg, None)  # a rule that is not one is refused before the store is read
     baselines = [baseline_arm(name, overrides) for name in cfg.confirm.baselines]
     source = None
@@ -411,7 +438,7 @@ def cmd_confirm(args: argparse.Namespace) -> int:
                                    sys.stdout, **run_options(cfg))
     print(closing_line("confirm", plan, counts)
           + f"; report it with `kraby-study report --study-name {plan.name}`")
-    return 130 if summary.interrupted else 0
+    return ended(summary)
 
 
 def cmd_best(args: argparse.Namespace) -> int:

@@ -18,6 +18,7 @@ PACKAGES = {"kraby_study": ROOT / "kraby_study", "kraby_envs": ROOT / "envs"}
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("envs", ("kraby_envs",)),
     ("records", ("kraby_study.errors", "kraby_study.records", "kraby_study.store.url")),
+    ("env", ("kraby_study.env",)),
     ("config", ("kraby_study.config",)),
     ("plan", ("kraby_study.plan",)),
     ("store", ("kraby_study.store",)),

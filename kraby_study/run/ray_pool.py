@@ -26,7 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 from kraby_study.errors import ClusterLost, ConfigError, first_line
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.run.pool import Event, as_event
-from kraby_study.run.provenance import machine_facts
+from kraby_study.run.provenance import trial_facts
 from kraby_study.run.worker import attempt
 
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
@@ -74,7 +74,7 @@ class TrialActor:
             self._outbox.put(("checkpoint", number, step, value))
             return self._replies.get()
 
-        self._outbox.put(("started", number, machine_facts()))
+        self._outbox.put(("started", number, trial_facts(spec.settings["env"])))
         self._outbox.put(("result", number, attempt(spec, self._shards, checkpoint, progress)))
 
     def drain(self, wait: float) -> list[tuple[Any, ...]]:

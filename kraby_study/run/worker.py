@@ -41,7 +41,7 @@ def serve(conn: Connection, shards: int) -> None:
     """Runs trials until the pool sends None or goes away."""
     import torch
 
-    from kraby_study.run.provenance import machine_facts
+    from kraby_study.run.provenance import trial_facts
 
     torch.set_num_threads(1)
     while True:
@@ -60,7 +60,7 @@ def serve(conn: Connection, shards: int) -> None:
             conn.send(("checkpoint", number, step, value))
             return bool(conn.recv())
 
-        conn.send(("started", number, machine_facts()))
+        conn.send(("started", number, trial_facts(spec.settings["env"])))
         result = attempt(spec, shards, checkpoint, progress)
         try:
             conn.send(("result", number, result))
