@@ -452,6 +452,11 @@ def cmd_best(args: argparse.Namespace) -> int:
     from kraby_study.store.store import opened
 
     chosen, overrides = stored_study(flag_overrides(args, [STORAGE, BEST_OF]))
+    if args.zoo:
+        if chosen or args.campaign:
+            raise ConfigError("--zoo writes rl-zoo3's settings, not a study's: drop "
+                              "--study-name and --campaign")
+        return write_zoo(overrides, args.name)
     if chosen and args.campaign:
         raise ConfigError("give --campaign NAME or --study-name NAME, not both")
     cfg = compose_config(overrides)
@@ -469,6 +474,32 @@ def cmd_best(args: argparse.Namespace) -> int:
     print(f"best: {chosen.description}")
     print(f"wrote {path}: use it with `kraby-study train ppo={config_name}` or "
           f"`kraby-study run ppo={config_name} study=...`")
+    return 0
+
+
+def write_zoo(overrides: Sequence[str], name: str | None) -> int:
+    """``best --zoo env=gym env.id=ID``: write the settings ppo=zoo reads for the id (with the
+    command's own ppo overrides) as ./conf/ppo/NAME.yaml, so they can be read and changed."""
+    import re
+    from pathlib import Path
+
+    from kraby_study.config.conf_dirs import USER_CONF_DIR
+    from kraby_study.config.ppo_file import write_ppo_config
+    from kraby_study.config.validate import to_container
+    from kraby_study.config.zoo import zoo_settings
+
+    cfg = compose_config([*(o for o in overrides if not o.startswith("ppo=")), "ppo=zoo"])
+    read = zoo_settings(str(cfg.env.id))
+    config_name = name or "zoo_" + re.sub(r"[^A-Za-z0-9_-]+", "_", read.env_id)
+    if not config_name.replace("_", "").replace("-", "").isalnum():
+        raise ConfigError(f"--name {config_name!r}: use letters, digits, _ and -")
+    path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
+    settings = {"env": to_container(cfg.env), "ppo": to_container(cfg.ppo)}
+    write_ppo_config(settings, ["normalize", "normalize_reward"],
+                     f"rl-zoo3 {read.version}'s PPO settings for {read.env_id} (its budget, "
+                     f"n_timesteps {read.n_timesteps:,}, is budget=zoo)", path)
+    print(f"wrote {path}: use it with `kraby-study train env=gym env.id={read.env_id} "
+          f"ppo={config_name}`")
     return 0
 
 
@@ -574,6 +605,10 @@ def build_parser() -> argparse.ArgumentParser:
         "among the arms tied with the best).\n\n" + EPILOG)
     parsers["best"].add_argument("--name", help="config name to write in ./conf/ppo/ (default "
                                  "best_<study>, or campaign_<NAME>)")
+    parsers["best"].add_argument("--zoo", action="store_true",
+                                 help="write rl-zoo3's published PPO settings for env.id "
+                                 "(ppo=zoo, needs env=gym env.id=ID and the [zoo] extra) "
+                                 "instead of a study's (default name zoo_<id>)")
     parsers["best"].add_argument("--campaign", metavar="NAME",
                                  help="write the settings a finished campaign ends with (its "
                                  "last stage's selected value, with every earlier winner)")
