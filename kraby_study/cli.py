@@ -32,10 +32,12 @@ OVERRIDES_HELP = ("Hydra overrides, e.g. study=ent_coef budget=quick ppo.n_steps
                   "storage=sqlite:///studies/kraby.db")
 
 EPILOG = """\
-config groups (conf/): env=leg, ppo=start|tuned, budget=full|quick|smoke,
+config groups (conf/): env=leg|gym (env=gym env.id=Pendulum-v1: any registered Gymnasium
+id), ppo=start|tuned|zoo (zoo: rl-zoo3's settings for env.id, pip install
+'kraby-study[zoo]'), budget=full|quick|smoke|zoo,
 study=observation|batch_size|n_steps|n_epochs|gamma|clip_range|learning_rate|gae_lambda|
 ent_coef|n_envs, campaign=documented (the nine studies in order, each with the earlier
-winners), search=ppo (the Optuna space).
+winners), search=ppo|gym (the Optuna spaces; optuna env=gym takes gym).
 A study file may take a setting from a finished study's selected value: ppo.gamma:
 ${winner:gamma}.
 executor=local|ray: trials run in worker processes here, or as Ray actors on a cluster
@@ -336,9 +338,12 @@ def cmd_train(args: argparse.Namespace) -> int:
     if cfg.racing.enabled:
         raise ConfigError("racing is for run and confirm: train makes one run")
     plan = train_plan(cfg)
-    with executor_for(cfg) as executor, open_writer(cfg) as store:
-        summary, _ = run_plan(store, plan, executor, 1, sys.stdout, **run_options(cfg))
-        return train_outcome(store, plan, summary, int(cfg.seed), sys.stdout)
+    with executor_for(cfg) as executor:
+        # One run: its worker starts importing torch and SB3 while the store opens.
+        executor.prestart(1)
+        with open_writer(cfg) as store:
+            summary, _ = run_plan(store, plan, executor, 1, sys.stdout, **run_options(cfg))
+            return train_outcome(store, plan, summary, int(cfg.seed), sys.stdout)
 
 
 def cmd_list(args: argparse.Namespace) -> int:

@@ -268,6 +268,9 @@ class RayExecutor:
         """``size`` trial actors, started when there is work for them."""
         return RayPool(size, self.shards, self.cpus, self.patience)
 
+    def prestart(self, size: int) -> None:
+        """Nothing: actors are placed when a trial needs one."""
+
 
 def _check_reachable(address: str | None, patience: float) -> None:
     """Fail fast on a ``host:port`` that nothing listens on: Ray itself would wait for it as
