@@ -90,7 +90,8 @@ def test_the_leg_threshold_check_does_not_apply_to_another_env() -> None:
 
 def test_a_package_that_registers_ids_is_imported(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.syspath_prepend(str(TESTS))
-    cfg = compose_config(["env=gym", "env.id=KrabyTestBroken-v0", "env.packages=[broken_env]"])
+    cfg = compose_config(["env=gym", "env.id=KrabyTestBroken-v0",
+                          "env.packages=[gym_fixtures]"])
     assert cfg.env.id == "KrabyTestBroken-v0"
 
 
@@ -190,6 +191,24 @@ def test_linear_schedules_reach_sb3_as_functions_of_progress() -> None:
 # --- commands ----------------------------------------------------------------------------
 
 
+def test_the_policy_gif_draws_the_first_evaluation_episodes(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from PIL import Image
+
+    from kraby_study.env.gym_env import GIF_EPISODES
+    from kraby_study.report.policy import render_policy
+    from kraby_study.run.trial import run_trial
+
+    monkeypatch.syspath_prepend(str(TESTS))
+    model = tmp_path / "m.zip"
+    spec = spec_of(["env=gym", "env.id=KrabyTestTiny-v0", "env.packages=[gym_fixtures]",
+                    "env.normalize=true", *TINY_PPO], model_path=str(model))
+    assert run_trial(spec).outcome == Outcome.COMPLETE
+    gif = render_policy(str(model), spec.settings, tmp_path / "policy.gif")
+    # Each 10-step episode: its reset and its 10 steps, one frame each.
+    assert Image.open(gif).n_frames == GIF_EPISODES * 11
+
+
 def test_an_unwritable_output_folder_is_refused_before_any_run(
         workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     code = run_cli("run", "study=clip_range", "budget=smoke",
@@ -215,7 +234,7 @@ def test_runs_that_end_in_errors_make_the_command_fail_and_say_how_many(
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join(
         [str(TESTS), *filter(None, [os.environ.get("PYTHONPATH")])]))
     code = run_cli("run", "study=clip_range", "env=gym", "env.id=KrabyTestBroken-v0",
-                   "env.packages=[broken_env]", "budget=smoke", "budget.seeds=1",
+                   "env.packages=[gym_fixtures]", "budget=smoke", "budget.seeds=1",
                    "budget.steps=64", "ppo.n_envs=2", "ppo.n_steps=16", "save_models=false",
                    "workers=1")
     captured = capsys.readouterr()
