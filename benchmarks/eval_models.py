@@ -1,7 +1,8 @@
 """The evaluation measure of a stored study's saved models: each complete trial's model (and
 its VecNormalize statistics, if saved) run by its env's adapter, deterministic actions, over
 the seeded evaluation episodes every run shares (apart from every training stream), beside
-the trial's training score.
+the trial's training score; then the mean and standard deviation of both per value (a
+confirm study's configuration, a sweep's value).
 
 Run: python benchmarks/eval_models.py --storage sqlite:///studies/kraby.db --study-name NAME
 [--episodes 10]
@@ -42,13 +43,17 @@ def main() -> None:
         normalizer = pickle.loads(stats.read_bytes()) if stats.is_file() else None
         score = adapter_for(env).evaluate(PPO.load(path, device="cpu"), env, args.episodes,
                                           normalizer)
-        rows.append((attrs.get("key"), attrs.get("final_score"), score))
-        print(f"{attrs.get('key')}: training score {attrs.get('final_score'):.1f}, "
+        group = ", ".join(f"{k}={v}" for k, v in trial.params.items()) or "all"
+        rows.append((group, attrs.get("final_score"), score))
+        print(f"{attrs.get('key')} ({group}): training score {attrs.get('final_score'):.1f}, "
               f"evaluation {score:.1f}")
-    if len(rows) > 1:
+    for group in dict.fromkeys(r[0] for r in rows):
+        mine = [r for r in rows if r[0] == group]
+        if len(mine) < 2:
+            continue
         for name, column in (("training score", 1), ("evaluation", 2)):
-            values = [r[column] for r in rows]
-            print(f"{name}: mean {statistics.mean(values):.1f}, sd "
+            values = [r[column] for r in mine]
+            print(f"{group}: {name} mean {statistics.mean(values):.1f}, sd "
                   f"{statistics.stdev(values):.1f} over {len(values)} runs")
 
 
