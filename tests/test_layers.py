@@ -92,6 +92,15 @@ def test_every_module_imports_only_its_own_layer_or_below() -> None:
     assert not upward, "imports that run upward:\n" + "\n".join(upward)
 
 
+def test_only_the_env_seam_imports_the_leg() -> None:
+    """Every use of an environment goes through kraby_study.env (docs/environments.md)."""
+    direct = [f"{path.relative_to(ROOT)}:{line}"
+              for module, path in modules().items()
+              if module.startswith("kraby_study.") and not module.startswith("kraby_study.env")
+              for name, line, _ in imports(path, module) if name.split(".")[0] == "kraby_envs"]
+    assert not direct, "kraby_envs imported outside the env seam:\n" + "\n".join(direct)
+
+
 def test_the_store_imports_at_module_level_only() -> None:
     """A function-level import inside store/ would hide a cycle between its modules."""
     hidden = [f"{path.relative_to(ROOT)}:{line} imports {name}"

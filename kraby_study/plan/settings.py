@@ -92,7 +92,9 @@ def with_value(cfg: DictConfig, parameter: str, value: Any) -> DictConfig:
     if root not in SWEEPABLE_ROOTS or "." not in parameter:
         raise ConfigError(f"study.parameter {parameter!r} must name a setting under env. or ppo.")
     if OmegaConf.select(cfg, parameter, default="__missing__") == "__missing__":
-        raise ConfigError(f"study.parameter {parameter!r} is not a setting of the config")
+        own = (f" (this env's settings: {', '.join(str(k) for k in cfg.env.keys())})"
+               if root == "env" else "")
+        raise ConfigError(f"study.parameter {parameter!r} is not a setting of the config{own}")
     trial_cfg = cfg.copy()
     try:
         OmegaConf.update(trial_cfg, parameter, value, merge=False)
