@@ -1,6 +1,7 @@
 """Benchmark: `kraby-study train` against a plain SB3 script, and 1 against 2 workers.
 
 Run: python benchmarks/bench_train.py [--steps 32768] [--skip-workers]
+     python benchmarks/bench_train.py --baseline DIR [--repeats 3]
 
 Both trainings use the tuned settings (n_steps 32 x 32 legs, batch 1024, 30 epochs). The plain
 script is what a user would write without kraby-study: PPO on a DummyVecEnv of 32 single
@@ -79,7 +80,8 @@ def _pss_mb(pids: list[int]) -> float:
     return total / 1024
 
 
-def measure(cmd: list[str], cwd: Path) -> tuple[float, tuple[float, float], str]:
+def measure(cmd: list[str], cwd: Path,
+            env: dict[str, str] | None = None) -> tuple[float, tuple[float, float], str]:
     """(wall seconds, (peak tree RSS, peak tree PSS) in MB, stdout) of a command.
 
     RSS is sampled every 50 ms; PSS, which walks every mapping, every 500 ms so that the
@@ -87,7 +89,7 @@ def measure(cmd: list[str], cwd: Path) -> tuple[float, tuple[float, float], str]
     """
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True)
+                            text=True, env=env)
     peak_rss = peak_pss = 0.0
     ticks = 0
     while proc.poll() is None:
@@ -136,6 +138,45 @@ def bench_train(steps: int, work: Path) -> list[str]:
     return rows
 
 
+def bench_against(baseline: Path, steps: int, repeats: int, work: Path) -> list[str]:
+    """Rows of the whole-command table: the plain script, ``train`` of this checkout and of
+    the ``baseline`` checkout (e.g. an older commit, unpacked with git archive), interleaved in
+    rotating order ``repeats`` times, so that each ratio compares runs that saw the same load."""
+    import statistics
+
+    from bench_startup import environment
+
+    script = work / "plain_sb3.py"
+    script.write_text(PLAIN_SCRIPT)
+    here = Path(__file__).resolve().parents[1]
+    sides = {"plain": None, "this": here, "baseline": baseline}
+    speeds: dict[str, list[float]] = {side: [] for side in sides}
+    for repeat in range(repeats):
+        order = list(sides)[repeat % 3:] + list(sides)[:repeat % 3]
+        for side in order:
+            if side == "plain":
+                cmd, env = [sys.executable, str(script), str(steps)], None
+            else:
+                store = work / f"{side}{repeat}.db"
+                cmd = kraby("train", "ppo=tuned", f"budget.steps={steps}", "save_models=false",
+                            f"storage=sqlite:///{store}")
+                env = environment(sides[side])  # type: ignore[arg-type]
+            wall, _, _ = measure(cmd, work, env)
+            speeds[side].append(steps / wall)
+    rows = ["| repeat | plain SB3 | train, this checkout | train, baseline | this / plain | "
+            "baseline / plain |", "|---:|---:|---:|---:|---:|---:|"]
+    for i in range(repeats):
+        plain = speeds["plain"][i]
+        rows.append(f"| {i + 1} | {plain:,.0f} | {speeds['this'][i]:,.0f} | "
+                    f"{speeds['baseline'][i]:,.0f} | {speeds['this'][i] / plain:.2f}x | "
+                    f"{speeds['baseline'][i] / plain:.2f}x |")
+    this = statistics.median(t / p for t, p in zip(speeds["this"], speeds["plain"], strict=True))
+    base = statistics.median(b / p for b, p in zip(speeds["baseline"], speeds["plain"],
+                                                    strict=True))
+    rows.append(f"| median | | | | {this:.2f}x | {base:.2f}x |")
+    return rows
+
+
 def bench_workers(work: Path) -> list[str]:
     """Rows of the workers table on a small study (4 values x 2 seeds).
 
@@ -164,10 +205,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=32768)
     parser.add_argument("--skip-workers", action="store_true")
+    parser.add_argument("--baseline", type=Path,
+                        help="another checkout: whole-command env steps/s of its train, this "
+                        "checkout's and the plain script's, interleaved (then nothing else)")
+    parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     print(f"cores: {os.cpu_count()}")
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
+        if args.baseline is not None:
+            print("\n".join(bench_against(args.baseline.resolve(), args.steps, args.repeats,
+                                           work)))
+            return
         print("\n".join(bench_train(args.steps, work)))
         if not args.skip_workers:
             print()

@@ -9,6 +9,7 @@ and one physics client.
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 from multiprocessing.connection import Connection
@@ -70,6 +71,11 @@ def main() -> None:
     # Ctrl-C reaches the whole process group; the process that owns the world decides.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     serve(Connection(int(sys.argv[1])))
+    # The world is closed and every reply sent: skip the interpreter's teardown, which the
+    # owner would wait for when it closes its env (about 0.3 s of every run).
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 if __name__ == "__main__":

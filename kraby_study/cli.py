@@ -32,10 +32,12 @@ OVERRIDES_HELP = ("Hydra overrides, e.g. study=ent_coef budget=quick ppo.n_steps
                   "storage=sqlite:///studies/kraby.db")
 
 EPILOG = """\
-config groups (conf/): env=leg, ppo=start|tuned, budget=full|quick|smoke,
+config groups (conf/): env=leg|gym (env=gym env.id=Pendulum-v1: any registered Gymnasium
+id), ppo=start|tuned|zoo (zoo: rl-zoo3's settings for env.id, pip install
+'kraby-study[zoo]'), budget=full|quick|smoke|zoo,
 study=observation|batch_size|n_steps|n_epochs|gamma|clip_range|learning_rate|gae_lambda|
 ent_coef|n_envs, campaign=documented (the nine studies in order, each with the earlier
-winners), search=ppo (the Optuna space).
+winners), search=ppo|gym (the Optuna spaces; optuna env=gym takes gym).
 A study file may take a setting from a finished study's selected value: ppo.gamma:
 ${winner:gamma}.
 executor=local|ray: trials run in worker processes here, or as Ray actors on a cluster
@@ -206,6 +208,26 @@ def compose_config(overrides: Sequence[str]) -> DictConfig:
     return compose(overrides)
 
 
+def checked_outputs(cfg: DictConfig) -> DictConfig:
+    """The config of a training command, once the folders it writes to are known writable."""
+    from kraby_study.plan.settings import validate_outputs
+
+    validate_outputs(cfg)
+    return cfg
+
+
+def ended(summary: CommandRun) -> int:
+    """A training command's exit code: 130 interrupted, 1 when runs ended in errors (said on
+    stderr, counted), else 0; a divergence is a result, not an error."""
+    if summary.interrupted:
+        return 130
+    line = summary.errors_line()
+    if line:
+        print(f"kraby-study: {line}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def open_writer(cfg: DictConfig):  # noqa: ANN201 - a context manager of Store
     """The store a command writes to, with the configured heartbeat timing."""
     from kraby_study.store.store import opened
@@ -235,8 +257,11 @@ def print_preview(cfg: DictConfig, counts: Sequence[Count],
 
     workers = (int(cfg.workers) if cfg.workers is not None
                else cores() if str(cfg.executor) == "local" else None)
+    from kraby_study.env import adapter_for
+
     lines = preview_lines(str(cfg.storage), counts, workers, notes)
     print(OmegaConf.to_yaml(cfg), end="")
+    print(f"env: {adapter_for(cfg.env).label(cfg.env)}")
     print("\n".join(lines))
     return 0
 
@@ -251,7 +276,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     overrides = flag_overrides(args, [STORAGE, WORKERS])
     lookup = StoreWinners()
     with winners_from(lookup):
-        cfg = compose_config(overrides)
+        cfg = checked_outputs(compose_config(overrides))
     if cfg.campaign is not None:
         if dry_run(args):
             return preview_campaign(cfg, overrides)
@@ -272,7 +297,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     with executor_for(cfg) as executor:
         summary, counts = run_stage(cfg, plan, executor)
     print(closing_line("study", plan, counts))
-    return 130 if summary.interrupted else 0
+    return ended(summary)
 
 
 def run_stage(cfg: DictConfig, plan: StudyPlan, executor: Executor) -> tuple[CommandRun, Tally]:
@@ -316,13 +341,17 @@ def cmd_train(args: argparse.Namespace) -> int:
     from kraby_study.run.executor import executor_for
     from kraby_study.run.study_run import run_plan, train_outcome
 
-    cfg = compose_config(with_default(flag_overrides(args, [STORAGE]), "ppo", "tuned"))
+    cfg = checked_outputs(compose_config(with_default(flag_overrides(args, [STORAGE]), "ppo",
+                                                      "tuned")))
     if cfg.racing.enabled:
         raise ConfigError("racing is for run and confirm: train makes one run")
     plan = train_plan(cfg)
-    with executor_for(cfg) as executor, open_writer(cfg) as store:
-        summary, _ = run_plan(store, plan, executor, 1, sys.stdout, **run_options(cfg))
-        return train_outcome(store, plan, summary, int(cfg.seed), sys.stdout)
+    with executor_for(cfg) as executor:
+        # One run: its worker starts importing torch and SB3 while the store opens.
+        executor.prestart(1)
+        with open_writer(cfg) as store:
+            summary, _ = run_plan(store, plan, executor, 1, sys.stdout, **run_options(cfg))
+            return train_outcome(store, plan, summary, int(cfg.seed), sys.stdout)
 
 
 def cmd_list(args: argparse.Namespace) -> int:
@@ -364,7 +393,10 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     from kraby_study.run.search_source import run_search
 
     overrides = with_default(flag_overrides(args, SEARCH_FLAGS), "budget", "quick")
-    cfg = compose_config(overrides)
+    if "env=gym" in overrides:
+        # The default space searches the leg's observation too; a gym env's space has no env.
+        overrides = with_default(overrides, "search", "gym")
+    cfg = checked_outputs(compose_config(overrides))
     if cfg.racing.enabled:
         raise ConfigError("racing is for run and confirm: a search races its trials' seeds "
                           "with --pruner wilcoxon")
@@ -384,7 +416,7 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     chosen = state.selected if len(objectives(cfg)) == 2 else f"best {state.selected}"
     print(f"search {state.name}: {counts.complete} complete, {counts.pruned} pruned, "
           f"{counts.failed} failed of {counts.planned}; {chosen}")
-    return 130 if summary.interrupted else 0
+    return ended(summary)
 
 
 def cmd_confirm(args: argparse.Namespace) -> int:
@@ -397,7 +429,7 @@ def cmd_confirm(args: argparse.Namespace) -> int:
     from kraby_study.store.store import opened, opened_for_reading
 
     overrides = flag_overrides(args, CONFIRM_FLAGS)
-    cfg = compose_config(with_default(overrides, "budget", "quick"))
+    cfg = checked_outputs(compose_config(with_default(overrides, "budget", "quick")))
     confirm_rule(cfg, None)  # a rule that is not one is refused before the store is read
     baselines = [baseline_arm(name, overrides) for name in cfg.confirm.baselines]
     source = None
@@ -419,7 +451,7 @@ def cmd_confirm(args: argparse.Namespace) -> int:
                                    sys.stdout, **run_options(cfg))
     print(closing_line("confirm", plan, counts)
           + f"; report it with `kraby-study report --study-name {plan.name}`")
-    return 130 if summary.interrupted else 0
+    return ended(summary)
 
 
 def cmd_best(args: argparse.Namespace) -> int:
@@ -434,6 +466,11 @@ def cmd_best(args: argparse.Namespace) -> int:
     from kraby_study.store.store import opened
 
     chosen, overrides = stored_study(flag_overrides(args, [STORAGE, BEST_OF]))
+    if args.zoo:
+        if chosen or args.campaign:
+            raise ConfigError("--zoo writes rl-zoo3's settings, not a study's: drop "
+                              "--study-name and --campaign")
+        return write_zoo(overrides, args.name)
     if chosen and args.campaign:
         raise ConfigError("give --campaign NAME or --study-name NAME, not both")
     cfg = compose_config(overrides)
@@ -452,6 +489,32 @@ def cmd_best(args: argparse.Namespace) -> int:
     print(f"best: {chosen.description}")
     print(f"wrote {path}: use it with `kraby-study train ppo={config_name}` or "
           f"`kraby-study run ppo={config_name} study=...`")
+    return 0
+
+
+def write_zoo(overrides: Sequence[str], name: str | None) -> int:
+    """``best --zoo env=gym env.id=ID``: write the settings ppo=zoo reads for the id (with the
+    command's own ppo overrides) as ./conf/ppo/NAME.yaml, so they can be read and changed."""
+    import re
+    from pathlib import Path
+
+    from kraby_study.config.conf_dirs import USER_CONF_DIR
+    from kraby_study.config.ppo_file import write_ppo_config
+    from kraby_study.config.validate import to_container
+    from kraby_study.config.zoo import zoo_settings
+
+    cfg = compose_config([*(o for o in overrides if not o.startswith("ppo=")), "ppo=zoo"])
+    read = zoo_settings(str(cfg.env.id))
+    config_name = name or "zoo_" + re.sub(r"[^A-Za-z0-9_-]+", "_", read.env_id)
+    if not config_name.replace("_", "").replace("-", "").isalnum():
+        raise ConfigError(f"--name {config_name!r}: use letters, digits, _ and -")
+    path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
+    settings = {"env": to_container(cfg.env), "ppo": to_container(cfg.ppo)}
+    write_ppo_config(settings, ["normalize", "normalize_reward"],
+                     f"rl-zoo3 {read.version}'s PPO settings for {read.env_id} (its budget, "
+                     f"n_timesteps {read.n_timesteps:,}, is budget=zoo)", path)
+    print(f"wrote {path}: use it with `kraby-study train env=gym env.id={read.env_id} "
+          f"ppo={config_name}`")
     return 0
 
 
@@ -570,6 +633,10 @@ def build_parser() -> argparse.ArgumentParser:
         "rule without retraining.\n\n" + EPILOG)
     parsers["best"].add_argument("--name", help="config name to write in ./conf/ppo/ (default "
                                  "best_<study>, or campaign_<NAME>)")
+    parsers["best"].add_argument("--zoo", action="store_true",
+                                 help="write rl-zoo3's published PPO settings for env.id "
+                                 "(ppo=zoo, needs env=gym env.id=ID and the [zoo] extra) "
+                                 "instead of a study's (default name zoo_<id>)")
     parsers["best"].add_argument("--campaign", metavar="NAME",
                                  help="write the settings a finished campaign ends with (its "
                                  "last stage's selected value, with every earlier winner)")

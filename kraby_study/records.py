@@ -663,10 +663,10 @@ LEGACY_SEEDING = "offset"
 """The scheme of every study stored before streams existed (leg i seeded with seed + i); its
 definition has no ``seeding`` key."""
 SEEDING_TEXT = {
-    "streams": "streams: leg i of the run with seed s draws from child i of "
-               "numpy.random.SeedSequence(s), so no two runs share a leg's stream",
-    "offset": "offset: leg i of the run with seed s is seeded with s + i, so runs s and s + 1 "
-              "share all legs but one (the scheme before streams)",
+    "streams": "streams: env i of the run with seed s (a leg, on the leg) draws from child i "
+               "of numpy.random.SeedSequence(s), so no two runs share an env's stream",
+    "offset": "offset: env i of the run with seed s is seeded with s + i, so runs s and s + 1 "
+              "share all envs but one (the scheme before streams)",
 }
 """How reports and ``--dry-run`` name each scheme."""
 

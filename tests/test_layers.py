@@ -18,6 +18,7 @@ PACKAGES = {"kraby_study": ROOT / "kraby_study", "kraby_envs": ROOT / "envs"}
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("envs", ("kraby_envs",)),
     ("records", ("kraby_study.errors", "kraby_study.records", "kraby_study.store.url")),
+    ("env", ("kraby_study.env",)),
     ("config", ("kraby_study.config",)),
     ("plan", ("kraby_study.plan",)),
     ("store", ("kraby_study.store",)),
@@ -89,6 +90,15 @@ def test_every_module_imports_only_its_own_layer_or_below() -> None:
                 upward.append(f"{path.relative_to(ROOT)}:{line} ({LAYERS[own][0]}) imports "
                               f"{imported} ({LAYERS[layer_of(imported)][0]})")
     assert not upward, "imports that run upward:\n" + "\n".join(upward)
+
+
+def test_only_the_env_seam_imports_the_leg() -> None:
+    """Every use of an environment goes through kraby_study.env (docs/environments.md)."""
+    direct = [f"{path.relative_to(ROOT)}:{line}"
+              for module, path in modules().items()
+              if module.startswith("kraby_study.") and not module.startswith("kraby_study.env")
+              for name, line, _ in imports(path, module) if name.split(".")[0] == "kraby_envs"]
+    assert not direct, "kraby_envs imported outside the env seam:\n" + "\n".join(direct)
 
 
 def test_the_store_imports_at_module_level_only() -> None:

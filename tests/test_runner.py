@@ -280,7 +280,7 @@ def test_a_trial_whose_worker_dies_every_time_is_recorded_as_failed(
     assert failed.outcome == Outcome.FAILED
     assert failure_kind(failed.failure) == Failure.ERROR
     assert f"exit code {codes[-1]}" in str(failed.failure)
-    assert summary == CommandRun(complete=1, failed=1)
+    assert summary == CommandRun(complete=1, failed=1, errors=1)
 
 
 def test_a_checkpoint_is_answered_with_what_the_source_said(pools: Pools) -> None:

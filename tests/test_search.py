@@ -193,8 +193,11 @@ def test_best_round_trip(spaces: Path, capsys: pytest.CaptureFixture[str]) -> No
     assert f"trial {best.number}" in out
     written = spaces / "conf" / "ppo" / "best_tiny.yaml"
     assert written.is_file()
+    from kraby_study.plan.settings import resolved_settings
+
     cfg = compose_config(["ppo=best_tiny"])
-    assert dict(cfg.ppo) == best.user_attrs["settings"]["ppo"]
+    # Stored settings leave out the optional PPO settings at their defaults, as resolving does.
+    assert resolved_settings(cfg)["ppo"] == best.user_attrs["settings"]["ppo"]
     swept = compose_config(["ppo=best_tiny", "study=ent_coef"])
     assert swept.ppo.gamma == 0.8  # the study's own settings still apply on top
     assert compose_config(["ppo=best_tiny", "study=observation"]).ppo.gamma == best.params[
@@ -269,12 +272,13 @@ def test_evaluation_is_deterministic_for_a_model(tmp_path: Path) -> None:
     from stable_baselines3 import PPO
 
     import kraby_envs
+    from kraby_study.env import adapter_for
     from kraby_study.plan.settings import resolved_settings
-    from kraby_study.run.evaluation import evaluate
 
     settings = resolved_settings(compose_config(["ppo=tuned"]))
     env = gym.make(kraby_envs.ENV_ID)
     model = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [8]})
+    evaluate = adapter_for(settings["env"]).evaluate
     first = evaluate(model, settings["env"], 4)
     assert first == evaluate(model, settings["env"], 4)
     assert -2.0 < first < 0

@@ -14,7 +14,7 @@ from hydra.plugins.search_path_plugin import SearchPathPlugin
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from kraby_study.config import winner
+from kraby_study.config import winner, zoo
 from kraby_study.config.conf_dirs import CONFIG_MODULE, user_conf_dir
 from kraby_study.config.schema import register_schema
 from kraby_study.config.validate import validate
@@ -88,8 +88,13 @@ def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
     its interpolations.
     """
     overrides = renamed(overrides)
+    if "ppo=zoo" in overrides and "env=gym" not in overrides:
+        # Otherwise Hydra's words: "Key 'normalize' not in 'LegEnvConfig'".
+        raise ConfigError("ppo=zoo is rl-zoo3's settings for a Gymnasium id: add env=gym "
+                          "env.id=ID")
     register_schema()
     winner.register()
+    zoo.register()
     Plugins.instance().register(UserConfFirst)
     GlobalHydra.instance().clear()
     try:

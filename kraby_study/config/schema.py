@@ -15,8 +15,8 @@ from omegaconf import MISSING
 
 
 @dataclass
-class EnvConfig:
-    """The simulated leg: keyword arguments of ``kraby_envs.KrabyOneLegEnv``."""
+class LegEnvConfig:
+    """``env=leg``, the simulated leg: keyword arguments of ``kraby_envs.KrabyOneLegEnv``."""
 
     observation: str = "default"
     """Observation variant: default, with_tip, with_tip_to_target or sin_angles."""
@@ -28,6 +28,31 @@ class EnvConfig:
     """Physics sub-steps per environment step (control period = time_step x frameskip)."""
     max_episode_steps: int = 32
     """Episode length (a time limit, no terminal state)."""
+
+
+@dataclass
+class GymEnvConfig:
+    """``env=gym``: any registered Gymnasium environment, by its id (docs/environments.md)."""
+
+    id: str = MISSING
+    """The registered id, e.g. Pendulum-v1 (an id of a package of ``packages`` too)."""
+    kwargs: dict[str, Any] = field(default_factory=dict)
+    """Keyword arguments of ``gymnasium.make`` for this id (e.g. {g: 9.81})."""
+    max_episode_steps: int | None = None
+    """Time limit of an episode; null: the limit the id is registered with."""
+    normalize: bool = False
+    """Wrap the vectorised env in SB3's VecNormalize (running mean and variance of the
+    observations, and of the returns when normalize_reward); its statistics are saved beside
+    the model and used by evaluation. Curves and scores stay in the env's own reward units."""
+    normalize_reward: bool = True
+    """With normalize: also scale rewards for learning (VecNormalize's norm_reward)."""
+    packages: list[str] = field(default_factory=list)
+    """Python packages imported before the id is looked up: those that register ids of their
+    own when imported (rl-zoo3's --gym-packages)."""
+
+
+ENV_SCHEMAS = {"leg": LegEnvConfig, "gym": GymEnvConfig}
+"""The env group's options and their schemas; ``conf/env/NAME.yaml`` builds on NAME's."""
 
 
 @dataclass
@@ -55,11 +80,25 @@ class PPOConfig:
     max_grad_norm: float = 0.5
     """Gradient clipping."""
     learning_rate: float = 1e-3
-    """Adam step size (constant)."""
+    """Adam step size (at the start, with learning_rate_schedule linear)."""
+    learning_rate_schedule: str = "constant"
+    """constant, or linear: from learning_rate down to 0 at the end of training (rl-zoo3's
+    ``lin_0.001``)."""
+    clip_range_schedule: str = "constant"
+    """constant, or linear: clip_range down to 0 at the end of training (``lin_0.2``)."""
     net_arch: list[int] = field(default_factory=lambda: [64, 64])
     """Hidden layers of the policy and value networks (separate networks, same shape)."""
     activation: str = "tanh"
     """Hidden activation: tanh or relu."""
+    ortho_init: bool = True
+    """Orthogonal initialisation of the networks (SB3's default)."""
+    log_std_init: float = 0.0
+    """Initial log standard deviation of a continuous action's Gaussian."""
+    use_sde: bool = False
+    """Generalised state-dependent exploration (gSDE) instead of independent Gaussian noise;
+    continuous (Box) actions only."""
+    sde_sample_freq: int = -1
+    """With use_sde: env steps between new noise matrices; -1: once per rollout."""
 
 
 @dataclass
@@ -289,7 +328,9 @@ class RayConfig:
 class KrabyConfig:
     """Everything a command needs: composed from conf/config.yaml and the command line."""
 
-    env: EnvConfig = field(default_factory=EnvConfig)
+    env: Any = MISSING
+    """The environment: a :class:`LegEnvConfig` (env=leg) or a :class:`GymEnvConfig`
+    (env=gym), typed by the option chosen."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
     budget: BudgetConfig = field(default_factory=BudgetConfig)
     study: StudyConfig | None = None
@@ -340,3 +381,5 @@ def register_schema() -> None:
     """Register the schema so conf/config.yaml can build on it (idempotent)."""
     cs = ConfigStore.instance()
     cs.store(name="kraby_schema", node=KrabyConfig)
+    for name, schema in ENV_SCHEMAS.items():
+        cs.store(group="env", name=f"{name}_schema", node=schema)

@@ -5,13 +5,14 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
+import tempfile
 from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from kraby_envs.seeding import check_scheme
 from kraby_study.config.schema import PPOConfig
+from kraby_study.env import adapter_for, check_scheme
 from kraby_study.errors import ConfigError
 from kraby_study.records import SelectRule
 from kraby_study.store.url import check_url
@@ -39,7 +40,7 @@ def _finite(name: str, value: float) -> None:
 def validate_ppo(ppo: PPOConfig | DictConfig, prefix: str = "ppo") -> None:
     """Refuse PPO settings stable-baselines3 could not train with."""
     for name in ("gamma", "gae_lambda", "clip_range", "ent_coef", "vf_coef", "max_grad_norm",
-                 "learning_rate"):
+                 "learning_rate", "log_std_init"):
         _finite(f"{prefix}.{name}", float(getattr(ppo, name)))
     for name in ("n_envs", "n_steps", "n_epochs"):
         value = int(getattr(ppo, name))
@@ -58,6 +59,13 @@ def validate_ppo(ppo: PPOConfig | DictConfig, prefix: str = "ppo") -> None:
              f"{list(ppo.net_arch)}")
     _require(ppo.activation in ("tanh", "relu"),
              f"{prefix}.activation must be tanh or relu, got {ppo.activation!r}")
+    for name in ("learning_rate_schedule", "clip_range_schedule"):
+        value = getattr(ppo, name)
+        _require(value in SCHEDULES,
+                 f"{prefix}.{name} must be one of {', '.join(SCHEDULES)}, got {value!r}")
+    _require(int(ppo.sde_sample_freq) >= -1,
+             f"{prefix}.sde_sample_freq must be -1 (once per rollout) or a number of steps, got "
+             f"{ppo.sde_sample_freq}")
     rollout = rollout_size(ppo)
     if ppo.batch_size is not None:
         batch = int(ppo.batch_size)
@@ -70,26 +78,14 @@ def validate_ppo(ppo: PPOConfig | DictConfig, prefix: str = "ppo") -> None:
                  f"{rollout}")
 
 
-def validate_env(env: DictConfig) -> None:
-    """Refuse environment settings the leg does not accept (checked without a physics client)."""
-    from kraby_envs import validate_env_kwargs
-
-    try:
-        validate_env_kwargs(**env_kwargs(env))
-    except ValueError as err:
-        raise ConfigError(f"env: {err}") from None
-    _require(int(env.max_episode_steps) >= 1,
-             f"env.max_episode_steps must be at least 1, got {env.max_episode_steps}")
+SCHEDULES = ("constant", "linear")
+"""How learning_rate and clip_range move over training: fixed, or linearly down to 0."""
 
 
-def env_kwargs(env: DictConfig) -> dict[str, Any]:
-    """Keyword arguments of the leg environment (the time limit is passed separately)."""
-    return {
-        "observation": str(env.observation),
-        "delta": float(env.delta),
-        "time_step": float(env.time_step),
-        "frameskip": int(env.frameskip),
-    }
+def validate_env(env: DictConfig, ppo: PPOConfig | DictConfig | None = None) -> None:
+    """Refuse environment settings its adapter does not accept (and, given the ppo settings,
+    PPO settings its spaces cannot take), without training anything."""
+    adapter_for(env).validate(env, ppo)
 
 
 def validate_budget(budget: DictConfig) -> None:
@@ -102,8 +98,8 @@ def validate_budget(budget: DictConfig) -> None:
 
 def validate(cfg: DictConfig) -> None:
     """Check a composed config as a whole: every value a command could use."""
-    validate_env(cfg.env)
     validate_ppo(cfg.ppo)
+    validate_env(cfg.env, cfg.ppo)
     validate_budget(cfg.budget)
     check_url(cfg.storage)
     for name in ("heartbeat_interval", "heartbeat_grace", "db_retry_seconds"):
@@ -144,7 +140,8 @@ def validate(cfg: DictConfig) -> None:
         SelectRule.check(str(cfg.compare.select), "compare.select")
     if cfg.report.threshold is not None:
         _finite("report.threshold", float(cfg.report.threshold))
-        # The reward is minus a squared distance: no episode scores above 0.
+    if cfg.report.threshold is not None and adapter_for(cfg.env).kind == "leg":
+        # The leg's reward is minus a squared distance: no episode scores above 0.
         _require(float(cfg.report.threshold) <= 0.0,
                  f"report.threshold must be at most 0, the leg's highest possible episode "
                  f"reward (minus a squared distance), got {cfg.report.threshold}")
@@ -199,6 +196,33 @@ def validate_tensorboard(cfg: DictConfig) -> None:
     _require(importlib.util.find_spec("tensorboard") is not None,
              "tensorboard_dir needs TensorBoard, which is not installed: pip install "
              "'kraby-study[tensorboard]'")
+
+
+def writable(folder: Path, name: str) -> None:
+    """Refuse a folder that cannot be made or written, in one line: the folders missing on
+    the way are made for the check, a file is written and removed, and what was made is
+    removed again."""
+    missing = []
+    existing = folder
+    while not existing.exists():
+        missing.append(existing)
+        if existing.parent == existing:
+            break
+        existing = existing.parent
+    _require(existing.is_dir(), f"{name} {folder}: {existing} is a file")
+    made: list[Path] = []
+    try:
+        for path in reversed(missing):
+            path.mkdir()
+            made.append(path)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as err:
+        raise ConfigError(f"{name} {folder} cannot be written: "
+                          f"{err.strerror or type(err).__name__}") from None
+    finally:
+        for path in reversed(made):
+            path.rmdir()
 
 
 def cores() -> int:

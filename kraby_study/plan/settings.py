@@ -15,8 +15,9 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from kraby_study.config.compose import compose_config
-from kraby_study.config.validate import resolved_batch_size, to_container
+from kraby_study.config.validate import resolved_batch_size, to_container, writable
 from kraby_study.errors import ConfigError, first_line
+from kraby_study.plan.spec import OPTIONAL_PPO
 from kraby_study.store.url import sqlite_path
 
 SWEEPABLE_ROOTS = ("env", "ppo")
@@ -26,10 +27,26 @@ UNSAFE = re.compile(r"[^A-Za-z0-9._,=+-]+")
 
 
 def resolved_settings(cfg: DictConfig) -> dict[str, Any]:
-    """The env and ppo settings of a config, with the batch size made explicit."""
-    settings = {"env": to_container(cfg.env), "ppo": to_container(cfg.ppo)}
+    """The env and ppo settings of a config, with the batch size made explicit.
+
+    A ppo setting of :data:`kraby_study.plan.spec.OPTIONAL_PPO` at its default is left out:
+    settings stored before it existed meant that default, and so keep their fingerprints.
+    """
+    ppo = {key: value for key, value in to_container(cfg.ppo).items()
+           if key not in OPTIONAL_PPO or value != OPTIONAL_PPO[key]}
+    settings = {"env": to_container(cfg.env), "ppo": ppo}
     settings["ppo"]["batch_size"] = resolved_batch_size(cfg.ppo)
     return settings
+
+
+def validate_outputs(cfg: DictConfig) -> None:
+    """The folders a training command writes to can be written: TensorBoard logs (when asked
+    for) and models (unless save_models is false); refused in one line before any run starts,
+    so that no run fails on them. Nothing is left behind."""
+    if cfg.tensorboard_dir is not None:
+        writable(Path(str(cfg.tensorboard_dir)).expanduser(), "tensorboard_dir")
+    if cfg.save_models:
+        writable(models_dir(cfg), "models_dir")
 
 
 def models_dir(cfg: DictConfig) -> Path:
@@ -75,7 +92,9 @@ def with_value(cfg: DictConfig, parameter: str, value: Any) -> DictConfig:
     if root not in SWEEPABLE_ROOTS or "." not in parameter:
         raise ConfigError(f"study.parameter {parameter!r} must name a setting under env. or ppo.")
     if OmegaConf.select(cfg, parameter, default="__missing__") == "__missing__":
-        raise ConfigError(f"study.parameter {parameter!r} is not a setting of the config")
+        own = (f" (this env's settings: {', '.join(str(k) for k in cfg.env.keys())})"
+               if root == "env" else "")
+        raise ConfigError(f"study.parameter {parameter!r} is not a setting of the config{own}")
     trial_cfg = cfg.copy()
     try:
         OmegaConf.update(trial_cfg, parameter, value, merge=False)

@@ -185,7 +185,7 @@ def apply_params(cfg: DictConfig, params: dict[str, Any]) -> DictConfig:
     if minibatches is not None:
         trial_cfg = with_value(trial_cfg, "ppo.batch_size", rollout_size(trial_cfg.ppo)
                                // minibatches)
-    validate_env(trial_cfg.env)
+    validate_env(trial_cfg.env, trial_cfg.ppo)
     validate_ppo(trial_cfg.ppo)
     return trial_cfg
 

@@ -10,6 +10,19 @@ from typing import Any
 
 from kraby_study.records import LEGACY_SEEDING, SEEDING, StudyAttrs
 
+OPTIONAL_PPO: dict[str, Any] = {
+    "learning_rate_schedule": "constant", "clip_range_schedule": "constant",
+    "ortho_init": True, "log_std_init": 0.0, "use_sde": False, "sde_sample_freq": -1,
+}
+"""PPO settings added after studies were first stored, with their defaults (those of
+``config.schema.PPOConfig``, which are SB3's): a run's settings hold one only when it differs,
+so every study stored before keeps its fingerprint. Read them with :func:`ppo_setting`."""
+
+
+def ppo_setting(ppo: dict[str, Any], name: str) -> Any:
+    """A run's ppo setting, its :data:`OPTIONAL_PPO` default when the settings leave it out."""
+    return ppo[name] if name in ppo else OPTIONAL_PPO[name]
+
 
 @dataclass(frozen=True)
 class TrialSpec:
@@ -47,7 +60,8 @@ class TrialSpec:
     """A two-objective search's cost (training_time): progress lines show it beside the
     score."""
     eval_episodes: int = 16
-    """Fixed targets of the evaluation objective."""
+    """Evaluation episodes of the evaluation objective (the leg's fixed targets, a gym env's
+    seeded resets)."""
     label: str = ""
     """How progress lines name the run, e.g. 'clip_range=0.2 seed 1'."""
     tensorboard_run: str | None = None

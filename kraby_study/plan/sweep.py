@@ -39,7 +39,7 @@ def expand_study(cfg: DictConfig) -> StudyPlan:
     for index, value in enumerate(values):
         trial_cfg = with_value(cfg, study.parameter, value)
         try:
-            validate_env(trial_cfg.env)
+            validate_env(trial_cfg.env, trial_cfg.ppo)
             validate_ppo(trial_cfg.ppo)
         except ConfigError as err:
             raise ConfigError(f"study {study.name}, value {value!r}: {err}") from None

@@ -16,7 +16,7 @@ def train_plan(cfg: DictConfig) -> StudyPlan:
     Runs with the same settings, budget and seeding share one study named train-<hash>, one
     trial per seed (``seeding=offset`` finds the runs stored before streams existed).
     """
-    validate_env(cfg.env)
+    validate_env(cfg.env, cfg.ppo)
     validate_ppo(cfg.ppo)
     settings = resolved_settings(cfg)
     scheme = seeding_of(cfg)

@@ -84,8 +84,11 @@ def add_policy(report: StudyReport, candidates: Candidates, url: str, rel: str) 
             report.notes.append(f"policy animation failed for {model}: {first}")
             return
         report.files.append(target)
+        from kraby_study.env import adapter_for
+
+        shown = adapter_for(settings.get("env") or {}).shown
         image = Image(f"{rel}/policy.gif", "trained policy",
-                      f"The best trained policy, {description}, reaching 3 fixed targets "
+                      f"The best trained policy, {description}, {shown} "
                       "(deterministic actions, real time).")
         links = [i for i, b in enumerate(report.blocks) if isinstance(b, Links)]
         report.blocks.insert(links[-1] if links else len(report.blocks), image)

@@ -29,14 +29,14 @@ from kraby_study.records import (
 )
 from kraby_study.report.document import Block, Heading, Items, Table, Text, to_markdown
 from kraby_study.report.load import StudyData
-from kraby_study.run.provenance import PACKAGES
+from kraby_study.run.provenance import ENV_FIELDS, PACKAGES
 
 FILE = "reproducibility.md"
 
 HARDWARE = ("cpu", "cores", "platform", "hostname")
 SOFTWARE = ("kraby_study", "python", *PACKAGES, "git_commit", "git_dirty")
 CHECKED = ("cpu", "cores", "platform", "kraby_study", "python", *PACKAGES, "git_commit",
-           "git_dirty")
+           "git_dirty", *ENV_FIELDS)
 """Fields that can move a trial's numbers: trials that differ in one are warned about (the
 hostname, the folder and the command line may differ freely)."""
 
@@ -188,6 +188,15 @@ def _facts_table(trials: Sequence[StoredTrial], records: dict[str, dict[str, str
     return Table(["field", "value (trials, when they differ)"], rows)
 
 
+def _env_block(trials: Sequence[StoredTrial], records: dict[str, dict[str, str]]) -> Block:
+    """The env's id, package and version when the trials recorded them (a Gymnasium env);
+    else the leg, which is part of kraby-study."""
+    if any(record.get("env_id") for record in records.values()):
+        return _facts_table(trials, records, ENV_FIELDS)
+    return Text("The Kraby leg (KrabyOneLeg-v0 of kraby_envs, which is part of kraby-study: "
+                "its version and commit are below).")
+
+
 def reproducibility_blocks(data: StudyData) -> list[Block]:
     """The page's blocks."""
     trials = started(data.trials)
@@ -206,6 +215,7 @@ def reproducibility_blocks(data: StudyData) -> list[Block]:
     blocks += [Heading("Seeds", 2), Items(_seeds_block(data, trials)),
                Heading("What was compared", 2), *_compared_block(data),
                Heading("Budget", 2), Items(_budget_block(data, trials)),
+               Heading("Environment", 2), _env_block(trials, records),
                Heading("Hardware", 2), _facts_table(trials, records, HARDWARE),
                Heading("Software and code", 2), _facts_table(trials, records, SOFTWARE),
                Heading("Commands", 2),

@@ -10,6 +10,7 @@ another machine that stopped) ends the command, and rerunning it resumes.
 from __future__ import annotations
 
 import dataclasses
+import sys
 from collections.abc import Callable
 from typing import TextIO
 
@@ -97,6 +98,7 @@ def run_campaign(campaign: Campaign, run_stage: RunStage, stream: TextIO) -> int
     """
     check_stored(campaign)
     total = len(campaign.stages)
+    errors = 0
     for stage in campaign.stages:
         cfg, plan = stage_plan(campaign, stage)
         taken = ", ".join(f"{i['setting']}={value_label(i['value'])}" for i in plan.inputs)
@@ -105,6 +107,7 @@ def run_campaign(campaign: Campaign, run_stage: RunStage, stream: TextIO) -> int
               + (f"; from earlier stages: {taken}" if taken else ""), file=stream, flush=True)
         check_stage(campaign, stage, cfg, plan)
         summary, counts = run_stage(cfg, plan)
+        errors += summary.errors
         if summary.interrupted:
             return 130
         # A raced stage plans the runs its race still wants, not every value's every seed.
@@ -119,4 +122,9 @@ def run_campaign(campaign: Campaign, run_stage: RunStage, stream: TextIO) -> int
               file=stream, flush=True)
     print(f"campaign {campaign.name}: {total}/{total} stages finished; `kraby-study best "
           f"--campaign {campaign.name}` writes the settings it ends with", file=stream)
+    if errors:
+        print(f"kraby-study: {errors} run(s) ended in an error (not a divergence): "
+              "`kraby-study list` counts them and the report gives their reasons",
+              file=sys.stderr)
+        return 1
     return 0

@@ -10,13 +10,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 from omegaconf import DictConfig
 
 from kraby_study.config.validate import cores
-from kraby_study.run.pool import Pool, WorkerPool
+from kraby_study.run.pool import Pool, WorkerPool, WorkerSlot, start_worker, stop_workers
 
 
 class Executor(Protocol):
@@ -27,6 +27,11 @@ class Executor(Protocol):
 
     def pool(self, size: int) -> Pool:
         """A pool of ``size`` trial slots (closed by the runner)."""
+        ...
+
+    def prestart(self, size: int) -> None:
+        """Start what a pool of ``size`` slots will run on now, ahead of its first trial (the
+        command then opens its store meanwhile); a no-op where nothing is gained."""
 
 
 @dataclass(frozen=True)
@@ -39,15 +44,32 @@ class LocalExecutor:
     """
 
     shards: int | None = None
+    spares: dict[int, list[WorkerSlot]] = field(default_factory=dict, compare=False)
+    """Workers started ahead (:meth:`prestart`), by the pool size they were started for."""
 
     def workers(self, configured: int | None) -> int:
         """The configured number, or one per core."""
         return int(configured) if configured is not None else cores()
 
+    def _shards(self, size: int) -> int:
+        return self.shards if self.shards is not None else max(1, cores() // size)
+
     def pool(self, size: int) -> Pool:
-        """``size`` worker processes, started when there is work for them."""
-        shards = self.shards if self.shards is not None else max(1, cores() // size)
-        return WorkerPool(size, shards)
+        """``size`` worker processes, started when there is work for them (those started
+        ahead for this size first)."""
+        return WorkerPool(size, self._shards(size), self.spares.setdefault(size, []))
+
+    def prestart(self, size: int) -> None:
+        """Start ``size`` workers now: their imports (torch, SB3, the envs: about 2 s) overlap
+        the command's own start (the store); a pool of ``size`` takes them."""
+        self.spares.setdefault(size, []).extend(start_worker(self._shards(size))
+                                                for _ in range(size))
+
+    def close(self) -> None:
+        """Stop the workers started ahead that no pool took."""
+        for slots in self.spares.values():
+            stop_workers(slots)
+            slots.clear()
 
 
 @contextmanager
@@ -63,4 +85,8 @@ def executor_for(cfg: DictConfig) -> Iterator[Executor]:
         with ray_executor(cfg) as executor:
             yield executor
     else:
-        yield LocalExecutor(None if cfg.shards is None else int(cfg.shards))
+        local = LocalExecutor(None if cfg.shards is None else int(cfg.shards))
+        try:
+            yield local
+        finally:
+            local.close()

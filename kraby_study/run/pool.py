@@ -19,7 +19,9 @@ from kraby_study.plan.spec import TrialSpec
 
 
 @dataclass
-class _Slot:
+class WorkerSlot:
+    """A worker process, its end of the pipe, and the trial it runs (None: idle)."""
+
     process: subprocess.Popen[bytes]
     conn: Connection
     number: int | None = None
@@ -72,25 +74,46 @@ class Pool(Protocol):
         """Stop every slot: politely when idle, at once when ``terminate``."""
 
 
+def start_worker(shards: int) -> WorkerSlot:
+    """A new worker process (``python -m kraby_study.run.worker``), its pipe, no trial yet."""
+    ours, theirs = Pipe()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "kraby_study.run.worker", str(theirs.fileno()), str(shards)],
+        pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL)
+    theirs.close()
+    return WorkerSlot(process, ours)
+
+
+def stop_workers(slots: list[WorkerSlot], terminate: bool = False) -> None:
+    """Stop workers: politely (they finish nothing: they are idle), or at once."""
+    for slot in slots:
+        try:
+            if terminate:
+                slot.process.terminate()
+            else:
+                slot.conn.send(None)
+        except (BrokenPipeError, OSError):
+            pass
+    for slot in slots:
+        _exit_code(slot.process)
+        slot.conn.close()
+
+
 class WorkerPool:
     """Up to ``size`` worker processes, started when there is work for them.
 
-    Each worker steps its trials' legs in ``shards`` processes.
+    Each worker steps its trials' legs in ``shards`` processes. ``spares`` are workers started
+    ahead (with the same shards), taken before any new one is started.
     """
 
-    def __init__(self, size: int, shards: int = 1) -> None:
+    def __init__(self, size: int, shards: int = 1, spares: list[WorkerSlot] | None = None) -> None:
         self.size = size
         self.shards = shards
-        self._slots: list[_Slot] = []
+        self._slots: list[WorkerSlot] = []
+        self._spares = spares if spares is not None else []
 
-    def _start(self) -> _Slot:
-        ours, theirs = Pipe()
-        process = subprocess.Popen(
-            [sys.executable, "-m", "kraby_study.run.worker", str(theirs.fileno()),
-             str(self.shards)],
-            pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL)
-        theirs.close()
-        slot = _Slot(process, ours)
+    def _start(self) -> WorkerSlot:
+        slot = self._spares.pop() if self._spares else start_worker(self.shards)
         self._slots.append(slot)
         return slot
 
@@ -126,7 +149,7 @@ class WorkerPool:
         return out
 
     @staticmethod
-    def _drain(slot: _Slot, out: list[Event]) -> bool:
+    def _drain(slot: WorkerSlot, out: list[Event]) -> bool:
         """Adds what the worker said to ``out``; False when its pipe has ended."""
         try:
             while slot.conn.poll():
@@ -149,17 +172,7 @@ class WorkerPool:
 
     def close(self, terminate: bool = False) -> None:
         """Stop every worker: politely when idle, at once when ``terminate``."""
-        for slot in self._slots:
-            try:
-                if terminate:
-                    slot.process.terminate()
-                else:
-                    slot.conn.send(None)
-            except (BrokenPipeError, OSError):
-                pass
-        for slot in self._slots:
-            _exit_code(slot.process)
-            slot.conn.close()
+        stop_workers(self._slots, terminate)
         self._slots.clear()
 
 

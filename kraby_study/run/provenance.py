@@ -10,6 +10,7 @@ note_provenance`).
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import re
@@ -17,11 +18,14 @@ import shlex
 import socket
 import subprocess
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from functools import cache
 from importlib import metadata
 from pathlib import Path
 
+ENV_FIELDS = ("env_id", "env_package", "env_version")
+"""What a Gymnasium env's trials also store: its id and the package (and version) that
+registers it; the leg's trials store none (it is part of kraby-study)."""
 PACKAGES = ("stable-baselines3", "torch", "pybullet", "gymnasium", "optuna", "numpy")
 """The packages whose versions decide a trial's numbers, stored with every trial."""
 
@@ -60,6 +64,20 @@ def machine_facts() -> dict[str, str]:
     }
     facts.update({package: _version(package) for package in PACKAGES})
     return facts
+
+
+def trial_facts(env: Mapping[str, object]) -> dict[str, str]:
+    """:func:`machine_facts`, and the env's own facts (:data:`ENV_FIELDS`) for a Gymnasium
+    env: what a worker stores when a trial starts."""
+    return {**machine_facts(), **_env_facts(json.dumps(dict(env), sort_keys=True, default=str))}
+
+
+@cache
+def _env_facts(env_json: str) -> dict[str, str]:
+    from kraby_study.env import adapter_for
+
+    env = json.loads(env_json)
+    return adapter_for(env).describe(env)
 
 
 def hide_passwords(text: str) -> str:

@@ -26,7 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 from kraby_study.errors import ClusterLost, ConfigError, first_line
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.run.pool import Event, as_event
-from kraby_study.run.provenance import machine_facts
+from kraby_study.run.provenance import trial_facts
 from kraby_study.run.worker import attempt
 
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
@@ -74,7 +74,7 @@ class TrialActor:
             self._outbox.put(("checkpoint", number, step, value))
             return self._replies.get()
 
-        self._outbox.put(("started", number, machine_facts()))
+        self._outbox.put(("started", number, trial_facts(spec.settings["env"])))
         self._outbox.put(("result", number, attempt(spec, self._shards, checkpoint, progress)))
 
     def drain(self, wait: float) -> list[tuple[Any, ...]]:
@@ -267,6 +267,9 @@ class RayExecutor:
     def pool(self, size: int) -> RayPool:
         """``size`` trial actors, started when there is work for them."""
         return RayPool(size, self.shards, self.cpus, self.patience)
+
+    def prestart(self, size: int) -> None:
+        """Nothing: actors are placed when a trial needs one."""
 
 
 def _check_reachable(address: str | None, patience: float) -> None:

@@ -18,7 +18,7 @@ from typing import Any, Protocol, TextIO
 
 from kraby_study.errors import ClusterLost, DatabaseLost, first_line
 from kraby_study.plan.spec import TrialSpec
-from kraby_study.records import Failure, Outcome, Tally, TrialResult, failure
+from kraby_study.records import Failure, Outcome, Tally, TrialResult, failure, failure_kind
 from kraby_study.run.executor import Executor
 from kraby_study.run.pool import Event, Pool
 from kraby_study.run.progress import Progress
@@ -58,11 +58,22 @@ class CommandRun(Tally):
     """What one command ran: the trials it ended, by outcome, and whether it was stopped."""
 
     interrupted: bool = False
+    errors: int = 0
+    """Failed trials whose failure is an error (not a divergence, which is a result)."""
 
-    def count(self, ended: Outcome) -> None:
-        """Count one trial that ended."""
+    def count(self, ended: Outcome, reason: str | None = None) -> None:
+        """Count one trial that ended (``reason``: its failure, if any)."""
         name = ended.value
         setattr(self, name, getattr(self, name) + 1)
+        if ended == Outcome.FAILED and failure_kind(reason) == Failure.ERROR:
+            self.errors += 1
+
+    def errors_line(self) -> str | None:
+        """What a command says when some of its runs ended in errors, or None."""
+        if not self.errors:
+            return None
+        return (f"{self.errors} run(s) ended in an error (not a divergence): `kraby-study "
+                "list` counts them and the report gives their reasons")
 
 
 class Retrying:
@@ -179,7 +190,7 @@ class _Run:
 
     def finish(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
         self.source.record(number, spec, result)
-        self.summary.count(result.outcome)
+        self.summary.count(result.outcome, result.failure)
         self.progress.finish(spec.label, result, cost=spec.cost is not None)
 
     def stop(self, why: str = "stopped by the user") -> None:

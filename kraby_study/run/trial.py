@@ -15,8 +15,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from kraby_study.env import adapter_for, normalizer_path
 from kraby_study.errors import first_line
-from kraby_study.plan.spec import TrialSpec
+from kraby_study.plan.spec import TrialSpec, ppo_setting
 from kraby_study.records import Failure, Outcome, TrialResult, failure
 from kraby_study.run.curve import Episode, bin_curve, final_score, mean_curve
 
@@ -55,15 +56,33 @@ def build_model(spec: TrialSpec, env: Any, seed: int, logs: Path | None = None) 
     ppo = spec.settings["ppo"]
     activation = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU}[ppo["activation"]]
     arch = list(ppo["net_arch"])
+    policy_kwargs: dict[str, Any] = {"net_arch": {"pi": arch, "vf": arch},
+                                     "activation_fn": activation}
+    # Only settings away from SB3's defaults are passed: the same call as before they existed.
+    for name in ("ortho_init", "log_std_init"):
+        if name in ppo:
+            policy_kwargs[name] = ppo[name]
+    extra = {name: ppo[name] for name in ("use_sde", "sde_sample_freq") if name in ppo}
     model = PPO(
         "MlpPolicy", env, n_steps=ppo["n_steps"], batch_size=ppo["batch_size"],
         n_epochs=ppo["n_epochs"], gamma=ppo["gamma"], gae_lambda=ppo["gae_lambda"],
-        clip_range=ppo["clip_range"], ent_coef=ppo["ent_coef"], vf_coef=ppo["vf_coef"],
-        max_grad_norm=ppo["max_grad_norm"], learning_rate=ppo["learning_rate"],
-        policy_kwargs={"net_arch": {"pi": arch, "vf": arch}, "activation_fn": activation},
-        seed=seed, device="cpu", verbose=0)
+        clip_range=schedule(ppo["clip_range"], ppo_setting(ppo, "clip_range_schedule")),
+        ent_coef=ppo["ent_coef"], vf_coef=ppo["vf_coef"], max_grad_norm=ppo["max_grad_norm"],
+        learning_rate=schedule(ppo["learning_rate"], ppo_setting(ppo, "learning_rate_schedule")),
+        policy_kwargs=policy_kwargs, seed=seed, device="cpu", verbose=0, **extra)
     model.set_logger(sb3_logger(logs))
     return model
+
+
+def schedule(value: float, kind: str) -> Any:
+    """A setting as SB3 takes it: the number itself (constant), or a function of the progress
+    remaining (1 at the start, 0 at the end) going linearly from the number to 0 (linear,
+    rl-zoo3's ``lin_<number>``)."""
+    if kind == "constant":
+        return value
+    from stable_baselines3.common.utils import LinearSchedule
+
+    return LinearSchedule(start=float(value), end=0.0, end_fraction=1.0)
 
 
 def sb3_logger(logs: Path | None) -> Any:
@@ -99,14 +118,20 @@ def tensorboard_folder(run: str, seed: int) -> Path:
 
 
 def make_env(spec: TrialSpec, seed: int, shards: int = 1) -> Any:
-    """The batched world of a spec: n_envs legs stepped in ``shards`` processes, each leg on
-    its own stream of ``seed`` by the spec's seeding scheme."""
-    from kraby_envs import make_batched
+    """The vectorised env of a spec (:mod:`kraby_study.env`): n_envs envs stepped in
+    ``shards`` processes where the env allows, each on its own stream of ``seed`` by the
+    spec's seeding scheme."""
+    env = spec.settings["env"]
+    return adapter_for(env).make_vec(env, int(spec.settings["ppo"]["n_envs"]), seed,
+                                     spec.seeding, shards=shards,
+                                     gamma=float(spec.settings["ppo"]["gamma"]))
 
-    env = dict(spec.settings["env"])
-    max_steps = int(env.pop("max_episode_steps"))
-    return make_batched(n_envs=int(spec.settings["ppo"]["n_envs"]), seed=seed,
-                        max_episode_steps=max_steps, shards=shards, seeding=spec.seeding, **env)
+
+def normalizer_of(env: Any) -> Any:
+    """The VecNormalize of a vectorised env, or None."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    return env if isinstance(env, VecNormalize) else None
 
 
 @dataclass
@@ -120,6 +145,8 @@ class _Seed:
     score: float | None = None
     train_reward: float | None = None
     model: Any = None
+    normalizer: Any = None
+    """The run's VecNormalize (its statistics as training left them), or None."""
 
 
 def _learn(spec: TrialSpec, seed: int, recorder: EpisodeRecorder, shards: int) -> _Seed:
@@ -127,6 +154,7 @@ def _learn(spec: TrialSpec, seed: int, recorder: EpisodeRecorder, shards: int) -
     run = _Seed()
     logs = tensorboard_folder(spec.tensorboard_run, seed) if spec.tensorboard_run else None
     env = make_env(spec, seed, shards)
+    run.normalizer = normalizer_of(env)
     try:
         run.model = build_model(spec, env, seed, logs)
         run.model.learn(total_timesteps=spec.steps, callback=recorder)
@@ -149,9 +177,9 @@ def _score(spec: TrialSpec, run: _Seed) -> None:
     """The final score of a seed that trained to its end."""
     run.train_reward = final_score(run.episodes, run.env_steps)
     if spec.objective == "evaluation":
-        from kraby_study.run.evaluation import evaluate
-
-        run.score = evaluate(run.model, spec.settings["env"], spec.eval_episodes)
+        env = spec.settings["env"]
+        run.score = adapter_for(env).evaluate(run.model, env, spec.eval_episodes,
+                                              run.normalizer)
     else:
         run.score = run.train_reward
     if run.score is None or not math.isfinite(run.score):
@@ -235,4 +263,7 @@ def _result(spec: TrialSpec, runs: list[_Seed], started: str, seconds: float,
             best = max(runs, key=lambda r: float(r.score or -math.inf))
             Path(spec.model_path).parent.mkdir(parents=True, exist_ok=True)
             best.model.save(spec.model_path)
+            if best.normalizer is not None:
+                # Evaluation and the report's GIF need the observation statistics too.
+                best.normalizer.save(str(normalizer_path(spec.model_path)))
     return result

@@ -9,6 +9,7 @@ legs are stepped in (see :mod:`kraby_envs.sharded`); it changes speed, not resul
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import traceback
@@ -41,7 +42,11 @@ def serve(conn: Connection, shards: int) -> None:
     """Runs trials until the pool sends None or goes away."""
     import torch
 
-    from kraby_study.run.provenance import machine_facts
+    # Loaded before the first trial is asked for: a worker started ahead of its work (see
+    # LocalExecutor.prestart) pays its imports while the command opens the store.
+    import kraby_study.run.callback  # noqa: F401
+    import kraby_study.run.trial  # noqa: F401
+    from kraby_study.run.provenance import trial_facts
 
     torch.set_num_threads(1)
     while True:
@@ -60,7 +65,7 @@ def serve(conn: Connection, shards: int) -> None:
             conn.send(("checkpoint", number, step, value))
             return bool(conn.recv())
 
-        conn.send(("started", number, machine_facts()))
+        conn.send(("started", number, trial_facts(spec.settings["env"])))
         result = attempt(spec, shards, checkpoint, progress)
         try:
             conn.send(("result", number, result))
@@ -72,6 +77,11 @@ def main() -> None:
     # Ctrl-C reaches the whole process group: the parent decides what stops.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     serve(Connection(int(sys.argv[1])), int(sys.argv[2]))
+    # Every result is sent and every env closed: skip the interpreter's teardown of torch and
+    # the rest (about a second the command would wait for at its end).
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 if __name__ == "__main__":

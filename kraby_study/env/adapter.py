@@ -1,0 +1,89 @@
+"""What an environment adapter does, and which adapter a run's env settings choose."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One rendered moment of an episode, as the report's policy GIF shows it."""
+
+    image: np.ndarray
+    """RGB pixels (height x width x 3)."""
+    caption: str
+    """What the moment is (episode, time, a measure of the task)."""
+    duration_ms: int
+    """How long the GIF shows it."""
+
+
+class EnvAdapter(Protocol):
+    """One kind of environment, seen by the orchestrator."""
+
+    kind: str
+    """The env group's option: leg or gym."""
+    shown: str
+    """What the GIF of :meth:`frames` shows, as its caption says it."""
+    view: tuple[float, float, float]
+    """How the GIF crops a rendered image: the fraction kept and its centre (x, y), as
+    fractions of the width and height."""
+
+    def validate(self, env: Mapping[str, Any], ppo: Mapping[str, Any] | None = None) -> None:
+        """Refuse settings the env cannot run with (and, given the ppo settings, PPO settings
+        the env's spaces cannot take), in one line: ConfigError."""
+        ...
+
+    def make_vec(self, env: Mapping[str, Any], n_envs: int, seed: int, seeding: str,
+                 shards: int = 1, gamma: float = 0.99) -> Any:
+        """The SB3 VecEnv of a run: ``n_envs`` envs, env i on stream i of ``seed`` under
+        ``seeding``, each finished episode's info holding SB3's ``episode`` record in the env's
+        own reward units; ``shards`` processes step it where the env can be split; ``gamma``
+        is the discount a VecNormalize scales returns with."""
+        ...
+
+    def evaluate(self, model: Any, env: Mapping[str, Any], episodes: int,
+                 normalizer: Any = None) -> float:
+        """Mean return of the deterministic policy over ``episodes`` fixed evaluation
+        episodes, none of them seeded like a training run; ``normalizer`` is the run's
+        VecNormalize, if any."""
+        ...
+
+    def frames(self, model: Any, env: Mapping[str, Any], size: tuple[int, int],
+               normalizer: Any = None) -> Iterator[Frame]:
+        """The frames of the first few evaluation episodes, rendered offscreen at about
+        ``size`` (width, height) pixels, actions deterministic."""
+        ...
+
+    def describe(self, env: Mapping[str, Any]) -> dict[str, str]:
+        """What the env is, as provenance stores it (the id, its package and version); empty
+        for the leg, which is part of kraby-study itself."""
+        ...
+
+    def label(self, env: Mapping[str, Any]) -> str:
+        """The env in a few words, as ``--dry-run`` shows it."""
+        ...
+
+
+def adapter_for(env: Mapping[str, Any]) -> EnvAdapter:
+    """The adapter of a run's env settings (a dict or a config node): gym when they name an
+    ``id``, else the leg."""
+    # keys(), not `in`: a config node's `in` is False for a missing value (env=gym, no id yet).
+    if "id" in env.keys():
+        from kraby_study.env.gym_env import GYM
+
+        return GYM
+    from kraby_study.env.leg import LEG
+
+    return LEG
+
+
+def normalizer_path(model_path: str | Path) -> Path:
+    """Where a model's VecNormalize statistics are saved: ``<model>.vecnormalize.pkl`` beside
+    its zip."""
+    path = Path(model_path)
+    return path.with_name(f"{path.stem}.vecnormalize.pkl")
