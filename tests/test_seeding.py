@@ -46,7 +46,7 @@ def test_an_old_scheme_study_resumes_bit_identical(
     # the same runs of a study run whole with it.
     capsys.readouterr()
     assert sweep(db, "budget.seeds=2", "--dry-run") == 0
-    assert "seeding offset: leg i of the run with seed s is seeded with s + i" in (
+    assert "seeding offset: env i of the run with seed s is seeded with s + i" in (
         capsys.readouterr().out)
     assert sweep(db, "budget.seeds=2") == 0
     assert scores(db, "clip_range") == scores(offset_full, "clip_range")
@@ -64,8 +64,8 @@ def test_a_new_study_seeds_by_streams_and_repeats_itself(
         workdir: Path, offset_full: Path, capsys: pytest.CaptureFixture[str]) -> None:
     first, again = workdir / "first.db", workdir / "again.db"
     assert sweep(first, "--dry-run") == 0
-    assert "seeding streams: leg i of the run with seed s draws from child i" in (
-        capsys.readouterr().out)
+    streams = "streams: env i of the run with seed s (a leg, on the leg) draws from child i"
+    assert f"seeding {streams}" in capsys.readouterr().out
     assert sweep(first) == 0 and sweep(again) == 0
     assert load(first, "clip_range").user_attrs[DEFINITION]["seeding"] == "streams"
     # A run is a function of its settings and seed: the same scores to the bit.
@@ -78,7 +78,7 @@ def test_a_new_study_seeds_by_streams_and_repeats_itself(
     assert run_cli("report", f"storage={sqlite_url(first)}", "--no-policy",
                    f"out={workdir / 'reports'}") == 0
     page = (workdir / "reports" / "clip_range" / "reproducibility.md").read_text()
-    assert "Seeding: streams: leg i of the run with seed s draws from child i" in page
+    assert f"Seeding: {streams}" in page
 
 
 def test_an_old_confirm_study_resumes_with_its_seeds(
