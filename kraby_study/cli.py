@@ -44,9 +44,9 @@ executor=local|ray: trials run in worker processes here, or as Ray actors on a c
 (ray.address=auto|host:port; null starts a Ray instance here); the command writes the store.
 tensorboard_dir=DIR: each run's SB3 logs in DIR/<study>/<value or trial>-seed<n>, for
 tensorboard --logdir DIR (pip install 'kraby-study[tensorboard]').
-seeding=streams|offset: how a run's seed gives each leg its stream (streams: independent
-children of the seed; offset: seed + leg, the scheme before streams); unset, a stored study
-keeps its own and a new one takes streams.
+seeding=streams|offset: how a run's seed gives each env copy (a leg) its stream (streams:
+independent children of the seed; offset: seed + i, the scheme before streams); unset, a
+stored study keeps its own and a new one takes streams.
 compare.margin=F (default 0.2): the smallest difference that matters, F x the best's |mean|;
 each value is best, equivalent (within it), worse (below the best by more) or undecided.
 compare.select=RULE: best, report and ${winner:...} apply RULE instead of a study's stored one.
@@ -547,7 +547,8 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser; only commands that exist are listed."""
     parser = _Parser(
         prog="kraby-study", description="Declarative PPO hyperparameter studies on the "
-        "simulated Kraby hexapod leg, stored in SQLite or PostgreSQL.",
+        "simulated Kraby hexapod leg or any Gymnasium environment, stored in SQLite or "
+        "PostgreSQL.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                 parser_class=_Parser)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from conftest import TINY, file_digest, finished_search, load, run_cli, sqlite_url
 from optuna.trial import TrialState
@@ -197,3 +198,13 @@ def test_a_confirm_of_an_evaluation_search_scores_on_the_same_fixed_targets(
         # Scored by evaluation: the training reward is stored beside it and differs.
         assert trial.value == trial.user_attrs["final_score"]
         assert trial.value != trial.user_attrs["train_reward"]
+    # The report shows the training reward beside the evaluation score, per configuration.
+    assert run_cli("report", "--study-name", "evaluated-confirm", "--no-policy",
+                   f"out={workdir / 'reports'}") == 0
+    folder = workdir / "reports" / "evaluated-confirm"
+    summary = pd.read_csv(folder / "summary.csv")
+    rewards = [t.user_attrs["train_reward"] for t in study.trials]
+    assert summary["train_mean"].mean() == pytest.approx(sum(rewards) / len(rewards))
+    assert summary["final_mean"].tolist() != summary["train_mean"].tolist()
+    page = (folder / "summary.md").read_text()
+    assert "training reward [95 % CI]" in page and "Scored by evaluation" in page

@@ -149,6 +149,9 @@ def test_sweep_report_writes_every_file(sweep_report: ReportIndex) -> None:
             assert png.read_bytes()[:8] == PNG_MAGIC and png.stat().st_size > 10_000
         for name in SWEEP_TABLES:
             assert (out / study / name).stat().st_size > 0
+        # Scored by the training reward: no second column of it.
+        assert "training reward" not in (out / study / "summary.md").read_text()
+        assert "train_mean" not in _read_summary(out, study)
     # A single-run study has no value axis: curves, final score and wall-clock only.
     assert sorted(p.name for p in (out / "train-abc").glob("*.png")) == [
         "final_score.png", "learning_curves.png", "wallclock.png"]

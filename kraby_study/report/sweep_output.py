@@ -115,9 +115,11 @@ def summary_table(sweep: Sweep) -> Table:
     """The summary as a table of formatted cells, best and tied rows marked; a raced study's
     table says after which round the race dropped a value."""
     raced = sweep.race is not None
+    trained = sweep.by_evaluation and "train_mean" in sweep.summary
     header = [sweep.name, "complete", "failed", "pruned", "pending",
               *(["dropped after round"] if raced else []),
               "final score", "95 % CI", "sd",
+              *(["training reward [95 % CI]", "training sd"] if trained else []),
               "IQM [95 % trimmed-t CI]", "final IQR", "final IQR (rescaled)", "AUC [95 % CI]",
               "env steps to threshold", "seconds to threshold", "reached",
               f"training time ({sweep.time_unit})",
@@ -132,6 +134,8 @@ def summary_table(sweep: Sweep) -> Table:
             *([str(sweep.dropped[vi].round) if dropped else "-"] if raced else []),
             number(row["final_mean"]), _interval(row["final_low"], row["final_high"]),
             number(row["final_sd"], 3),
+            *([_with_interval(row["train_mean"], row["train_low"], row["train_high"]),
+               number(row["train_sd"], 3)] if trained else []),
             _with_interval(row["iqm"], row["iqm_low"], row["iqm_high"]),
             number(row["final_iqr"], 3), number(row["final_iqr_unbiased"], 3),
             _with_interval(row["auc_mean"], row["auc_low"], row["auc_high"]),
@@ -425,8 +429,16 @@ def describe_sweep(sweep: Sweep) -> str:
         source = definition.get("source")
         origin = f" from {source}" if source else ""
         fresh = each.replace(" seeds each", " fresh seeds each")
+        scored = ""
+        if sweep.by_evaluation:
+            episodes = definition.get("eval_episodes")
+            scored = (f" Scored by evaluation, as its source was: a run's final score is its "
+                      f"deterministic policy's mean return over the {episodes} evaluation "
+                      f"episodes every run shares (none seeded like a training run); the "
+                      f"training reward (mean episode reward over the last 10 % of training) "
+                      f"is shown beside it, and no answer reads it.")
         return (f"Confirmation of {len(sweep.values)} configurations{origin} on {fresh}"
-                f"{budget}. Status: {sweep.status()}.")
+                f"{budget}. Status: {sweep.status()}.{scored}")
     if not sweep.parameter:
         return f"Single training run, {seeds} seed(s){budget}. Status: {sweep.status()}."
     inputs = sweep.data.ledger.attrs.inputs or []

@@ -64,7 +64,7 @@ SINGLE_LABEL = "all seeds"
 DROPPED_PREFIX = "dropped by the race"
 """How the summary's note of a value the race dropped begins."""
 TRIAL_COLUMNS = ["number", "key", "seed", "vi", "value", "outcome", "final_score",
-                 "wall_time", "cpu_time", "env_steps", "failure", "model_path"]
+                 "train_reward", "wall_time", "cpu_time", "env_steps", "failure", "model_path"]
 SEED_COLUMNS = ["vi", "seed", "number", "final_score", "first_reward", "auc",
                 "steps_to_threshold", "seconds_to_threshold", "end_step", "end_seconds"]
 
@@ -135,6 +135,13 @@ class Sweep:
         return self.data.kind
 
     @property
+    def by_evaluation(self) -> bool:
+        """Its runs are scored by the evaluation objective (a confirm of an evaluation
+        search): the final score is the deterministic policy's mean evaluation return, and
+        the summary holds the training reward beside it."""
+        return self.data.definition.get("objective") == "evaluation"
+
+    @property
     def time_attr(self) -> str:
         """The trial column the summary's training time describes: the one fastest_tied
         compares (:func:`kraby_study.selection.time_measure`)."""
@@ -188,6 +195,9 @@ def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.Data
             "outcome": state.value,
             "final_score": float(trial.value)
             if state == Outcome.COMPLETE and trial.value is not None else np.nan,
+            # Stored beside the score since the evaluation objective; NaN on older runs.
+            "train_reward": attrs.get("train_reward", np.nan)
+            if state == Outcome.COMPLETE else np.nan,
             "wall_time": attrs.get("wall_time", np.nan) if state != Outcome.PENDING else np.nan,
             "cpu_time": attrs.get("cpu_time", np.nan) if state != Outcome.PENDING else np.nan,
             "env_steps": attrs.get("env_steps", np.nan) if state != Outcome.PENDING else np.nan,
@@ -197,7 +207,7 @@ def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.Data
             "model_path": attrs.get("model_path"),
         })
     frame = pd.DataFrame(rows, columns=TRIAL_COLUMNS)
-    for column in ("final_score", "wall_time", "cpu_time", "env_steps"):
+    for column in ("final_score", "train_reward", "wall_time", "cpu_time", "env_steps"):
         frame[column] = pd.to_numeric(frame[column], errors="coerce").astype(float)
     return frame
 
@@ -460,6 +470,28 @@ def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame,
     return out
 
 
+def add_train_reward(summary: pd.DataFrame, trials: pd.DataFrame,
+                     bootstrap: int = BOOTSTRAP_REPETITIONS) -> pd.DataFrame:
+    """``summary`` with each value's training reward (mean episode reward over the last 10 %
+    of training) over its complete seeds: ``train_mean``, ``train_sd`` and the interval of
+    the mean ``train_low``, ``train_high`` (:func:`kraby_study.stats.describe`, as the final
+    score's). For a study scored by evaluation, whose final score is not the training
+    reward; no decision reads it."""
+    done = trials[(trials["outcome"] == Outcome.COMPLETE) & trials["train_reward"].notna()]
+    out = summary.copy()
+    for column in ("train_mean", "train_sd", "train_low", "train_high"):
+        out[column] = np.nan
+    if done.empty:
+        return out
+    train = describe(done, "vi", "train_reward", bootstrap=bootstrap)
+    for vi in train.index:
+        if vi in out.index:
+            for column, source in (("train_mean", "mean"), ("train_sd", "sd"),
+                                   ("train_low", "low"), ("train_high", "high")):
+                out.loc[vi, column] = train.loc[vi, source]
+    return out
+
+
 def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
                   min_seeds: int = MIN_SEEDS, dropped: Collection[int] = (),
                   comparison: Comparison[int] | None = None) -> Verdict:
@@ -561,6 +593,8 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     threshold, is_default, untrained = study_threshold(curves, summary, chosen)
     seeds = seed_metrics(trials, curves, threshold)
     summary = add_curve_metrics(summary, seeds, bootstrap)
+    if definition.get("objective") == "evaluation":
+        summary = add_train_reward(summary, trials, bootstrap)
     colours = value_colours(labels if data.kind == StudyKind.CONFIRM else values)
     sweep = Sweep(data=data, parameter=parameter, name=name or SINGLE_LABEL, values=values,
                  rule=study_rule(data, judged.select),
