@@ -267,3 +267,10 @@ def test_a_gym_sweep_search_confirm_and_report_end_to_end(
     curves = pd.read_csv(workdir / "out" / "clip_range" / "curves.csv")
     reward = next(c for c in curves.columns if "reward" in c)
     assert curves[reward].between(8, 500).all()
+    # A gym space's parameters are all numbers: the top table still writes whole numbers.
+    top = (workdir / "out" / "ppo_search" / "top_trials.md").read_text()
+    first = next(line for line in top.splitlines() if line.startswith("| 1 |"))
+    assert ".0 |" not in first
+    # The confirm of the evaluation search shows the training reward beside its score.
+    assert "training reward [95 % CI]" in (
+        workdir / "out" / "ppo_search-confirm" / "summary.md").read_text()

@@ -142,8 +142,10 @@ def index_blocks(url: str, reports: list[StudyReport],
         Heading(TITLE, 1),
         Text(f"Store: {shown_url(url)}. {len(reports)} stud{'y' if len(reports) == 1 else 'ies'}"
              " reported."),
-        Text("Final score: mean episode reward over the last 10 % of a run's training "
-             "(reward = minus the squared tip-target distance in m^2, summed over the episode). "
+        Text("Final score: mean episode reward over the last 10 % of a run's training, in "
+             "its env's reward units (the leg's: minus the squared tip-target distance in m^2, "
+             "summed over the episode); in a study scored by evaluation, the deterministic "
+             "policy's mean return over the evaluation episodes. "
              f"Intervals of a mean: {interval_name(bootstrap)}. Learning-curve bands: "
              f"{BAND_NAME}. Other intervals are named where they are shown. Values marked "
              f"'\u2248 best': {HOLM_NAME}. Figures use "

@@ -60,8 +60,10 @@ def top_table(search: Search) -> Table:
     top = top_trials(search)
     header = ["rank", "trial", "objective", *search.params, "env steps", "time (s)"]
     rows = []
-    for _, row in top.iterrows():
-        rows.append([str(row["rank"]), str(row["number"]), _cell(row["value"]),
+    # Records keep each column's type: iterrows would make every cell a float (256.0) when
+    # all parameters are numbers, as on a gym env's space.
+    for row in top.to_dict("records"):
+        rows.append([str(int(row["rank"])), str(int(row["number"])), _cell(row["value"]),
                      *[format_param(row[p], search.distributions.get(p)) for p in search.params],
                      f"{int(row['env_steps']):,}" if np.isfinite(row["env_steps"]) else "-",
                      f"{row['wall_time']:.0f}" if np.isfinite(row["wall_time"]) else "-"])
