@@ -208,3 +208,6 @@ def test_a_confirm_of_an_evaluation_search_scores_on_the_same_fixed_targets(
     assert summary["final_mean"].tolist() != summary["train_mean"].tolist()
     page = (folder / "summary.md").read_text()
     assert "training reward [95 % CI]" in page and "Scored by evaluation" in page
+    index = (workdir / "reports" / "index.md").read_text()
+    assert "Final score (the deterministic policy's mean return over the evaluation episodes)" in (
+        index)

@@ -116,11 +116,11 @@ def _shared_streams(data: StudyData, trials: Sequence[StoredTrial], seeding: str
     """Whether test runs reset legs on the streams of tuning runs: only where both studies
     seed by offset (s + i), whose runs share streams with every run less than n_envs apart."""
     if seeding != LEGACY_SEEDING or data.source_legs is None:
-        return ["Test and tuning runs share no leg's stream (one of the two studies seeds by "
+        return ["Test and tuning runs share no env's stream (one of the two studies seeds by "
                 "streams)."]
     reusing = [t for t in trials if offset_leg_seeds(t) & data.source_legs]
     if not reusing:
-        return ["Test and tuning runs share no leg's stream."]
+        return ["Test and tuning runs share no env's stream."]
     return [f"Warning: {len(reusing)} of {len(trials)} test runs reset some of their legs on "
             "the same streams as tuning runs (both studies seed by offset), so their episodes "
             "are partly those the settings were chosen on."]

@@ -490,6 +490,10 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
                 path = draw(sweep, folder / f"{stem}.{fmt}")
                 report.files.append(path)
                 caption = CAPTIONS[stem]
+                if stem == "final_score" and sweep.by_evaluation:
+                    caption = caption.replace(
+                        "(mean episode reward over the last 10 % of training)",
+                        "(the deterministic policy's mean return over the evaluation episodes)")
                 if stem == "time_to_threshold":
                     caption += f" {threshold_text(sweep)}"
                 if stem in DASHED_FIGURES and sweep.dropped:

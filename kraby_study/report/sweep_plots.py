@@ -219,7 +219,9 @@ def final_score(sweep: Sweep, path: Path) -> Path:
                        alpha=0.18 if mark == "best" else 0.07, linewidth=0, zorder=0)
     _seeds_and_means(ax, sweep, "final_score", "final_mean", "final_low", "final_high")
     _value_axis(ax, sweep)
-    ax.set_ylabel("final score (mean episode reward,\nlast 10 % of training)")
+    ax.set_ylabel("final score (mean evaluation return,\ndeterministic policy)"
+                  if sweep.by_evaluation else
+                  "final score (mean episode reward,\nlast 10 % of training)")
     extra: list[Line2D | Patch] = []
     if (marks == "best").any():
         extra.append(Patch(color=BEST_COLOUR, alpha=0.3, label="best mean"))
