@@ -24,6 +24,9 @@ assert len(plan.specs) == 16, len(plan.specs)
 from kraby_envs.robot import URDF_PATH
 assert URDF_PATH.is_file() and target in URDF_PATH.resolve().parents
 import kraby_study.report
+from kraby_study.env import adapter_for
+assert target in pathlib.Path(sys.modules["kraby_study.env"].__file__).resolve().parents
+assert adapter_for({"id": "Pendulum-v1"}).kind == "gym"
 env = kraby_envs.make_batched(n_envs=2, seed=0)
 assert env.reset().shape[0] == 2
 print("wheel ok")
