@@ -10,7 +10,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import run_cli
+from conftest import load, run_cli
 
 from kraby_study.config.compose import compose_config
 from kraby_study.env import adapter_for, normalizer_path
@@ -274,3 +274,26 @@ def test_a_gym_sweep_search_confirm_and_report_end_to_end(
     # The confirm of the evaluation search shows the training reward beside its score.
     assert "training reward [95 % CI]" in (
         workdir / "out" / "ppo_search-confirm" / "summary.md").read_text()
+
+
+@pytest.mark.slow
+def test_a_gym_campaign_race_train_and_ray_run(workdir: Path) -> None:
+    cart = ["env=gym", "env.id=CartPole-v1", "budget=smoke", "budget.steps=1024",
+            "budget.curve_every=256", "ppo.n_envs=4", "ppo.n_steps=32", "ppo.n_epochs=2",
+            "ppo.net_arch=[16]", "save_models=false", "workers=2"]
+    (workdir / "conf" / "campaign").mkdir(parents=True)
+    (workdir / "conf" / "campaign" / "cart.yaml").write_text(
+        "# @package campaign\nname: cart\ndescription: two sweeps on CartPole-v1\nstart: {}\n"
+        "stages:\n  - study: clip_range\n  - study: gamma\n")
+    assert run_cli("run", "campaign=cart", *cart) == 0
+    db = workdir / "studies" / "kraby.db"
+    # The second stage ran with the first's selected clip_range, on the gym env.
+    gamma = load(db, "cart-gamma").get_trials()[0].user_attrs
+    assert gamma["settings"]["env"]["id"] == "CartPole-v1"
+    assert run_cli("run", "study=clip_range", "--racing", "budget.seeds=4", *cart) == 0
+    assert run_cli("run", "study=clip_range", "executor=ray", "study.name=on_ray", *cart) == 0
+    assert len(load(db, "on_ray").get_trials()) == 8
+    # train on a normalised env saves the model and its VecNormalize statistics.
+    assert run_cli("train", "env=gym", "env.id=Pendulum-v1", "ppo=zoo", "budget.steps=8192",
+                   "env.normalize=true") == 0
+    assert list(workdir.glob("**/s0.zip")) and list(workdir.glob("**/s0.vecnormalize.pkl"))
