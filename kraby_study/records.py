@@ -699,6 +699,12 @@ def two_objectives(definition: Mapping[str, Any]) -> bool:
     return len(objective_names(objective)) == 2
 
 
+def scored_by_evaluation(definition: Mapping[str, Any]) -> bool:
+    """Whether a stored study's runs are scored by the evaluation objective (a confirm of an
+    evaluation search stores its objective; every other study is scored by final_reward)."""
+    return definition.get("objective") == REWARDS[1]
+
+
 def stored_floor(definition: Mapping[str, Any]) -> str | None:
     """A stored two-objective search's floor (an enqueued ppo config's name); None for a search
     stored without one (one objective, ``search.floor=null``, or made before floors existed)."""

@@ -36,12 +36,16 @@ from kraby_study.stats import (
 )
 
 MARK_TEXT = {"best": "best", "tie": "\u2248 best", "": ""}
+TRAINING_SCORE = "mean episode reward over the last 10 % of training"
+"""What a final score is, unless the study is scored by evaluation."""
+EVALUATION_SCORE = "the deterministic policy's mean return over the evaluation episodes"
+"""What a final score is in a study scored by evaluation."""
 CAPTIONS = {
     "learning_curves": "Mean episode reward against environment steps, mean over seeds with its "
                        "95 % Hall skewness-corrected t interval at every n (a cheap interval: "
                        "the curves have hundreds of points); (b) zooms on the last quarter of "
                        "training.",
-    "final_score": "Final score (mean episode reward over the last 10 % of training) of every "
+    "final_score": f"Final score ({TRAINING_SCORE}) of every "
                    f"seed; mean and {SHORT_INTERVAL_NAME} beside them. "
                    "Shaded: the best mean, and the "
                    f"values not significantly worse than it ({PROCEDURE_NAME}).",
@@ -115,7 +119,7 @@ def summary_table(sweep: Sweep) -> Table:
     """The summary as a table of formatted cells, best and tied rows marked; a raced study's
     table says after which round the race dropped a value."""
     raced = sweep.race is not None
-    trained = sweep.by_evaluation and "train_mean" in sweep.summary
+    trained = sweep.by_evaluation  # build_sweep gives its summary the training reward
     header = [sweep.name, "complete", "failed", "pruned", "pending",
               *(["dropped after round"] if raced else []),
               "final score", "95 % CI", "sd",
@@ -435,8 +439,8 @@ def describe_sweep(sweep: Sweep) -> str:
             scored = (f" Scored by evaluation, as its source was: a run's final score is its "
                       f"deterministic policy's mean return over the {episodes} evaluation "
                       f"episodes every run shares (none seeded like a training run); the "
-                      f"training reward (mean episode reward over the last 10 % of training) "
-                      f"is shown beside it, and no answer reads it.")
+                      f"training reward ({TRAINING_SCORE}) is shown beside it, and no answer "
+                      f"reads it.")
         return (f"Confirmation of {len(sweep.values)} configurations{origin} on {fresh}"
                 f"{budget}. Status: {sweep.status()}.{scored}")
     if not sweep.parameter:
@@ -491,9 +495,7 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
                 report.files.append(path)
                 caption = CAPTIONS[stem]
                 if stem == "final_score" and sweep.by_evaluation:
-                    caption = caption.replace(
-                        "(mean episode reward over the last 10 % of training)",
-                        "(the deterministic policy's mean return over the evaluation episodes)")
+                    caption = caption.replace(TRAINING_SCORE, EVALUATION_SCORE)
                 if stem == "time_to_threshold":
                     caption += f" {threshold_text(sweep)}"
                 if stem in DASHED_FIGURES and sweep.dropped:

@@ -34,6 +34,7 @@ from kraby_study.records import (
     SelectRule,
     StudyKind,
     outcome,
+    scored_by_evaluation,
     swept_value,
     value_key,
     value_label,
@@ -139,7 +140,7 @@ class Sweep:
         """Its runs are scored by the evaluation objective (a confirm of an evaluation
         search): the final score is the deterministic policy's mean evaluation return, and
         the summary holds the training reward beside it."""
-        return self.data.definition.get("objective") == "evaluation"
+        return scored_by_evaluation(self.data.definition)
 
     @property
     def time_attr(self) -> str:
@@ -478,18 +479,11 @@ def add_train_reward(summary: pd.DataFrame, trials: pd.DataFrame,
     score's). For a study scored by evaluation, whose final score is not the training
     reward; no decision reads it."""
     done = trials[(trials["outcome"] == Outcome.COMPLETE) & trials["train_reward"].notna()]
-    out = summary.copy()
-    for column in ("train_mean", "train_sd", "train_low", "train_high"):
-        out[column] = np.nan
+    columns = {"mean": "train_mean", "sd": "train_sd", "low": "train_low", "high": "train_high"}
     if done.empty:
-        return out
+        return summary.assign(**{column: np.nan for column in columns.values()})
     train = describe(done, "vi", "train_reward", bootstrap=bootstrap)
-    for vi in train.index:
-        if vi in out.index:
-            for column, source in (("train_mean", "mean"), ("train_sd", "sd"),
-                                   ("train_low", "low"), ("train_high", "high")):
-                out.loc[vi, column] = train.loc[vi, source]
-    return out
+    return summary.join(train[list(columns)].rename(columns=columns))  # NaN: no such seeds
 
 
 def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
@@ -593,7 +587,7 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     threshold, is_default, untrained = study_threshold(curves, summary, chosen)
     seeds = seed_metrics(trials, curves, threshold)
     summary = add_curve_metrics(summary, seeds, bootstrap)
-    if definition.get("objective") == "evaluation":
+    if scored_by_evaluation(definition):
         summary = add_train_reward(summary, trials, bootstrap)
     colours = value_colours(labels if data.kind == StudyKind.CONFIRM else values)
     sweep = Sweep(data=data, parameter=parameter, name=name or SINGLE_LABEL, values=values,
