@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from kraby_study.answers.raced import StudyRace, race_of
+from kraby_study.answers.selected import study_rule
 from kraby_study.comparison import MARGIN, MIN_SEEDS, CompareOptions, Comparison, compare
 from kraby_study.race import Drop
 from kraby_study.records import (
@@ -524,14 +525,6 @@ def arms_frame(sweep: Sweep) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def study_rule(data: StudyData, override: str | None = None) -> str:
-    """The selection rule of a study: ``override`` (``compare.select``) when given, else its
-    stored one (final_score when none or unknown)."""
-    if override is not None:
-        return SelectRule.check(str(override), "compare.select")
-    return SelectRule.of(data.ledger.attrs.select)
-
-
 def option(options: Any, name: str, default: Any) -> Any:
     """A report option (an attribute of ``options``), or ``default`` when it or ``options`` is
     None."""
@@ -591,7 +584,7 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
         summary = add_train_reward(summary, trials, bootstrap)
     colours = value_colours(labels if data.kind == StudyKind.CONFIRM else values)
     sweep = Sweep(data=data, parameter=parameter, name=name or SINGLE_LABEL, values=values,
-                 rule=study_rule(data, judged.select),
+                 rule=study_rule(data.ledger.attrs.select, judged),
                  labels=labels, colours=colours, trials=trials, curves=curves,
                  bands=curve_bands(curves), summary=summary, seeds=seeds, threshold=threshold,
                  threshold_default=is_default, untrained=untrained, bootstrap=bootstrap,
