@@ -24,6 +24,7 @@ from typing import Generic, TypeVar
 
 from kraby_study.comparison import CompareOptions, Comparison, compare
 from kraby_study.records import SelectRule
+from kraby_study.selection import RULES
 
 K = TypeVar("K", bound=Hashable)
 
@@ -131,18 +132,19 @@ def front_choice(front: Sequence[Point[K]], seed_scores: Mapping[K, Sequence[flo
         return None
     options = options or CompareOptions()
     best_score = max(front, key=lambda p: p.score)
-    by_key = {p.key: p for p in front}
-    comparison = compare({p.key: list(seed_scores.get(p.key, [])) for p in front},
+    # Highest score first, so that the rule's "first in order" breaks a tie in cost by score.
+    ordered = sorted(front, key=lambda p: -p.score)
+    by_key = {p.key: p for p in ordered}
+    comparison = compare({p.key: list(seed_scores.get(p.key, [])) for p in ordered},
                          options.margin, options.alpha, options.min_seeds)
     if comparison.best is None:
         return FrontChoice(chosen=best_score, best=best_score, tested=False, rule=rule)
-    best = by_key[comparison.best]
     admitted = (comparison.equivalent if rule == SelectRule.FASTEST_EQUIVALENT else
                 comparison.tied if rule == SelectRule.FASTEST_TIED else [])
-    candidates = [best, *(by_key[k] for k in admitted)]
-    chosen = min(candidates, key=lambda p: (p.cost, -p.score))
-    return FrontChoice(chosen=chosen, best=best, tied=list(admitted), rule=rule,
-                       comparison=comparison)
+    # The rules of a sweep's values, with the trials' cost as their time.
+    chosen = RULES[SelectRule(rule)].select(comparison, {}, {p.key: p.cost for p in ordered})
+    return FrontChoice(chosen=by_key[chosen], best=by_key[comparison.best],
+                       tied=list(admitted), rule=rule, comparison=comparison)
 
 
 def cheapest_tied(front: Sequence[Point[K]], seed_scores: Mapping[K, Sequence[float]],
