@@ -1,8 +1,10 @@
-"""Running a policy on the leg from a fixed start to fixed targets: one rule for every user.
+"""Running a policy on the leg from a fixed start to given targets: one rule for every user.
 
-Evaluation (a search's ``evaluation`` objective) scores a policy over these episodes; the
-report's policy GIF draws the first few of the same targets. Both go through :func:`rollout`,
-so what is scored is what is shown.
+Evaluation (the ``evaluation`` objective) scores a policy over episodes from
+:data:`START_ANGLES` to targets drawn from the run's own evaluation stream
+(:func:`evaluation_targets`; studies stored before took :func:`fixed_targets`, one set for
+every run); the report's policy GIF draws the first few fixed targets. Both go through
+:func:`rollout`.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from kraby_envs.seeding import evaluation_stream, leg_generator
 from kraby_envs.task import TARGET_CENTRE, TARGET_HALF_EXTENTS
 
 FIXED_TARGETS_SEED = 20240
@@ -22,12 +25,25 @@ START_ANGLES = (0.0, 0.0, 0.0)
 """Every fixed episode starts from this pose: the middle of the training start range."""
 
 
-def fixed_targets(n: int, delta: float) -> np.ndarray:
-    """``n`` fixed targets, drawn once (seeded) from the target box scaled by ``delta``; the
-    first ``k`` of ``n`` are the targets of ``fixed_targets(k, delta)``."""
-    rng = np.random.default_rng(FIXED_TARGETS_SEED)
+def _targets(rng: np.random.Generator, n: int, delta: float) -> np.ndarray:
+    """``n`` targets uniform in the target box scaled by ``delta``, drawn in order from
+    ``rng`` (so the first ``k`` of ``n`` are the ``k`` drawn alone)."""
     half = TARGET_HALF_EXTENTS * delta
     return TARGET_CENTRE + rng.uniform(-1.0, 1.0, size=(n, 3)) * half
+
+
+def fixed_targets(n: int, delta: float) -> np.ndarray:
+    """``n`` fixed targets, drawn once (seeded) from the target box scaled by ``delta``, the
+    same for every run: the evaluation of studies stored before each run drew its own, and the
+    report's GIF. The first ``k`` of ``n`` are the targets of ``fixed_targets(k, delta)``."""
+    return _targets(np.random.default_rng(FIXED_TARGETS_SEED), n, delta)
+
+
+def evaluation_targets(n: int, delta: float, seed: int) -> np.ndarray:
+    """The ``n`` evaluation targets of the run with seed ``seed``, drawn from its evaluation
+    stream (:func:`kraby_envs.seeding.evaluation_stream`), apart from its training legs'
+    streams and from every other run's; the first ``k`` of ``n`` are those of ``k``."""
+    return _targets(leg_generator(evaluation_stream(seed)), n, delta)
 
 
 @dataclass(frozen=True)

@@ -37,3 +37,17 @@ def leg_generator(stream: np.random.SeedSequence) -> np.random.Generator:
     """The generator a leg draws from: PCG64 on its stream, the generator Gymnasium's
     ``reset(seed=...)`` makes from ``SeedSequence(seed)``."""
     return np.random.Generator(np.random.PCG64(stream))
+
+
+EVALUATION_KEY = 0x6576616C
+"""Spawn key of a run's evaluation stream: child ``EVALUATION_KEY`` of the run's
+``SeedSequence(seed)``, far above the children its legs (or a gym env's sub-envs) take,
+``0 .. n_envs - 1``."""
+
+
+def evaluation_stream(seed: int) -> np.random.SeedSequence:
+    """The stream a run with seed ``seed`` draws its evaluation episodes from (its test set):
+    ``SeedSequence(seed, spawn_key=(EVALUATION_KEY,))``, the child ``EVALUATION_KEY`` of the
+    run's own sequence. It shares no state with the run's training streams, and runs of other
+    seeds (a confirm's fresh seeds against its search's) draw other episodes."""
+    return np.random.SeedSequence(seed, spawn_key=(EVALUATION_KEY,))

@@ -217,6 +217,9 @@ class TrialMeasures:
     scores: list[float] | None = None
     """Each seed's score, in seed order, of a trial that trained to its end: the sample the
     comparison with the best reads for a search trial (its final_score is their mean)."""
+    eval_errors: list[float] | None = None
+    """A trial scored by evaluation: each seed's evaluation standard error, in seed order
+    (the sd of its episodes' returns over sqrt(episodes): the test set's own noise)."""
 
     def measures(self) -> TrialMeasures:
         """Only the measured fields (of a result or of stored attributes)."""
@@ -607,7 +610,7 @@ def offset_leg_seeds(trial: StoredTrial, per_trial: int = 1) -> set[int]:
 
 REWARDS = ("final_reward", "evaluation")
 """A search's rewards, maximised: the mean episode reward over the last 10 % of training, or
-the deterministic policy's reward on fixed targets."""
+the deterministic policy's mean return over the run's evaluation episodes."""
 COSTS = ("training_time",)
 """A search's costs, minimised: ``training_time`` is CPU seconds per seed
 (:meth:`TrialMeasures.training_time`)."""
@@ -691,6 +694,42 @@ def seed_text(seeds: Iterable[int]) -> str:
 def stored_seeding(definition: Mapping[str, Any]) -> str:
     """A stored definition's seeding scheme: its ``seeding``, offset when it has none."""
     return str(definition.get("seeding", LEGACY_SEEDING))
+
+
+EVAL_SETS = ("run", "fixed")
+"""Where a run's evaluation episodes come from: ``run``, its own, drawn from its seed's
+evaluation stream (a test set no run of another seed shares: a confirm's fresh seeds never
+see its search's episodes); ``fixed``, one set every run shared (studies stored before)."""
+EVAL_SET = "run"
+"""The evaluation set of a new study."""
+LEGACY_EVAL_SET = "fixed"
+"""The evaluation set of every study stored before runs drew their own: its definition has no
+``eval_set``."""
+EVAL_EPISODES = 100
+"""Evaluation episodes per run of a new study (docs/statistics.md: their standard error
+against the margin on Pendulum-v1 and the leg)."""
+LEGACY_EVAL_EPISODES = 16
+"""Evaluation episodes of a study stored before ``eval_episodes`` was stored (searches always
+stored it)."""
+
+
+def _evaluation_part(definition: Mapping[str, Any]) -> Mapping[str, Any]:
+    """Where a stored definition keeps its evaluation settings: a search's ``search``
+    section, the definition itself for a confirm."""
+    search = definition.get("search")
+    return search if isinstance(search, Mapping) else definition
+
+
+def stored_eval_set(definition: Mapping[str, Any]) -> str:
+    """A stored definition's evaluation set: its ``eval_set``, fixed when it has none."""
+    return str(_evaluation_part(definition).get("eval_set", LEGACY_EVAL_SET))
+
+
+def stored_eval_episodes(definition: Mapping[str, Any]) -> int | None:
+    """A stored definition's evaluation episodes; None when it stores none (a study not
+    scored by evaluation)."""
+    episodes = _evaluation_part(definition).get("eval_episodes")
+    return int(episodes) if episodes is not None else None
 
 
 def two_objectives(definition: Mapping[str, Any]) -> bool:

@@ -182,32 +182,75 @@ def test_a_search_trial_equal_to_a_baseline_is_trained_once(folder: Path) -> Non
     assert len(study.trials) == 4 * 2
 
 
-def test_a_confirm_of_an_evaluation_search_scores_on_the_same_fixed_targets(
+def test_a_confirm_of_an_evaluation_search_scores_on_a_test_set_the_search_never_saw(
         workdir: Path) -> None:
-    # The search scored its trials on the fixed targets; its confirm scores every arm on
-    # them too (a fixed test set), and stores the objective in its definition.
+    # Each run draws its evaluation targets from its own seed's stream: the confirm's fresh
+    # seeds meet none of the targets its search selected on.
+    import numpy as np
+    from stable_baselines3 import PPO
+
+    from kraby_envs.rollout import evaluation_targets
+    from kraby_study.env import adapter_for
+    from kraby_study.records import trial_seeds
+
     space = SPACE.replace("name: tiny", "name: evaluated").replace("trials: 4", "trials: 2")
     finished_search(workdir, "evaluated", space, "optuna", "search=evaluated", "--workers",
                     "2", *TINY, "search.objective=evaluation", "search.eval_episodes=4")
     assert run_cli("confirm", "--study-name", "evaluated", "--top", "1", "--seeds", "2",
-                   "--workers", "2", *TINY) == 0
-    study = load(workdir / "studies" / "kraby.db", "evaluated-confirm")
+                   "--workers", "2", *TINY, "save_models=true") == 0
+    store = workdir / "studies" / "kraby.db"
+    search, study = load(store, "evaluated"), load(store, "evaluated-confirm")
+    searched = search.user_attrs["kraby_definition"]["search"]
+    assert searched["eval_set"] == "run" and searched["eval_episodes"] == 4
     definition = study.user_attrs["kraby_definition"]
-    assert definition["objective"] == "evaluation" and definition["eval_episodes"] == 4
+    # The confirm's own test set: each fresh seed's episodes, today's default number.
+    assert definition["objective"] == "evaluation" and definition["eval_set"] == "run"
+    assert definition["eval_episodes"] == 100
+    delta = float(definition["arms"][0]["settings"]["env"]["delta"])
+    seen = np.concatenate([evaluation_targets(4, delta, seed) for trial in search.trials
+                           for seed in trial_seeds(trial, 2)])
     for trial in study.trials:
+        targets = evaluation_targets(100, delta, trial.user_attrs["seed"])
+        assert not np.isclose(targets[:, None, :], seen[None]).all(-1).any()
         # Scored by evaluation: the training reward is stored beside it and differs.
         assert trial.value == trial.user_attrs["final_score"]
         assert trial.value != trial.user_attrs["train_reward"]
+        # The stored score is the saved policy's mean return on exactly those targets.
+        env = trial.user_attrs["settings"]["env"]
+        model = PPO.load(trial.user_attrs["model_path"], device="cpu")
+        rescored = adapter_for(env).evaluate(model, env, 100, seed=trial.user_attrs["seed"])
+        assert rescored.mean == pytest.approx(trial.value, rel=1e-6)
+        assert trial.user_attrs["eval_errors"] == [pytest.approx(rescored.error, rel=1e-6)]
     # The report shows the training reward beside the evaluation score, per configuration.
     assert run_cli("report", "--study-name", "evaluated-confirm", "--no-policy",
                    f"out={workdir / 'reports'}") == 0
     folder = workdir / "reports" / "evaluated-confirm"
     summary = pd.read_csv(folder / "summary.csv")
     rewards = [t.user_attrs["train_reward"] for t in study.trials]
-    assert summary["train_mean"].mean() == pytest.approx(sum(rewards) / len(rewards))
+    # summary.csv writes 5 significant digits.
+    assert summary["train_mean"].mean() == pytest.approx(sum(rewards) / len(rewards), rel=1e-4)
     assert summary["final_mean"].tolist() != summary["train_mean"].tolist()
     page = (folder / "summary.md").read_text()
     assert "training reward [95 % CI]" in page and "Scored by evaluation" in page
     index = (workdir / "reports" / "index.md").read_text()
     assert "Final score (the deterministic policy's mean return over the evaluation episodes)" in (
         index)
+
+
+def test_a_study_stored_on_the_shared_fixed_set_resumes_on_it(workdir: Path) -> None:
+    # A search stored before runs drew their own episodes has no eval_set: it resumes on the
+    # fixed set it began with (the same definition), and its confirm still draws its own.
+    space = SPACE.replace("name: tiny", "name: older").replace("trials: 4", "trials: 1")
+    finished_search(workdir, "older", space, "optuna", "search=older", "--workers", "1",
+                    *TINY, "budget.seeds=1", "search.objective=evaluation",
+                    "search.eval_episodes=3", "search.eval_set=fixed")
+    store = workdir / "studies" / "kraby.db"
+    searched = load(store, "older").user_attrs["kraby_definition"]["search"]
+    assert "eval_set" not in searched and searched["eval_episodes"] == 3
+    assert run_cli("optuna", "--trials", "2", "search=older", "--workers", "1", *TINY,
+                   "budget.seeds=1", "search.objective=evaluation") == 0
+    assert len(load(store, "older").trials) == 2
+    assert run_cli("confirm", "--study-name", "older", "--top", "1", "--seeds", "2",
+                   "--workers", "1", *TINY, "search.eval_episodes=5") == 0
+    definition = load(store, "older-confirm").user_attrs["kraby_definition"]
+    assert definition["eval_set"] == "run" and definition["eval_episodes"] == 5

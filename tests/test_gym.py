@@ -129,8 +129,90 @@ def test_sub_env_seeds_and_evaluation_seeds_are_apart() -> None:
     assert len({s.reset for s in streams}) == 4
     assert [s.reset for s in sub_env_seeds(7, 2, "offset")] == [7, 8]
     assert evaluation_seeds(5)[:3] == evaluation_seeds(3)
+    assert evaluation_seeds(5, seed=4)[:3] == evaluation_seeds(3, seed=4)
     training = {s.reset for seed in range(50) for s in sub_env_seeds(seed, 8, "streams")}
     assert not training & set(evaluation_seeds(16))
+    # Each run's own test set: apart from every training stream and from every other seed's.
+    own = [set(evaluation_seeds(100, seed)) for seed in range(50)]
+    assert all(len(episodes) == 100 for episodes in own)
+    assert not training & set().union(*own)
+    assert all(not a & b for i, a in enumerate(own) for b in own[i + 1:])
+    assert not set(evaluation_seeds(100)) & set().union(*own)
+
+
+def episode_by_episode(model: object, resets: list[dict[str, object]],
+                       make: object) -> list[float]:
+    """Each episode alone, one policy call per step: the evaluation before it was stepped
+    side by side."""
+    env = make()  # type: ignore[operator]
+    returns = []
+    for reset in resets:
+        observation, _ = env.reset(**reset)
+        total, ended = 0.0, False
+        while not ended:
+            action = model.predict(observation, deterministic=True)[0]  # type: ignore[attr-defined]
+            observation, reward, terminated, truncated, _ = env.step(action)
+            total += float(reward)
+            ended = terminated or truncated
+        returns.append(total)
+    env.close()
+    return returns
+
+
+@pytest.mark.parametrize("env_id", ["Pendulum-v1", "CartPole-v1"])
+def test_evaluation_side_by_side_equals_episode_by_episode(env_id: str) -> None:
+    # One batched forward pass per step gives each episode the actions it gets alone; the
+    # returns agree to float32 rounding of the batched matrix product (Pendulum's reach -1e3).
+    from stable_baselines3 import PPO
+
+    env = {"id": env_id, "kwargs": {}, "packages": []}
+    model = PPO("MlpPolicy", gym.make(env_id), seed=3, device="cpu",
+                policy_kwargs={"net_arch": [16]})
+    adapter = adapter_for(env)
+    evaluation = adapter.evaluate(model, env, 20, seed=5)
+    alone = episode_by_episode(model, [{"seed": s} for s in evaluation_seeds(20, 5)],
+                               lambda: gym.make(env_id))
+    assert len(evaluation.returns) == 20
+    np.testing.assert_allclose(evaluation.returns, alone, rtol=1e-5, atol=1e-6)
+    assert evaluation.mean == pytest.approx(np.mean(alone), rel=1e-6)
+    assert evaluation.error == pytest.approx(np.std(alone, ddof=1) / np.sqrt(20), rel=1e-4)
+    # More episodes than envs stepped at once: further rounds on the same envs.
+    from kraby_study.env.evaluation import lockstep_returns
+
+    resets = [{"seed": s} for s in evaluation_seeds(20, 5)]
+    narrow = lockstep_returns(lambda: gym.make(env_id), resets,
+                              lambda o: model.predict(o, deterministic=True)[0], width=3)
+    np.testing.assert_allclose(narrow, alone, rtol=1e-5, atol=1e-6)
+
+
+def test_the_legs_evaluation_side_by_side_equals_episode_by_episode() -> None:
+    from stable_baselines3 import PPO
+
+    import kraby_envs
+    from kraby_envs.rollout import START_ANGLES, evaluation_targets, fixed_targets
+    from kraby_study.env.leg import DEFAULTS, leg_kwargs
+
+    env = dict(DEFAULTS)
+    kwargs = leg_kwargs(env)
+
+    def make() -> gym.Env:
+        return gym.make(kraby_envs.ENV_ID, max_episode_steps=env["max_episode_steps"], **kwargs)
+
+    model = PPO("MlpPolicy", make(), seed=1, device="cpu", policy_kwargs={"net_arch": [16]})
+    adapter = adapter_for(env)
+    for seed, targets in ((7, evaluation_targets(6, kwargs["delta"], 7)),
+                          (None, fixed_targets(6, kwargs["delta"]))):
+        resets = [{"options": {"joint_angles": START_ANGLES, "target": tuple(t)}}
+                  for t in targets]
+        evaluation = adapter.evaluate(model, env, 6, seed=seed)
+        np.testing.assert_allclose(evaluation.returns, episode_by_episode(model, resets, make),
+                                   rtol=1e-5, atol=1e-7)
+    # Each run's targets are its own: apart from the fixed set and from other seeds'.
+    own = evaluation_targets(6, kwargs["delta"], 7)
+    assert not np.isclose(own[:, None, :], fixed_targets(6, kwargs["delta"])[None]).all(-1).any()
+    assert not np.isclose(own[:, None, :],
+                          evaluation_targets(6, kwargs["delta"], 8)[None]).all(-1).any()
+    np.testing.assert_array_equal(evaluation_targets(3, kwargs["delta"], 7), own[:3])
 
 
 # --- training, VecNormalize and evaluation ------------------------------------------------
@@ -165,8 +247,14 @@ def test_vecnormalize_statistics_are_saved_and_used_by_evaluation(tmp_path: Path
     env = spec.settings["env"]
     policy = PPO.load(str(model), device="cpu")
     adapter = adapter_for(env)
-    assert adapter.evaluate(policy, env, 3, normalizer) == pytest.approx(result.final_score)
-    assert adapter.evaluate(policy, env, 3, None) != pytest.approx(result.final_score)
+    # The run's own episodes (its seed's evaluation stream), on normalised observations.
+    scored = adapter.evaluate(policy, env, 3, normalizer, seed=spec.seed)
+    assert scored.mean == pytest.approx(result.final_score)
+    assert result.eval_errors == [pytest.approx(scored.error)]
+    assert adapter.evaluate(policy, env, 3, None, seed=spec.seed).mean != pytest.approx(
+        result.final_score)
+    assert adapter.evaluate(policy, env, 3, normalizer).mean != pytest.approx(
+        result.final_score)
 
 
 def test_linear_schedules_reach_sb3_as_functions_of_progress() -> None:

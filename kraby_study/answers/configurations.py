@@ -70,8 +70,7 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
                           steps=int(definition["steps"]),
                           curve_every=int(definition["curve_every"]), env_keys=env_keys,
                           two_objectives=front,
-                          objective=objective_names(search.get("objective", REWARDS[0]))[0],
-                          eval_episodes=int(search.get("eval_episodes", 16)))
+                          objective=objective_names(search.get("objective", REWARDS[0]))[0])
 
 
 def _front_arms(name: str, done: list[Any], top: int, floor: str | None) -> list[Arm]:

@@ -6,6 +6,9 @@ changed resumes exactly as it began; a new study gets today's default.
   streams.
 - ``confirm.seed`` (a confirm study): the first of its stored seeds, else 1000.
 - ``confirm.select`` (a confirm study): its stored selection rule, else the command's default.
+- ``search.eval_set``: the stored evaluation set (fixed for a study stored before runs drew
+  their own episodes), else run.
+- ``search.eval_episodes``: the stored number, else 100.
 
 A setting the command gives stays as given: if it differs from the stored study, the store
 refuses it as a changed definition, naming the setting.
@@ -17,7 +20,16 @@ from omegaconf import DictConfig, open_dict
 
 from kraby_study.config.winner import Lookup
 from kraby_study.plan.campaign import Campaign, Stage, stage_config
-from kraby_study.records import SEEDING, StudyAttrs, StudyKind, stored_seeding
+from kraby_study.records import (
+    EVAL_EPISODES,
+    EVAL_SET,
+    SEEDING,
+    StudyAttrs,
+    StudyKind,
+    stored_eval_episodes,
+    stored_eval_set,
+    stored_seeding,
+)
 from kraby_study.store.rows import has_store, reading
 
 
@@ -31,12 +43,13 @@ def stored_attrs(url: str, name: str) -> StudyAttrs | None:
 
 
 def resumed(cfg: DictConfig, name: str) -> DictConfig:
-    """``cfg`` with ``seeding`` (and, for a confirm, ``confirm.seed`` and ``confirm.select``)
-    settled for the study named ``name`` in ``cfg.storage``: as given, else as stored, else
-    the default. A stored confirm keeps its rule unless one is given, so resuming it never
-    changes what it selects."""
+    """``cfg`` with ``seeding``, ``search.eval_set`` and ``search.eval_episodes`` (and, for a
+    confirm, ``confirm.seed`` and ``confirm.select``) settled for the study named ``name`` in
+    ``cfg.storage``: as given, else as stored, else the default. A stored confirm keeps its
+    rule unless one is given, so resuming it never changes what it selects."""
     if cfg.seeding is not None and cfg.confirm.seed is not None and (
-            cfg.confirm.select is not None):
+            cfg.confirm.select is not None and cfg.search.eval_set is not None
+            and cfg.search.eval_episodes is not None):
         return cfg
     attrs = stored_attrs(str(cfg.storage), name)
     definition = attrs.definition if attrs is not None and attrs.fingerprint else None
@@ -44,6 +57,12 @@ def resumed(cfg: DictConfig, name: str) -> DictConfig:
     with open_dict(out):
         if out.seeding is None:
             out.seeding = stored_seeding(definition) if definition is not None else SEEDING
+        if out.search.eval_set is None:
+            out.search.eval_set = (stored_eval_set(definition) if definition is not None
+                                   else EVAL_SET)
+        if out.search.eval_episodes is None:
+            stored = stored_eval_episodes(definition) if definition is not None else None
+            out.search.eval_episodes = EVAL_EPISODES if stored is None else stored
         if (out.confirm.seed is None and definition is not None
                 and definition.get("kind") == StudyKind.CONFIRM.value
                 and definition.get("seeds")):

@@ -198,8 +198,14 @@ class SearchConfig:
     options). Cost (minimised): training_time, CPU seconds per seed (the worker's and its
     leg-stepping processes'), mean over the trial's seeds. Two objectives make a front of
     trials (docs/studies.md)."""
-    eval_episodes: int = 16
-    """Fixed targets of the evaluation objective."""
+    eval_episodes: int | None = None
+    """Episodes of each run's evaluation (the evaluation objective, and a confirm of an
+    evaluation search); null: a stored study's own number, 100 for a new one."""
+    eval_set: str | None = None
+    """Where a run's evaluation episodes come from: run (its own, drawn from its seed's
+    evaluation stream, so a confirm's fresh seeds never meet its search's episodes) or fixed
+    (one set every run shares, as studies stored before); null: a stored study's own, run for
+    a new one."""
     params: dict[str, ParamSpace] = field(default_factory=dict)
     """The space: Optuna parameter name -> range."""
     enqueue: list[str] = field(default_factory=lambda: ["tuned", "start"])

@@ -14,7 +14,7 @@ from omegaconf import DictConfig, OmegaConf
 from kraby_study.config.schema import PPOConfig
 from kraby_study.env import adapter_for, check_scheme
 from kraby_study.errors import ConfigError
-from kraby_study.records import SelectRule
+from kraby_study.records import EVAL_SETS, SelectRule
 from kraby_study.store.url import check_url
 
 
@@ -118,6 +118,14 @@ def validate(cfg: DictConfig) -> None:
             check_scheme(str(cfg.seeding))
         except ValueError as err:
             raise ConfigError(f"{err} (or null: a stored study's own)") from None
+    if cfg.search.eval_episodes is not None:
+        _require(int(cfg.search.eval_episodes) >= 2,
+                 f"search.eval_episodes must be at least 2 (a standard error needs two), got "
+                 f"{cfg.search.eval_episodes}")
+    if cfg.search.eval_set is not None:
+        _require(cfg.search.eval_set in EVAL_SETS,
+                 f"search.eval_set must be one of {', '.join(EVAL_SETS)} (or null: a stored "
+                 f"study's own), got {cfg.search.eval_set!r}")
     if cfg.confirm.seed is not None:
         _require(int(cfg.confirm.seed) >= 0,
                  f"confirm.seed must be >= 0, got {cfg.confirm.seed}")

@@ -9,6 +9,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from kraby_study.env.evaluation import Evaluation
+
 
 @dataclass(frozen=True)
 class Frame:
@@ -47,10 +49,12 @@ class EnvAdapter(Protocol):
         ...
 
     def evaluate(self, model: Any, env: Mapping[str, Any], episodes: int,
-                 normalizer: Any = None) -> float:
-        """Mean return of the deterministic policy over ``episodes`` fixed evaluation
-        episodes, none of them seeded like a training run; ``normalizer`` is the run's
-        VecNormalize, if any."""
+                 normalizer: Any = None, seed: int | None = None) -> Evaluation:
+        """The returns of the deterministic policy over ``episodes`` evaluation episodes of
+        the run with seed ``seed``, drawn from its evaluation stream (apart from its training
+        streams and from every other seed's episodes); ``seed`` None: the one set every run
+        shared before (``eval_set: fixed``). ``normalizer`` is the run's VecNormalize, if
+        any. Episodes are stepped side by side (:mod:`kraby_study.env.evaluation`)."""
         ...
 
     def frames(self, model: Any, env: Mapping[str, Any], size: tuple[int, int],

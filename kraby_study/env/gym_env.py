@@ -7,9 +7,10 @@ seeding`), not by SB3's ``seed + i``: under ``streams`` env i takes child i of
 (``generate_state(3, numpy.uint64)``): the seed of its first reset, of its action space and
 of its observation space. Gymnasium then seeds the env's own generator from the first word
 and keeps that stream across later resets. Under ``offset`` env i is seeded with ``seed + i``
-for all three, as SB3 does. Evaluation episodes are reset with seeds drawn from a sequence of
-their own (:data:`EVALUATION_ENTROPY`), the same for every run and apart from every training
-stream.
+for all three, as SB3 does. A run's evaluation episodes are reset with seeds drawn from its
+own evaluation stream (:func:`kraby_envs.seeding.evaluation_stream`, a child of its seed's
+sequence apart from its sub-envs'), so no two runs of different seeds share a test episode;
+studies stored before took one set for every run (:data:`EVALUATION_ENTROPY`).
 """
 
 from __future__ import annotations
@@ -27,11 +28,13 @@ import numpy as np
 from gymnasium import spaces
 
 from kraby_study.env.adapter import Frame
+from kraby_study.env.evaluation import Evaluation, lockstep_returns
 from kraby_study.errors import ConfigError, first_line
 
 EVALUATION_ENTROPY = 0x6B726162795F6576616C
-"""Entropy of the evaluation episodes' seed sequence: episode k resets with a word of child k.
-A training stream is a child of SeedSequence(run seed), whose entropy is the run's seed: no run
+"""Entropy of the shared evaluation set of studies stored before each run drew its own
+(``eval_set: fixed``), and of the GIF's episodes: episode k resets with a word of child k. A
+training stream is a child of SeedSequence(run seed), whose entropy is the run's seed: no run
 seed below 2**80 gives this sequence."""
 
 GIF_EPISODES = 2
@@ -68,10 +71,16 @@ def sub_env_seeds(seed: int, n_envs: int, scheme: str) -> list[SubEnvSeeds]:
     return [SubEnvSeeds(*w) for w in words]
 
 
-def evaluation_seeds(episodes: int) -> list[int]:
-    """The reset seed of each evaluation episode (the first k of n are those of k)."""
-    children = np.random.SeedSequence(EVALUATION_ENTROPY).spawn(episodes)
-    return [int(child.generate_state(1, np.uint64)[0]) for child in children]
+def evaluation_seeds(episodes: int, seed: int | None = None) -> list[int]:
+    """The reset seed of each evaluation episode of the run with seed ``seed``: a word of each
+    child of its evaluation stream (:func:`kraby_envs.seeding.evaluation_stream`); ``None``: the
+    set every run shared before (:data:`EVALUATION_ENTROPY`). The first k of n are those of
+    k."""
+    from kraby_envs.seeding import evaluation_stream
+
+    stream = (np.random.SeedSequence(EVALUATION_ENTROPY) if seed is None
+              else evaluation_stream(seed))
+    return [int(child.generate_state(1, np.uint64)[0]) for child in stream.spawn(episodes)]
 
 
 def import_packages(packages: Sequence[str]) -> None:
@@ -182,15 +191,18 @@ class GymAdapter:
         return vec
 
     def evaluate(self, model: Any, env: Mapping[str, Any], episodes: int,
-                 normalizer: Any = None) -> float:
+                 normalizer: Any = None, seed: int | None = None) -> Evaluation:
         import_packages(env.get("packages") or ())
-        made = gym.make(str(env["id"]), **make_kwargs(env))
-        try:
-            returns = [sum(_episode(made, model, seed, normalizer))
-                       for seed in evaluation_seeds(episodes)]
-        finally:
-            made.close()
-        return float(np.mean(returns))
+        env_id, kwargs = str(env["id"]), make_kwargs(env)
+
+        def act(observations: np.ndarray) -> np.ndarray:
+            seen = normalizer.normalize_obs(observations) if normalizer is not None \
+                else observations
+            return model.predict(seen, deterministic=True)[0]
+
+        resets = [{"seed": s} for s in evaluation_seeds(episodes, seed)]
+        return Evaluation(tuple(lockstep_returns(lambda: gym.make(env_id, **kwargs), resets,
+                                                 act)))
 
     def frames(self, model: Any, env: Mapping[str, Any], size: tuple[int, int],
                normalizer: Any = None) -> Iterator[Frame]:
@@ -248,15 +260,6 @@ def _step(env: Any, model: Any, observation: Any, normalizer: Any) -> tuple[Any,
     action = model.predict(seen, deterministic=True)[0]
     observation, reward, terminated, truncated, _ = env.step(action)
     return observation, float(reward), bool(terminated or truncated)
-
-
-def _episode(env: Any, model: Any, seed: int, normalizer: Any) -> Iterator[float]:
-    """The rewards of one deterministic episode from ``reset(seed=seed)``."""
-    observation, _ = env.reset(seed=seed)
-    ended = False
-    while not ended:
-        observation, reward, ended = _step(env, model, observation, normalizer)
-        yield reward
 
 
 GYM = GymAdapter()

@@ -2,8 +2,10 @@
 imports it from.
 
 Its vectorised env is the batched world of ``n_envs`` legs (split into shards stepped in
-parallel); evaluation and the GIF run the deterministic policy from rest to the fixed targets
-(:func:`kraby_envs.rollout.fixed_targets`), so what is scored is what is shown.
+parallel); evaluation runs the deterministic policy from rest to targets drawn from the run's
+own evaluation stream (:func:`kraby_envs.rollout.evaluation_targets`; studies stored before:
+:func:`kraby_envs.rollout.fixed_targets`, one set for every run), and the GIF draws it reaching
+the first fixed targets.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from kraby_study.env.adapter import Frame
+from kraby_study.env.evaluation import Evaluation, lockstep_returns
 from kraby_study.errors import ConfigError
 
 DEFAULTS: dict[str, Any] = {"observation": "default", "delta": 0.5, "time_step": 0.05 / 12,
@@ -27,6 +30,8 @@ GIF_STEPS = 32
 """Env steps per target in the GIF."""
 HOLD_MS = 700
 """How long the last frame of each target stays on screen."""
+LOCKSTEP = 16
+"""Legs stepped side by side in an evaluation (each its own physics world)."""
 
 
 def leg_kwargs(env: Mapping[str, Any]) -> dict[str, Any]:
@@ -64,25 +69,27 @@ class LegAdapter:
                             seeding=seeding, **leg_kwargs(env))
 
     def evaluate(self, model: Any, env: Mapping[str, Any], episodes: int,
-                 normalizer: Any = None) -> float:
+                 normalizer: Any = None, seed: int | None = None) -> Evaluation:
         import gymnasium as gym
 
         import kraby_envs
-        from kraby_envs.rollout import fixed_targets, rollout
+        from kraby_envs.rollout import START_ANGLES, evaluation_targets, fixed_targets
 
         kwargs = leg_kwargs(env)
-        leg = gym.make(kraby_envs.ENV_ID, max_episode_steps=int(env["max_episode_steps"]),
-                       **kwargs)
+        targets = (fixed_targets(episodes, kwargs["delta"]) if seed is None
+                   else evaluation_targets(episodes, kwargs["delta"], seed))
+        resets = [{"options": {"joint_angles": START_ANGLES,
+                               "target": tuple(float(x) for x in target)}}
+                  for target in targets]
 
-        def act(observation: Any) -> Any:
-            return model.predict(observation, deterministic=True)[0]
+        def make() -> Any:
+            return gym.make(kraby_envs.ENV_ID, max_episode_steps=int(env["max_episode_steps"]),
+                            **kwargs)
 
-        try:
-            totals = [sum(s.reward for s in rollout(leg, act, target))
-                      for target in fixed_targets(episodes, kwargs["delta"])]
-        finally:
-            leg.close()
-        return float(np.mean(totals))
+        def act(observations: np.ndarray) -> np.ndarray:
+            return model.predict(observations, deterministic=True)[0]
+
+        return Evaluation(tuple(lockstep_returns(make, resets, act, LOCKSTEP)))
 
     def frames(self, model: Any, env: Mapping[str, Any], size: tuple[int, int],
                normalizer: Any = None) -> Iterator[Frame]:

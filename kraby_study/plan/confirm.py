@@ -20,7 +20,14 @@ from omegaconf import DictConfig
 from kraby_study.errors import ConfigError
 from kraby_study.plan.racing import race_rules
 from kraby_study.plan.settings import model_path, settings_with_ppo, tensorboard_run
-from kraby_study.plan.spec import StudyPlan, TrialSpec, seeding_of, with_seeding
+from kraby_study.plan.spec import (
+    StudyPlan,
+    TrialSpec,
+    evaluation_of,
+    seeding_of,
+    with_evaluation,
+    with_seeding,
+)
 from kraby_study.records import REWARDS, SelectRule, StudyKind, sweep_key
 
 TEST_SEED = 1000
@@ -62,9 +69,8 @@ class ConfirmedStudy:
     """A two-objective search: its arms are trials of its front, spread along it."""
     objective: str = "final_reward"
     """How its runs were scored, and so how the confirm scores its arms: final_reward, or
-    evaluation (a search's deterministic policy on the fixed targets: a fixed test set)."""
-    eval_episodes: int = 16
-    """Fixed targets of the evaluation objective."""
+    evaluation (the deterministic policy's mean return; the confirm's runs on episodes of
+    their own fresh seeds)."""
 
 
 def baseline_arm(name: str, overrides: Sequence[str]) -> Arm:
@@ -133,7 +139,9 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
         raise ConfigError(f"confirm: two configurations are named alike ({', '.join(labels)})")
     first = TEST_SEED if cfg.confirm.seed is None else int(cfg.confirm.seed)
     objective = source.objective if source else REWARDS[0]
-    episodes = source.eval_episodes if source else int(cfg.search.eval_episodes)
+    # The confirm's test set is its own: each fresh seed's episodes (eval_set run), as many as
+    # the command settles, whatever set and number its source searched on.
+    eval_set, episodes = evaluation_of(cfg)
     seeds = fresh_seeds(source.used_seeds if source else set(), int(cfg.confirm.seeds),
                         first=first)
     scheme = seeding_of(cfg)
@@ -146,7 +154,7 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
                        model_path=model_path(cfg, name, sweep_key(index, seed)),
                        label=f"{arm.label} seed {seed}",
                        tensorboard_run=tensorboard_run(cfg, name, arm.label), seeding=scheme,
-                       objective=objective, eval_episodes=episodes)
+                       objective=objective, eval_episodes=episodes, eval_set=eval_set)
              for index, arm in enumerate(arms) for seed in seeds]
     definition = {
         "kind": StudyKind.CONFIRM.value, "parameter": PARAMETER, "values": labels,
@@ -160,7 +168,8 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
     if objective != REWARDS[0]:
         # Only a confirm of an evaluation search stores its objective: every other confirm
         # keeps the definition (and the fingerprint) it had before confirms scored that way.
-        definition.update(objective=objective, eval_episodes=episodes)
+        definition = with_evaluation({**definition, "objective": objective,
+                                      "eval_episodes": episodes}, eval_set)
     if racing is not None:
         definition["racing"] = racing.stored()
     return StudyPlan(name=name, parameter=PARAMETER, values=labels, specs=specs,

@@ -13,8 +13,13 @@ from omegaconf import DictConfig
 from kraby_study.config.validate import rollout_size, to_container, validate_env, validate_ppo
 from kraby_study.errors import ConfigError
 from kraby_study.plan.settings import resolved_settings, with_value
-from kraby_study.plan.spec import seeding_of, with_seeding
-from kraby_study.records import check_objective, stored_objective, value_key
+from kraby_study.plan.spec import (
+    evaluation_of,
+    seeding_of,
+    with_evaluation,
+    with_seeding,
+)
+from kraby_study.records import REWARDS, check_objective, stored_objective, value_key
 
 SAMPLERS = ("tpe", "random", "nsga2")
 PRUNERS = ("median", "hyperband", "wilcoxon", "none")
@@ -36,7 +41,7 @@ def validate_search(cfg: DictConfig) -> None:
     if len(names) == 2 and search.pruner not in (None, "none"):
         _fail(f"Optuna cannot prune a trial with several objectives: search.objective="
               f"[{','.join(names)}] runs with --pruner none, not {search.pruner}")
-    for name in ("trials", "checkpoints", "eval_episodes"):
+    for name in ("trials", "checkpoints"):
         if int(search[name]) < 1:
             _fail(f"search.{name} must be at least 1, got {search[name]}")
     for name in ("startup_trials", "pruner_startup_trials"):
@@ -219,6 +224,12 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
     floor = search_floor(cfg)
     if floor is not None:
         search["floor"] = floor
+    eval_set, search["eval_episodes"] = evaluation_of(cfg)
+    search.pop("eval_set", None)
+    if objectives(cfg)[0] == REWARDS[1]:
+        # Only an evaluation search stores where its episodes come from; a search stored
+        # before they did (no key) evaluated every run on one fixed set.
+        search = with_evaluation(search, eval_set)
     settings = resolved_settings(cfg)
     return with_seeding({"kind": "search", "search": search, "settings": settings,
                          "steps": int(cfg.budget.steps), "seeds": int(cfg.budget.seeds),

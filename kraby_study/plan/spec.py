@@ -8,7 +8,14 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
-from kraby_study.records import LEGACY_SEEDING, SEEDING, StudyAttrs
+from kraby_study.records import (
+    EVAL_EPISODES,
+    EVAL_SET,
+    LEGACY_EVAL_SET,
+    LEGACY_SEEDING,
+    SEEDING,
+    StudyAttrs,
+)
 
 OPTIONAL_PPO: dict[str, Any] = {
     "learning_rate_schedule": "constant", "clip_range_schedule": "constant",
@@ -59,9 +66,13 @@ class TrialSpec:
     cost: str | None = None
     """A two-objective search's cost (training_time): progress lines show it beside the
     score."""
-    eval_episodes: int = 16
-    """Evaluation episodes of the evaluation objective (the leg's fixed targets, a gym env's
-    seeded resets)."""
+    eval_episodes: int = EVAL_EPISODES
+    """Evaluation episodes of the evaluation objective (the leg's targets, a gym env's seeded
+    resets)."""
+    eval_set: str = EVAL_SET
+    """Where the evaluation episodes come from (:data:`kraby_study.records.EVAL_SETS`): run,
+    each seed's own (drawn from its evaluation stream), or fixed, one set shared by every
+    run (studies stored before)."""
     label: str = ""
     """How progress lines name the run, e.g. 'clip_range=0.2 seed 1'."""
     tensorboard_run: str | None = None
@@ -174,6 +185,24 @@ def seeding_of(cfg: Any) -> str:
     """The seeding scheme a plan uses: ``seeding`` as the command settled it (the stored
     study's, or the one given), streams while unset."""
     return str(cfg.seeding) if cfg.seeding is not None else SEEDING
+
+
+def evaluation_of(cfg: Any) -> tuple[str, int]:
+    """The evaluation set and episodes a plan uses: ``search.eval_set`` and
+    ``search.eval_episodes`` as the command settled them (the stored study's, or those
+    given), a new study's defaults while unset."""
+    search = cfg.search
+    eval_set = str(search.eval_set) if search.eval_set is not None else EVAL_SET
+    episodes = int(search.eval_episodes) if search.eval_episodes is not None else EVAL_EPISODES
+    return eval_set, episodes
+
+
+def with_evaluation(definition: dict[str, Any], eval_set: str) -> dict[str, Any]:
+    """A definition as stored for ``eval_set``: run adds ``eval_set: run``; fixed adds
+    nothing, so every study stored before runs drew their own episodes keeps its fingerprint
+    and resumes on the set it began with."""
+    return {**definition, "eval_set": eval_set} if eval_set != LEGACY_EVAL_SET \
+        else dict(definition)
 
 
 def with_seeding(definition: dict[str, Any], scheme: str) -> dict[str, Any]:

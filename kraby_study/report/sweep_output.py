@@ -15,6 +15,7 @@ import pandas as pd
 
 from kraby_study.comparison import answers_name
 from kraby_study.coverage import coverage_note
+from kraby_study.failed_seeds import definition_text
 from kraby_study.records import Outcome, StudyKind, value_label
 from kraby_study.report import sweep_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
@@ -122,8 +123,9 @@ def summary_table(sweep: Sweep) -> Table:
     trained = sweep.by_evaluation  # build_sweep gives its summary the training reward
     header = [sweep.name, "complete", "failed", "pruned", "pending",
               *(["dropped after round"] if raced else []),
-              "final score", "95 % CI", "sd",
-              *(["training reward [95 % CI]", "training sd"] if trained else []),
+              "final score", "95 % CI", "sd", "failed seeds [95 % CI of the rate]",
+              *(["evaluation se", "training reward [95 % CI]", "training sd"]
+                if trained else []),
               "IQM [95 % trimmed-t CI]", "final IQR", "final IQR (rescaled)", "AUC [95 % CI]",
               "env steps to threshold", "seconds to threshold", "reached",
               f"training time ({sweep.time_unit})",
@@ -137,8 +139,9 @@ def summary_table(sweep: Sweep) -> Table:
             str(row["pending"]),
             *([str(sweep.dropped[vi].round) if dropped else "-"] if raced else []),
             number(row["final_mean"]), _interval(row["final_low"], row["final_high"]),
-            number(row["final_sd"], 3),
-            *([_with_interval(row["train_mean"], row["train_low"], row["train_high"]),
+            number(row["final_sd"], 3), _failed_seeds(row),
+            *([number(row["eval_se"], 3),
+               _with_interval(row["train_mean"], row["train_low"], row["train_high"]),
                number(row["train_sd"], 3)] if trained else []),
             _with_interval(row["iqm"], row["iqm_low"], row["iqm_high"]),
             number(row["final_iqr"], 3), number(row["final_iqr_unbiased"], 3),
@@ -153,6 +156,32 @@ def summary_table(sweep: Sweep) -> Table:
             "dropped" if dropped else MARK_TEXT[row["mark"]], str(row.get("answer") or "-"),
             str(row["note"] or "")])
     return Table(header, rows, marks=list(sweep.summary["mark"]))
+
+
+def _failed_seeds(row: pd.Series) -> str:
+    """A value's failed seeds, e.g. '2/10 [0.03, 0.56]'; '-' when not counted."""
+    if not np.isfinite(row["failed_seeds"]):
+        return "-"
+    return (f"{int(row['failed_seeds'])}/{row['complete']} "
+            f"{_interval(row['failed_seeds_low'], row['failed_seeds_high'])}")
+
+
+def failed_seeds_text(sweep: Sweep) -> str | None:
+    """The values with failed seeds, the selected one first named as such, and what a failed
+    seed is; None when no seed failed (or the line is not defined)."""
+    if not np.isfinite(sweep.failure_line):
+        return None
+    rows = sweep.summary[sweep.summary["failed_seeds"].fillna(0) > 0]
+    if rows.empty:
+        return None
+    parts = []
+    for vi, row in rows.iterrows():
+        selected = " (selected)" if bool(sweep.summary.loc[vi].get("selected", False)) else ""
+        rate = _interval(row["failed_seeds_low"], row["failed_seeds_high"])
+        parts.append(f"{row['value']}{selected} {int(row['failed_seeds'])} of "
+                     f"{row['complete']} (rate 95 % CI {rate})")
+    meaning = definition_text(sweep.failure_line, sweep.untrained)
+    return "Failed seeds: " + "; ".join(parts) + f" ({meaning})."
 
 
 def threshold_text(sweep: Sweep) -> str:
@@ -507,7 +536,9 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
     failed = failed_items(sweep)
     arms, winner = confirm_blocks(sweep)
     chosen = selection_text(sweep)
-    said = Text(verdict(sweep) + (f" {chosen}" if chosen else ""))
+    failing = failed_seeds_text(sweep)
+    said = Text(verdict(sweep) + (f" {chosen}" if chosen else "")
+                + (f" {failing}" if failing else ""))
     details: list[Block] = [summary_table(sweep), Text(threshold_text(sweep))]
     if failed:
         details += [Text(f"Failed or pruned runs ({len(failed)}), not in the figures:"),

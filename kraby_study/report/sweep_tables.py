@@ -29,6 +29,7 @@ import pandas as pd
 from kraby_study.answers.raced import StudyRace, race_of
 from kraby_study.answers.selected import study_rule
 from kraby_study.comparison import MARGIN, MIN_SEEDS, CompareOptions, Comparison, compare
+from kraby_study.failed_seeds import failed_seeds, failure_line
 from kraby_study.race import Drop
 from kraby_study.records import (
     Outcome,
@@ -66,7 +67,8 @@ SINGLE_LABEL = "all seeds"
 DROPPED_PREFIX = "dropped by the race"
 """How the summary's note of a value the race dropped begins."""
 TRIAL_COLUMNS = ["number", "key", "seed", "vi", "value", "outcome", "final_score",
-                 "train_reward", "wall_time", "cpu_time", "env_steps", "failure", "model_path"]
+                 "train_reward", "eval_error", "wall_time", "cpu_time", "env_steps", "failure",
+                 "model_path"]
 SEED_COLUMNS = ["vi", "seed", "number", "final_score", "first_reward", "auc",
                 "steps_to_threshold", "seconds_to_threshold", "end_step", "end_seconds"]
 
@@ -125,6 +127,9 @@ class Sweep:
     race: StudyRace | None = None
     comparison: Comparison[int] | None = None
     """The study's one comparison: the summary's answers, the verdict and the selection."""
+    failure_line: float = math.nan
+    """The final score below which a seed failed (:mod:`kraby_study.failed_seeds`); NaN when
+    not defined."""
 
     @property
     def dropped(self) -> dict[int, Drop]:
@@ -200,6 +205,9 @@ def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.Data
             # Stored beside the score since the evaluation objective; NaN on older runs.
             "train_reward": attrs.get("train_reward", np.nan)
             if state == Outcome.COMPLETE else np.nan,
+            # A run scored by evaluation: its score's standard error from its episodes.
+            "eval_error": (attrs.get("eval_errors") or [np.nan])[0]
+            if state == Outcome.COMPLETE else np.nan,
             "wall_time": attrs.get("wall_time", np.nan) if state != Outcome.PENDING else np.nan,
             "cpu_time": attrs.get("cpu_time", np.nan) if state != Outcome.PENDING else np.nan,
             "env_steps": attrs.get("env_steps", np.nan) if state != Outcome.PENDING else np.nan,
@@ -209,7 +217,8 @@ def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.Data
             "model_path": attrs.get("model_path"),
         })
     frame = pd.DataFrame(rows, columns=TRIAL_COLUMNS)
-    for column in ("final_score", "train_reward", "wall_time", "cpu_time", "env_steps"):
+    for column in ("final_score", "train_reward", "eval_error", "wall_time", "cpu_time",
+                   "env_steps"):
         frame[column] = pd.to_numeric(frame[column], errors="coerce").astype(float)
     return frame
 
@@ -487,6 +496,33 @@ def add_train_reward(summary: pd.DataFrame, trials: pd.DataFrame,
     return summary.join(train[list(columns)].rename(columns=columns))  # NaN: no such seeds
 
 
+def add_eval_error(summary: pd.DataFrame, trials: pd.DataFrame) -> pd.DataFrame:
+    """``summary`` with each value's evaluation standard error (``eval_se``): the root mean
+    square over its complete seeds of each run's standard error from its own episodes, the
+    test set's share of a run's score (NaN for runs stored without one)."""
+    done = trials[(trials["outcome"] == Outcome.COMPLETE) & trials["eval_error"].notna()]
+    rms = done.groupby("vi")["eval_error"].apply(lambda e: float(np.sqrt(np.mean(e ** 2))))
+    return summary.assign(eval_se=[rms.get(vi, np.nan) for vi in summary.index])
+
+
+def add_failed_seeds(summary: pd.DataFrame, seeds: pd.DataFrame, untrained: float
+                     ) -> tuple[pd.DataFrame, float]:
+    """``summary`` with each value's failed seeds (:mod:`kraby_study.failed_seeds`):
+    ``failed_seeds`` (count), ``failed_seeds_low`` and ``failed_seeds_high`` (the exact
+    interval of the rate); and the failure line (NaN when it is not defined: no best, no
+    curve, or a best that learned nothing)."""
+    best = summary.index[summary["mark"] == "best"]
+    best_mean = float(summary.loc[best[0], "final_mean"]) if len(best) else math.nan
+    line = failure_line(untrained, best_mean)
+    groups = dict(iter(seeds.groupby("vi", sort=True)))
+    found = [failed_seeds(groups[vi]["final_score"].tolist() if vi in groups else [], line)
+             for vi in summary.index]
+    out = summary.assign(failed_seeds=[f.count if f.seeds else np.nan for f in found],
+                         failed_seeds_low=[f.low for f in found],
+                         failed_seeds_high=[f.high for f in found])
+    return out, line
+
+
 def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
                   min_seeds: int = MIN_SEEDS, dropped: Collection[int] = (),
                   comparison: Comparison[int] | None = None) -> Verdict:
@@ -580,8 +616,10 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     threshold, is_default, untrained = study_threshold(curves, summary, chosen)
     seeds = seed_metrics(trials, curves, threshold)
     summary = add_curve_metrics(summary, seeds, bootstrap)
+    summary, failure = add_failed_seeds(summary, seeds, untrained)
     if scored_by_evaluation(definition):
         summary = add_train_reward(summary, trials, bootstrap)
+        summary = add_eval_error(summary, trials)
     colours = value_colours(labels if data.kind == StudyKind.CONFIRM else values)
     sweep = Sweep(data=data, parameter=parameter, name=name or SINGLE_LABEL, values=values,
                  rule=study_rule(data.ledger.attrs.select, judged),
@@ -590,7 +628,8 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
                  threshold_default=is_default, untrained=untrained, bootstrap=bootstrap,
                  verdict=study_verdict(summary, seeds, comparison.min_seeds, list(dropped),
                                        comparison),
-                 min_seeds=comparison.min_seeds, race=race, comparison=comparison)
+                 min_seeds=comparison.min_seeds, race=race, comparison=comparison,
+                 failure_line=failure)
     chosen = (RULES[SelectRule(sweep.rule)].select(comparison, mean_by_value(found.aucs),
                                                    mean_by_value(found.seconds))
               if found is not None and sweep.finished else None)

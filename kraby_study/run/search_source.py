@@ -20,7 +20,7 @@ from kraby_study.plan.space import (
     search_floor,
     wilcoxon_seeds,
 )
-from kraby_study.plan.spec import TrialSpec, fingerprint, seeding_of
+from kraby_study.plan.spec import TrialSpec, evaluation_of, fingerprint, seeding_of
 from kraby_study.records import (
     Failure,
     Outcome,
@@ -108,7 +108,8 @@ class SearchSource(StudySource):
             model_path=model_path(cfg, self.ledger.name, key),
             checkpoint_every=every, seed_scores=seed_scores, seeds=int(cfg.budget.seeds),
             objective=names[0], cost=names[1] if len(names) == 2 else None,
-            eval_episodes=int(cfg.search.eval_episodes), label=short_label(params, key),
+            eval_episodes=evaluation_of(cfg)[1], eval_set=evaluation_of(cfg)[0],
+            label=short_label(params, key),
             tensorboard_run=tensorboard_run(cfg, self.ledger.name, key),
             seeding=seeding_of(cfg))
 

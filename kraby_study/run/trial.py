@@ -144,6 +144,8 @@ class _Seed:
     pruned_at: int | None = None
     score: float | None = None
     train_reward: float | None = None
+    eval_error: float | None = None
+    """The standard error of an evaluation score from its episodes."""
     model: Any = None
     normalizer: Any = None
     """The run's VecNormalize (its statistics as training left them), or None."""
@@ -173,13 +175,16 @@ def _learn(spec: TrialSpec, seed: int, recorder: EpisodeRecorder, shards: int) -
     return run
 
 
-def _score(spec: TrialSpec, run: _Seed) -> None:
-    """The final score of a seed that trained to its end."""
+def _score(spec: TrialSpec, run: _Seed, seed: int) -> None:
+    """The final score of the seed ``seed`` that trained to its end."""
     run.train_reward = final_score(run.episodes, run.env_steps)
     if spec.objective == "evaluation":
         env = spec.settings["env"]
-        run.score = adapter_for(env).evaluate(run.model, env, spec.eval_episodes,
-                                              run.normalizer)
+        # Each seed's own test set (eval_set run), or the one every run shared before.
+        own = seed if spec.eval_set == "run" else None
+        evaluation = adapter_for(env).evaluate(run.model, env, spec.eval_episodes,
+                                               run.normalizer, seed=own)
+        run.score, run.eval_error = evaluation.mean, evaluation.error
     else:
         run.score = run.train_reward
     if run.score is None or not math.isfinite(run.score):
@@ -216,7 +221,7 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
         run = _learn(spec, spec.seed + index, recorder, shards)
         runs.append(run)
         if run.failure is None and run.pruned_at is None:
-            _score(spec, run)
+            _score(spec, run, spec.seed + index)
         if run.failure is not None or run.pruned_at is not None:
             break
         if on_checkpoint is not None and _stopped_after(spec, runs, on_checkpoint):
@@ -259,6 +264,9 @@ def _result(spec: TrialSpec, runs: list[_Seed], started: str, seconds: float,
         result.final_score = float(np.mean(result.scores))
         rewards = [r.train_reward for r in runs if r.train_reward is not None]
         result.train_reward = float(np.mean(rewards)) if rewards else None
+        if spec.objective == "evaluation":
+            result.eval_errors = [float(r.eval_error) for r in runs  # type: ignore[arg-type]
+                                  if r.eval_error is not None]
         if spec.model_path:
             best = max(runs, key=lambda r: float(r.score or -math.inf))
             Path(spec.model_path).parent.mkdir(parents=True, exist_ok=True)
