@@ -20,6 +20,7 @@ from omegaconf import DictConfig
 from kraby_study.errors import ConfigError
 from kraby_study.plan.racing import race_rules
 from kraby_study.plan.settings import model_path, settings_with_ppo, tensorboard_run
+from kraby_study.plan.space import objectives
 from kraby_study.plan.spec import (
     StudyPlan,
     TrialSpec,
@@ -138,7 +139,9 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
     if len(set(labels)) != len(labels):
         raise ConfigError(f"confirm: two configurations are named alike ({', '.join(labels)})")
     first = TEST_SEED if cfg.confirm.seed is None else int(cfg.confirm.seed)
-    objective = source.objective if source else REWARDS[0]
+    # A source's runs set how the arms are scored; baselines alone take the command's reward
+    # (search.objective, final_reward by default).
+    objective = source.objective if source else objectives(cfg)[0]
     # The confirm's test set is its own: each fresh seed's episodes (eval_set run), as many as
     # the command settles, whatever set and number its source searched on.
     eval_set, episodes = evaluation_of(cfg)
