@@ -23,7 +23,9 @@ from kraby_study.records import (
     TrialAttrs,
     offset_leg_seeds,
     outcome,
+    scored_by_evaluation,
     seed_text,
+    stored_eval_set,
     stored_seeding,
     trial_seeds,
 )
@@ -109,7 +111,21 @@ def _seeds_block(data: StudyData, trials: Sequence[StoredTrial]) -> list[str]:
         lines.append("Test and tuning seeds are disjoint." if not shared else
                      f"Warning: test and tuning seeds share {seed_text(shared)}.")
         lines += _shared_streams(data, trials, seeding)
+    if scored_by_evaluation(data.definition):
+        lines.append(_test_set(data.definition))
     return lines
+
+
+def _test_set(definition: dict[str, Any]) -> str:
+    """Where a confirm scored by evaluation drew its evaluation episodes (its test set)."""
+    episodes = definition.get("eval_episodes")
+    if stored_eval_set(definition) == "run":
+        return (f"Test set: each run's own {episodes} evaluation episodes, drawn from its "
+                "seed's evaluation stream (a child of its SeedSequence apart from its training "
+                "streams): no test episode is one the source study scored a run on.")
+    return (f"Warning: test set reused: every run was scored on the same {episodes} fixed "
+            "evaluation episodes as every run of its source (stored before runs drew their "
+            "own), so the settings were selected on the episodes they are tested on.")
 
 
 def _shared_streams(data: StudyData, trials: Sequence[StoredTrial], seeding: str) -> list[str]:

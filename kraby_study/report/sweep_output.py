@@ -16,7 +16,7 @@ import pandas as pd
 from kraby_study.comparison import answers_name
 from kraby_study.coverage import coverage_note
 from kraby_study.failed_seeds import definition_text
-from kraby_study.records import Outcome, StudyKind, value_label
+from kraby_study.records import Outcome, StudyKind, stored_eval_set, value_label
 from kraby_study.report import sweep_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
@@ -465,9 +465,13 @@ def describe_sweep(sweep: Sweep) -> str:
         scored = ""
         if sweep.by_evaluation:
             episodes = definition.get("eval_episodes")
-            scored = (f" Scored by evaluation, as its source was: a run's final score is its "
-                      f"deterministic policy's mean return over the {episodes} evaluation "
-                      f"episodes every run shares (none seeded like a training run); the "
+            drawn = ("drawn from its own seed's evaluation stream, so none is an episode its "
+                     "source selected on; evaluation se: the standard error a run's score "
+                     "carries from its episodes (root mean square over the seeds)"
+                     if stored_eval_set(definition) == "run" else
+                     "every run shares (one fixed set, as stored before runs drew their own)")
+            scored = (f" Scored by evaluation: a run's final score is its deterministic "
+                      f"policy's mean return over {episodes} evaluation episodes {drawn}; the "
                       f"training reward ({TRAINING_SCORE}) is shown beside it, and no answer "
                       f"reads it.")
         return (f"Confirmation of {len(sweep.values)} configurations{origin} on {fresh}"
