@@ -1,7 +1,7 @@
 """The evaluation measure of a stored study's saved models: each complete trial's model (and
 its VecNormalize statistics, if saved) run by its env's adapter, deterministic actions, over
-the seeded evaluation episodes every run shares (apart from every training stream), beside
-the trial's training score; then the mean and standard deviation of both per value (a
+the evaluation episodes of its seed's own evaluation stream (apart from its training streams),
+beside the trial's training score; then the mean and standard deviation of both per value (a
 confirm study's configuration, a sweep's value).
 
 Run: python benchmarks/eval_models.py --storage sqlite:///studies/kraby.db --study-name NAME
@@ -42,7 +42,7 @@ def main() -> None:
         stats = normalizer_path(path)
         normalizer = pickle.loads(stats.read_bytes()) if stats.is_file() else None
         score = adapter_for(env).evaluate(PPO.load(path, device="cpu"), env, args.episodes,
-                                          normalizer)
+                                          normalizer, seed=attrs.get("seed")).mean
         group = ", ".join(f"{k}={v}" for k, v in trial.params.items()) or "all"
         rows.append((group, attrs.get("final_score"), score))
         print(f"{attrs.get('key')} ({group}): training score {attrs.get('final_score'):.1f}, "

@@ -24,7 +24,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("store", ("kraby_study.store",)),
     ("stats", ("kraby_study.stats", "kraby_study.comparison", "kraby_study.coverage",
                "kraby_study.selection", "kraby_study.race",
-               "kraby_study.front")),
+               "kraby_study.front", "kraby_study.failed_seeds")),
     ("answers", ("kraby_study.answers",)),
     ("run", ("kraby_study.run",)),
     ("report", ("kraby_study.report",)),
