@@ -705,7 +705,7 @@ EVAL_SET = "run"
 LEGACY_EVAL_SET = "fixed"
 """The evaluation set of every study stored before runs drew their own: its definition has no
 ``eval_set``."""
-EVAL_EPISODES = 100
+EVAL_EPISODES = 200
 """Evaluation episodes per run of a new study (docs/statistics.md: their standard error
 against the margin on Pendulum-v1 and the leg)."""
 LEGACY_EVAL_EPISODES = 16

@@ -191,7 +191,7 @@ def test_a_confirm_of_an_evaluation_search_scores_on_a_test_set_the_search_never
 
     from kraby_envs.rollout import evaluation_targets
     from kraby_study.env import adapter_for
-    from kraby_study.records import trial_seeds
+    from kraby_study.records import EVAL_EPISODES, trial_seeds
 
     space = SPACE.replace("name: tiny", "name: evaluated").replace("trials: 4", "trials: 2")
     finished_search(workdir, "evaluated", space, "optuna", "search=evaluated", "--workers",
@@ -205,12 +205,12 @@ def test_a_confirm_of_an_evaluation_search_scores_on_a_test_set_the_search_never
     definition = study.user_attrs["kraby_definition"]
     # The confirm's own test set: each fresh seed's episodes, today's default number.
     assert definition["objective"] == "evaluation" and definition["eval_set"] == "run"
-    assert definition["eval_episodes"] == 100
+    assert definition["eval_episodes"] == EVAL_EPISODES
     delta = float(definition["arms"][0]["settings"]["env"]["delta"])
     seen = np.concatenate([evaluation_targets(4, delta, seed) for trial in search.trials
                            for seed in trial_seeds(trial, 2)])
     for trial in study.trials:
-        targets = evaluation_targets(100, delta, trial.user_attrs["seed"])
+        targets = evaluation_targets(EVAL_EPISODES, delta, trial.user_attrs["seed"])
         assert not np.isclose(targets[:, None, :], seen[None]).all(-1).any()
         # Scored by evaluation: the training reward is stored beside it and differs.
         assert trial.value == trial.user_attrs["final_score"]
@@ -218,7 +218,8 @@ def test_a_confirm_of_an_evaluation_search_scores_on_a_test_set_the_search_never
         # The stored score is the saved policy's mean return on exactly those targets.
         env = trial.user_attrs["settings"]["env"]
         model = PPO.load(trial.user_attrs["model_path"], device="cpu")
-        rescored = adapter_for(env).evaluate(model, env, 100, seed=trial.user_attrs["seed"])
+        rescored = adapter_for(env).evaluate(model, env, EVAL_EPISODES,
+                                             seed=trial.user_attrs["seed"])
         assert rescored.mean == pytest.approx(trial.value, rel=1e-6)
         assert trial.user_attrs["eval_errors"] == [pytest.approx(rescored.error, rel=1e-6)]
     # The report shows the training reward beside the evaluation score, per configuration.

@@ -8,7 +8,7 @@ changed resumes exactly as it began; a new study gets today's default.
 - ``confirm.select`` (a confirm study): its stored selection rule, else the command's default.
 - ``search.eval_set``: the stored evaluation set (fixed for a study stored before runs drew
   their own episodes), else run.
-- ``search.eval_episodes``: the stored number, else 100.
+- ``search.eval_episodes``: the stored number, else 200.
 
 A setting the command gives stays as given: if it differs from the stored study, the store
 refuses it as a changed definition, naming the setting.

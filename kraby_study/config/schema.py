@@ -200,7 +200,7 @@ class SearchConfig:
     trials (docs/studies.md)."""
     eval_episodes: int | None = None
     """Episodes of each run's evaluation (the evaluation objective, and a confirm of an
-    evaluation search); null: a stored study's own number, 100 for a new one."""
+    evaluation search); null: a stored study's own number, 200 for a new one."""
     eval_set: str | None = None
     """Where a run's evaluation episodes come from: run (its own, drawn from its seed's
     evaluation stream, so a confirm's fresh seeds never meet its search's episodes) or fixed
