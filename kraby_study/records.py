@@ -608,6 +608,9 @@ def offset_leg_seeds(trial: StoredTrial, per_trial: int = 1) -> set[int]:
 
 # A search's objectives ------------------------------------------------------------------------
 
+FINAL_FRACTION = 0.1
+"""A run's final score averages the episodes that end in this last fraction of its steps."""
+
 REWARDS = ("final_reward", "evaluation")
 """A search's rewards, maximised: the mean episode reward over the last 10 % of training, or
 the deterministic policy's mean return over the run's evaluation episodes."""

@@ -72,6 +72,15 @@ def sqlite_url(path: Path) -> str:
     return f"sqlite:///{path}"
 
 
+def csv_approx(expected: object) -> object:
+    """``pytest.approx`` at the precision of the report's CSV files: a float written with
+    CSV_DIGITS (6) significant digits is off by up to half a unit in the last one, 5 x 10^-6
+    of its value, more than approx's default 10^-6 allows."""
+    from kraby_study.report.document import CSV_DIGITS
+
+    return pytest.approx(expected, rel=10.0 ** (1 - CSV_DIGITS))
+
+
 def file_digest(path: Path) -> str:
     """Hash of a file's bytes ('' when missing)."""
     return hashlib.sha256(path.read_bytes()).hexdigest() if path.exists() else ""

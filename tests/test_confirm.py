@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from conftest import TINY, file_digest, finished_search, load, run_cli, sqlite_url
+from conftest import TINY, csv_approx, file_digest, finished_search, load, run_cli, sqlite_url
 from optuna.trial import TrialState
 
 from kraby_study.config.compose import compose_config
@@ -228,8 +228,7 @@ def test_a_confirm_of_an_evaluation_search_scores_on_a_test_set_the_search_never
     folder = workdir / "reports" / "evaluated-confirm"
     summary = pd.read_csv(folder / "summary.csv")
     rewards = [t.user_attrs["train_reward"] for t in study.trials]
-    # summary.csv writes 5 significant digits.
-    assert summary["train_mean"].mean() == pytest.approx(sum(rewards) / len(rewards), rel=1e-4)
+    assert summary["train_mean"].mean() == csv_approx(sum(rewards) / len(rewards))
     assert summary["final_mean"].tolist() != summary["train_mean"].tolist()
     page = (folder / "summary.md").read_text()
     assert "training reward [95 % CI]" in page and "Scored by evaluation" in page

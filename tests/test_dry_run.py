@@ -77,15 +77,16 @@ def test_optuna_and_confirm_dry_runs(workdir: Path, finished: Path,
     before = file_digest(finished)
     url = sqlite_url(finished)
     capsys.readouterr()
-    assert run_cli("optuna", "--trials", "6", "budget=smoke", "budget.steps=512",
+    # 1024 steps on the leg's 32 envs: 32 each, one whole episode (512 would hold none).
+    assert run_cli("optuna", "--trials", "6", "budget=smoke", "budget.steps=1024",
                    "budget.seeds=2", "--storage", url, "--workers", "2", "--dry-run") == 0
     out = capsys.readouterr().out
     assert "\nsearch:\n" in out
-    assert ("ppo_search: 6 trials (search.trials, each 2 seeds x 512 env steps), 1,024 env "
-            "steps each, 6,144 in all") in out
+    assert ("ppo_search: 6 trials (search.trials, each 2 seeds x 1,024 env steps), 2,048 env "
+            "steps each, 12,288 in all") in out
     assert "x 2 workers, measured over 4 trials" in out
     assert run_cli("confirm", "--study-name", "clip_range", "--top", "2", "--seeds", "3",
-                   "--storage", url,
+                   "--storage", url, "ppo.n_envs=4",  # the baseline's: 32 legs hold no episode
                    "--baseline", "ppo=tuned", "--cfg", "job", "--racing") == 0
     out = capsys.readouterr().out
     assert "clip_range-confirm: at most 9 trials (3 configurations x 3 seeds)" in out

@@ -12,7 +12,7 @@ import numpy as np
 import optuna
 import pandas as pd
 import pytest
-from conftest import hall_bounds, sqlite_url
+from conftest import csv_approx, hall_bounds, sqlite_url
 from optuna.distributions import FloatDistribution
 from optuna.trial import TrialState, create_trial
 from scipy import stats
@@ -174,14 +174,14 @@ def test_summary_numbers_equal_a_hand_computation(sweep_report: ReportIndex) -> 
     low = summary.loc[0.01]
     # [1, 2, 3] has skewness 0: Hall's interval is the Student-t one.
     assert (low["complete"], low["failed"], low["pending"]) == (3, 1, 0)
-    assert low["final_mean"] == pytest.approx(2.0)
-    assert low["final_sd"] == pytest.approx(1.0)
+    assert low["final_mean"] == csv_approx(2.0)
+    assert low["final_sd"] == csv_approx(1.0)
     assert low["final_low"] == pytest.approx(2.0 - t2 / math.sqrt(3), rel=1e-5)
     assert low["final_high"] == pytest.approx(2.0 + t2 / math.sqrt(3), rel=1e-5)
-    assert low["time_mean"] == pytest.approx(12.0)  # the failed run's 3 s is not a result
+    assert low["time_mean"] == csv_approx(12.0)  # the failed run's 3 s is not a result
     high = summary.loc[0.1]
     assert (high["complete"], high["failed"]) == (3, 0)
-    assert high["final_mean"] == pytest.approx(5.0)
+    assert high["final_mean"] == csv_approx(5.0)
     assert high["final_sd"] == pytest.approx(math.sqrt(13.0), rel=1e-5)
     # [2, 4, 9] is right-skewed: Hall's interval (the cubic's roots), above the Student-t one.
     _, hall_low, hall_high = hall_bounds([2.0, 4.0, 9.0])
@@ -254,7 +254,7 @@ def test_search_report(tmp_path: Path) -> None:
     top = pd.read_csv(out / "tpe" / "top_trials.csv")
     assert len(top) == 10 and top["value"].is_monotonic_decreasing
     study = optuna.load_study(study_name="tpe", storage=url)
-    assert top["value"].iloc[0] == pytest.approx(study.best_value)
+    assert top["value"].iloc[0] == csv_approx(study.best_value)
     trials = pd.read_csv(out / "tpe" / "trials.csv")
     pruned = trials[trials["outcome"] == "pruned"]
     assert len(pruned) == 4 and (pruned["pruned_at"] == 2000).all()

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import hall_bounds, newcombe_bounds, sqlite_url
+from conftest import csv_approx, hall_bounds, newcombe_bounds, sqlite_url
 from optuna.distributions import CategoricalDistribution
 from optuna.trial import TrialState, create_trial
 from scipy import stats
@@ -119,16 +119,16 @@ def test_iqm_iqr_and_the_failed_run(report: ReportIndex) -> None:
     summary = _summary(report.out)
     low = summary.loc[0.001]
     assert (low["complete"], low["failed"]) == (4, 1)
-    assert low["iqm"] == pytest.approx(2.5)  # middle half of 1, 2, 3, 10
+    assert low["iqm"] == csv_approx(2.5)  # middle half of 1, 2, 3, 10
     # Tukey-McLaughlin: g = 1, winsorised [2, 2, 3, 3] (sd sqrt(1/3)), se = sd / (0.5 * 2),
     # t(0.975, 4 - 2 - 1 = 1) = 12.706.
     half = stats.t.ppf(0.975, 1) * math.sqrt(1 / 3) / (0.5 * 2)
-    assert (low["iqm_low"], low["iqm_high"]) == pytest.approx((2.5 - half, 2.5 + half))
+    assert (low["iqm_low"], low["iqm_high"]) == csv_approx((2.5 - half, 2.5 + half))
     assert low["iqm_low"] <= 2.5 <= low["iqm_high"]
-    assert low["final_iqr"] == pytest.approx(4.75 - 1.75)  # linear quartiles
+    assert low["final_iqr"] == csv_approx(4.75 - 1.75)  # linear quartiles
     best = summary.loc[0.01]
-    assert best["iqm"] == pytest.approx(5.5) and best["final_iqr"] == pytest.approx(1.5)
-    assert summary.loc[0.3, "final_iqr"] == pytest.approx(0.2)
+    assert best["iqm"] == csv_approx(5.5) and best["final_iqr"] == csv_approx(1.5)
+    assert summary.loc[0.3, "final_iqr"] == csv_approx(0.2)
     # The failed run is listed, and nowhere in the metrics.
     text = (report.out / "learning_rate" / "summary.md").read_text()
     assert "learning_rate = 0.001, seed 4 (trial 12): diverged" in text
@@ -143,7 +143,7 @@ def test_auc_is_the_mean_of_each_seed_curve(report: ReportIndex) -> None:
         if len(aucs) > 1:
             _, low, high = hall_bounds(aucs)
             assert (row["auc_low"], row["auc_high"]) == pytest.approx((low, high), rel=1e-5)
-    assert summary.loc[0.3, "auc_mean"] == pytest.approx(1.25 * 3.0)
+    assert summary.loc[0.3, "auc_mean"] == csv_approx(1.25 * 3.0)
 
 
 def test_curve_bands_are_hall_intervals_per_value_and_step() -> None:
@@ -187,8 +187,8 @@ def test_default_threshold_reached_and_never_reached(report: ReportIndex) -> Non
         assert row["reached"] == len(hits)
         if hits:
             times = censored[value]
-            assert row["steps_to_threshold"] == pytest.approx(np.mean([s for s, _ in times]))
-            assert row["seconds_to_threshold"] == pytest.approx(np.mean([t for _, t in times]))
+            assert row["steps_to_threshold"] == csv_approx(np.mean([s for s, _ in times]))
+            assert row["seconds_to_threshold"] == csv_approx(np.mean([t for _, t in times]))
         else:
             assert math.isnan(row["steps_to_threshold"])
             assert math.isnan(row["seconds_to_threshold"])
@@ -200,11 +200,11 @@ def test_default_threshold_reached_and_never_reached(report: ReportIndex) -> Non
 def test_a_single_seed_has_no_intervals(report: ReportIndex) -> None:
     row = _summary(report.out).loc[0.1]
     assert row["complete"] == 1
-    assert row["iqm"] == pytest.approx(0.5) and row["auc_mean"] == pytest.approx(0.3125)
+    assert row["iqm"] == csv_approx(0.5) and row["auc_mean"] == csv_approx(0.3125)
     for column in ("iqm_low", "iqm_high", "auc_low", "auc_high", "final_iqr", "p_vs_best",
                    "p_holm", "p_improvement_low", "p_improvement_high"):
         assert math.isnan(row[column]), column
-    assert row["p_improvement"] == pytest.approx(1.0)  # every best seed beats 0.5
+    assert row["p_improvement"] == csv_approx(1.0)  # every best seed beats 0.5
     assert pd.isna(row["mark"])  # neither best nor tied: an empty cell
 
 
@@ -237,19 +237,19 @@ def test_holm_ties_and_probability_of_improvement(report: ReportIndex) -> None:
     for value in (0.001, 0.3):
         pairs = [(b > y) + 0.5 * (b == y) for b in best for y in FINALS[value]]
         row = summary.loc[value]
-        assert row["p_improvement"] == pytest.approx(np.mean(pairs))
+        assert row["p_improvement"] == csv_approx(np.mean(pairs))
         assert row["p_improvement_low"] <= row["p_improvement"] <= row["p_improvement_high"]
     # Newcombe's interval (method 5), from the roots of its quartic: 4 seeds against 4 at
     # 0.75; every seed of the best beats every seed of 0.3 (4 against 3): up to 1, not a point.
     assert (summary.loc[0.001, "p_improvement_low"],
             summary.loc[0.001, "p_improvement_high"]) == pytest.approx(
-        newcombe_bounds(0.75, 4, 4), abs=1e-6)  # summary.csv keeps 6 decimals
+        newcombe_bounds(0.75, 4, 4), abs=1e-6)  # 6 significant digits: 5e-7 at most below 1
     assert (summary.loc[0.3, "p_improvement_low"],
             summary.loc[0.3, "p_improvement_high"]) == pytest.approx(
         newcombe_bounds(1.0, 4, 3), abs=1e-6)
     assert summary.loc[0.3, "p_improvement_low"] < 1.0 == summary.loc[0.3, "p_improvement_high"]
-    assert summary.loc[0.001, "p_improvement"] == pytest.approx(0.75)
-    assert summary.loc[0.3, "p_improvement"] == pytest.approx(1.0)
+    assert summary.loc[0.001, "p_improvement"] == csv_approx(0.75)
+    assert summary.loc[0.3, "p_improvement"] == csv_approx(1.0)
     assert math.isnan(summary.loc[0.01, "p_improvement"])
     text = (report.out / "learning_rate" / "summary.md").read_text()
     assert "closed Holm-Welch step-down, alpha 0.05" in text and "P(best > value)" in text
@@ -309,7 +309,7 @@ def test_confirm_study(report: ReportIndex) -> None:
     assert "| configuration | origin | source's score |" in index
     # A confirm's training time is the CPU seconds its fastest_tied compares, and says so; a
     # sweep's is wall-clock seconds.
-    assert summary["time_mean"].tolist() == pytest.approx([3.0, 7.0, 4.0])
+    assert summary["time_mean"].tolist() == csv_approx([3.0, 7.0, 4.0])
     assert "| reached | training time (CPU s) |" in text
     sweep_text = (report.out / "learning_rate" / "summary.md").read_text()
     assert "| reached | training time (wall s) |" in sweep_text
@@ -325,9 +325,9 @@ def test_threshold_option_changes_reach(store_url: str, report: ReportIndex,
     # Reward >= 1: 0.01 at its second point (200) in every seed; 0.001 at 300 for the seed
     # whose final score is 1, at 200 for the others; 0.1 (0, 0.25, 0.5, 0.5) never.
     assert summary.loc[0.01, "reached"] == 4 and default.loc[0.01, "reached"] == 3
-    assert summary.loc[0.01, "steps_to_threshold"] == pytest.approx(200)
+    assert summary.loc[0.01, "steps_to_threshold"] == csv_approx(200)
     assert summary.loc[0.001, "reached"] == 4
-    assert summary.loc[0.001, "steps_to_threshold"] == pytest.approx((300 + 3 * 200) / 4)
+    assert summary.loc[0.001, "steps_to_threshold"] == csv_approx((300 + 3 * 200) / 4)
     assert summary.loc[0.1, "reached"] == 0
     assert "mean episode reward >= 1, set by the report's option report.threshold" in (
         index.out / "learning_rate" / "summary.md").read_text()

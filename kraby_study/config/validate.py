@@ -14,7 +14,7 @@ from omegaconf import DictConfig, OmegaConf
 from kraby_study.config.schema import PPOConfig
 from kraby_study.env import adapter_for, check_scheme
 from kraby_study.errors import ConfigError
-from kraby_study.records import EVAL_SETS, SelectRule
+from kraby_study.records import EVAL_SETS, FINAL_FRACTION, REWARDS, SelectRule
 from kraby_study.store.url import check_url
 
 
@@ -94,6 +94,95 @@ def validate_budget(budget: DictConfig) -> None:
     _require(int(budget.seeds) >= 1, f"budget.seeds must be at least 1, got {budget.seeds}")
     _require(int(budget.curve_every) >= 1,
              f"budget.curve_every must be at least 1, got {budget.curve_every}")
+
+
+RUN_LENGTH = ("ppo.n_envs", "env.max_episode_steps")
+"""The settings beside budget.steps that decide whether a run can be scored
+(:func:`validate_run_length`)."""
+
+
+def steps_per_env(steps: int, n_envs: int) -> int:
+    """The steps each env of a run takes: SB3 steps all ``n_envs`` at once, and a run stops at
+    the first step at or past its budget of ``steps`` (:class:`~kraby_study.run.callback.
+    EpisodeRecorder`)."""
+    return -(-int(steps) // int(n_envs))
+
+
+def scores_a_full_episode(steps: int, n_envs: int, limit: int) -> bool:
+    """Whether a run of ``steps`` on ``n_envs`` envs can score an episode of ``limit`` steps:
+    one of each env's episodes of exactly that length, back to back from its first step,
+    ends in the last :data:`FINAL_FRACTION` of the run, as
+    :func:`kraby_study.run.curve.final_score` counts them (at the same env step)."""
+    per_env = steps_per_env(steps, n_envs)
+    last_end = (per_env // limit) * limit * n_envs
+    return last_end > per_env * n_envs * (1.0 - FINAL_FRACTION)
+
+
+def validate_run_length(env: Any, ppo: Any, steps: int, objective: str = REWARDS[0],
+                        where: str = "", fixed_steps: bool = False) -> None:
+    """Refuse a run whose last 10 % cannot hold the end of an episode of the env's full time
+    limit, when that is where its score comes from (the final_reward objective).
+
+    The final score is the mean reward of the episodes that end in the run's last 10 % of
+    steps. An env that only truncates (the leg, Pendulum-v1) ends every episode at its time
+    limit, so such a run would score nothing and fail "no finite score" after all its work.
+    An env that also terminates (CartPole-v1) ends some episodes earlier, but those are the
+    episodes it fails: a configuration that has learnt to last would be scored by its
+    failures, or not at all. Which kind an id is cannot be known before it runs, so the rule
+    is the same for both. Runs of at least 10 time limits per env always pass; an env
+    without a time limit is not checked. The evaluation objective scores the policy on
+    evaluation episodes instead, so its runs are not refused (their training reward is then
+    stored only when an episode ended late enough).
+
+    Args:
+        env: The run's env settings.
+        ppo: Its PPO settings (n_envs, and n_steps and batch_size for another n_envs).
+        steps: Its budget in env steps.
+        objective: How it is scored (:data:`kraby_study.records.REWARDS`).
+        where: What the message names first (a study's value, a confirm's configuration).
+        fixed_steps: The steps are not the command's budget.steps (a confirm retrains at the
+            confirmed study's): only another n_envs is offered.
+    """
+    if objective != REWARDS[0]:
+        return
+    adapter = adapter_for(env)
+    limit = adapter.time_limit(env)
+    n_envs = int(ppo["n_envs"])
+    if limit is None or scores_a_full_episode(steps, n_envs, limit):
+        return
+    per_env = steps_per_env(steps, n_envs)
+    whose = "the leg's" if adapter.kind == "leg" else f"{env['id']}'s"
+    first = math.floor(per_env * (1.0 - FINAL_FRACTION)) + 1
+    enough = -(-per_env // limit) * limit * n_envs
+    other = _other_n_envs(ppo, steps, limit)
+    offers = [] if fixed_steps else [f"budget.steps={enough} (or any from "
+                                     f"{10 * limit * n_envs} on) with ppo.n_envs={n_envs}"]
+    if other is not None:
+        offers.append(f"ppo.n_envs={other}" + ("" if fixed_steps else
+                                               f" with budget.steps={steps}"))
+    raise ConfigError(
+        f"{where}{'' if fixed_steps else 'budget.steps='}{steps}"
+        f"{' steps' if fixed_steps else ''} with ppo.n_envs={n_envs} is {per_env} steps per "
+        f"env, and no episode of the full {limit} steps ({whose} time limit) can end in the "
+        f"last 10 % of them (steps {first}-{per_env}), where the final score is taken"
+        + (f": give {', or '.join(offers)}" if offers else ""))
+
+
+def _other_n_envs(ppo: Any, steps: int, limit: int) -> int | None:
+    """The n_envs nearest the given one (the smaller first, at most twice it) with which a run
+    of ``steps`` scores a full episode and the rollout n_steps x n_envs still splits into its
+    batches (when n_steps is known)."""
+    n_envs, n_steps, batch = int(ppo["n_envs"]), ppo.get("n_steps"), ppo.get("batch_size")
+    for distance in range(1, n_envs + 1):
+        for other in (n_envs - distance, n_envs + distance):
+            if other < 1 or not scores_a_full_episode(steps, other, limit):
+                continue
+            if n_steps is None:  # not known yet (a campaign stage's earlier winner)
+                return other
+            rollout = int(n_steps) * other
+            if rollout % (int(batch) if batch is not None else 1) == 0 and rollout >= 2:
+                return other
+    return None
 
 
 def validate(cfg: DictConfig) -> None:

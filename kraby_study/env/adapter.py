@@ -72,6 +72,10 @@ class EnvAdapter(Protocol):
         """The env in a few words, as ``--dry-run`` shows it."""
         ...
 
+    def time_limit(self, env: Mapping[str, Any]) -> int | None:
+        """The most steps an episode can last (its time limit), or None when it has none."""
+        ...
+
 
 def adapter_for(env: Mapping[str, Any]) -> EnvAdapter:
     """The adapter of a run's env settings (a dict or a config node): gym when they name an

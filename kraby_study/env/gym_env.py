@@ -252,6 +252,13 @@ class GymAdapter:
         return (f"gym {facts['env_id']} ({facts['env_package']} {facts['env_version']})"
                 + (f": {shown}" if shown else ""))
 
+    def time_limit(self, env: Mapping[str, Any]) -> int | None:
+        if env.get("max_episode_steps") is not None:
+            return int(env["max_episode_steps"])
+        import_packages(env.get("packages") or ())
+        registered = gym.spec(str(env["id"])).max_episode_steps
+        return int(registered) if registered is not None else None
+
 
 def _step(env: Any, model: Any, observation: Any, normalizer: Any) -> tuple[Any, float, bool]:
     """One step of the deterministic policy (on the observation as it learnt to see it):

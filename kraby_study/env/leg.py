@@ -126,5 +126,9 @@ class LegAdapter:
         return (f"leg (KrabyOneLeg-v0 of kraby_envs: observation {env['observation']}, "
                 f"{env['max_episode_steps']}-step episodes)")
 
+    def time_limit(self, env: Mapping[str, Any]) -> int | None:
+        # Every episode of the leg lasts exactly this long: it is truncated, never terminated.
+        return int(env["max_episode_steps"])
+
 
 LEG = LegAdapter()

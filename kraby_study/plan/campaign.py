@@ -12,10 +12,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from kraby_study.config.compose import compose_config
-from kraby_study.config.validate import to_container
+from kraby_study.config.validate import RUN_LENGTH, to_container, validate_run_length
 from kraby_study.config.winner import Lookup, references, winners_from
 from kraby_study.errors import ConfigError
 from kraby_study.records import SelectRule
@@ -152,8 +152,36 @@ def campaign_of(cfg: DictConfig, overrides: Sequence[str]) -> Campaign:
             raise ConfigError(f"{_key(override)} is selected by stage "
                               f"{swept[_key(override)].study} of campaign {name}: drop "
                               f"{override}")
-    return Campaign(name=name, description=str(spec.description),
-                    start=dict(to_container(spec.start)), stages=stages, overrides=list(kept))
+    campaign = Campaign(name=name, description=str(spec.description),
+                        start=dict(to_container(spec.start)), stages=stages, overrides=list(kept))
+    for stage in stages:
+        _check_run_length(campaign, stage)
+    return campaign
+
+
+def _check_run_length(campaign: Campaign, stage: Stage) -> None:
+    """Before any stage runs, each stage's runs can be scored at its budget
+    (:func:`kraby_study.config.validate.validate_run_length`), for every value it sweeps of
+    n_envs or the time limit. A length setting an earlier stage selects is one of that stage's
+    values, each checked there; the stage is checked again when it is planned."""
+    cfg = stage_file(campaign, stage)
+    winners = {setting for setting, _ in references(cfg)}
+    if any(path in winners for path in ("budget.steps", "env.id", *RUN_LENGTH)
+           if path != stage.parameter):
+        return
+    env = {key: OmegaConf.select(cfg, f"env.{key}")
+           for key in ("id", "max_episode_steps", "packages") if key in cfg.env}
+    ppo = {key: None if f"ppo.{key}" in winners else OmegaConf.select(cfg, f"ppo.{key}")
+           for key in ("n_envs", "n_steps", "batch_size")}
+    where = f"campaign {campaign.name}, stage {stage.number} ({stage.study})"
+    swept = stage.parameter in RUN_LENGTH
+    for value in to_container(cfg.study["values"]) if swept else [None]:
+        root, key = stage.parameter.split(".", 1)
+        settings = {"env": dict(env), "ppo": dict(ppo)}
+        if swept:
+            settings[root][key] = value
+        validate_run_length(settings["env"], settings["ppo"], int(cfg.budget.steps),
+                            where=f"{where}, value {value!r}: " if swept else f"{where}: ")
 
 
 def _check_reference(name: str, studies: list[str], number: int, setting: str,

@@ -17,6 +17,7 @@ from typing import Any
 
 from omegaconf import DictConfig
 
+from kraby_study.config.validate import validate_run_length
 from kraby_study.errors import ConfigError
 from kraby_study.plan.racing import race_rules
 from kraby_study.plan.settings import model_path, settings_with_ppo, tensorboard_run
@@ -152,6 +153,10 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
     steps = source.steps if source else int(cfg.budget.steps)
     curve_every = source.curve_every if source else int(cfg.budget.curve_every)
     name = confirm_name(source.name if source else None, [a.label for a in baselines])
+    at = f" at {source.name}'s {steps} steps" if source else ""
+    for arm in arms:
+        validate_run_length(arm.settings["env"], arm.settings["ppo"], steps, objective,
+                            where=f"confirm{at}, {arm.label}: ", fixed_steps=source is not None)
     specs = [TrialSpec(study=name, key=sweep_key(index, seed), seed=seed, steps=steps,
                        curve_every=curve_every, settings=arm.settings, value=arm.label,
                        model_path=model_path(cfg, name, sweep_key(index, seed)),

@@ -10,7 +10,14 @@ from typing import Any
 
 from omegaconf import DictConfig
 
-from kraby_study.config.validate import rollout_size, to_container, validate_env, validate_ppo
+from kraby_study.config.validate import (
+    RUN_LENGTH,
+    rollout_size,
+    to_container,
+    validate_env,
+    validate_ppo,
+    validate_run_length,
+)
 from kraby_study.errors import ConfigError
 from kraby_study.plan.settings import resolved_settings, with_value
 from kraby_study.plan.spec import (
@@ -66,6 +73,7 @@ def validate_search(cfg: DictConfig) -> None:
     for name, param in search.params.items():
         _validate_param(cfg, str(name), param)
     _validate_batches(cfg)
+    _validate_run_lengths(cfg)
 
 
 def objectives(cfg: DictConfig) -> list[str]:
@@ -175,6 +183,22 @@ def _validate_batches(cfg: DictConfig) -> None:
                 if rollout % int(count) or rollout // int(count) < 2:
                     _fail(f"search.params: nminibatches {count} does not split the rollout "
                           f"{n_steps} x {n_envs} = {rollout} into batches of at least 2")
+
+
+def _validate_run_lengths(cfg: DictConfig) -> None:
+    """Every trial the space allows can be scored by the search's reward: each n_envs and time
+    limit it may sample, at the budget (:func:`kraby_study.config.validate.validate_run_length`).
+    """
+    env, ppo = to_container(cfg.env), to_container(cfg.ppo)
+    paths = [str(param.path) for param in cfg.search.params.values()]
+    searched = [path for path in RUN_LENGTH if path in paths]
+    for n_envs in _choices(cfg, "ppo.n_envs", ppo["n_envs"]):
+        for limit in _choices(cfg, "env.max_episode_steps", env.get("max_episode_steps")):
+            values = {"ppo.n_envs": n_envs, "env.max_episode_steps": limit}
+            where = ", ".join(f"{path}={values[path]}" for path in searched)
+            validate_run_length({**env, "max_episode_steps": limit}, {**ppo, "n_envs": n_envs},
+                                int(cfg.budget.steps), objectives(cfg)[0],
+                                where=f"search.params, {where}: " if where else "")
 
 
 def apply_params(cfg: DictConfig, params: dict[str, Any]) -> DictConfig:

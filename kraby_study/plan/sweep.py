@@ -5,7 +5,13 @@ from __future__ import annotations
 
 from omegaconf import DictConfig
 
-from kraby_study.config.validate import to_container, validate_env, validate_ppo
+from kraby_study.config.validate import (
+    RUN_LENGTH,
+    to_container,
+    validate_env,
+    validate_ppo,
+    validate_run_length,
+)
 from kraby_study.errors import ConfigError
 from kraby_study.plan.racing import race_rules
 from kraby_study.plan.settings import (
@@ -43,6 +49,10 @@ def expand_study(cfg: DictConfig) -> StudyPlan:
             validate_ppo(trial_cfg.ppo)
         except ConfigError as err:
             raise ConfigError(f"study {study.name}, value {value!r}: {err}") from None
+        # Named by its value only where the value sets the run's length.
+        validate_run_length(trial_cfg.env, trial_cfg.ppo, int(cfg.budget.steps),
+                            where=f"study {study.name}, value {value!r}: "
+                            if str(study.parameter) in RUN_LENGTH else "")
         settings = resolved_settings(trial_cfg)
         named = f"{param_name(str(study.parameter))}={value_label(value)}"
         logs = tensorboard_run(cfg, str(study.name), named)

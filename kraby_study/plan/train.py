@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from omegaconf import DictConfig
 
-from kraby_study.config.validate import validate_env, validate_ppo
+from kraby_study.config.validate import validate_env, validate_ppo, validate_run_length
 from kraby_study.plan.settings import model_path, resolved_settings, tensorboard_run
 from kraby_study.plan.spec import StudyPlan, TrialSpec, fingerprint, seeding_of, with_seeding
 from kraby_study.records import StudyKind, train_key
@@ -18,6 +18,7 @@ def train_plan(cfg: DictConfig) -> StudyPlan:
     """
     validate_env(cfg.env, cfg.ppo)
     validate_ppo(cfg.ppo)
+    validate_run_length(cfg.env, cfg.ppo, int(cfg.budget.steps))
     settings = resolved_settings(cfg)
     scheme = seeding_of(cfg)
     definition = with_seeding({"kind": StudyKind.TRAIN.value, "settings": settings,

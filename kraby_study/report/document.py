@@ -170,11 +170,16 @@ def to_html(blocks: Sequence[Block], title: str) -> str:
     return "\n".join(parts)
 
 
+CSV_DIGITS = 6
+"""Significant digits of every float the report's CSV files hold."""
+
+
 def write_csvs(folder: Path, frames: Sequence[tuple[str, pd.DataFrame]]) -> list[Path]:
-    """Write named tables as CSV files in a folder; returns their paths."""
+    """Write named tables as CSV files in a folder, floats to :data:`CSV_DIGITS` significant
+    digits; returns their paths."""
     paths = []
     for name, frame in frames:
         path = folder / name
-        frame.to_csv(path, index=False, float_format="%.6g")
+        frame.to_csv(path, index=False, float_format=f"%.{CSV_DIGITS}g")
         paths.append(path)
     return paths

@@ -7,10 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kraby_study.records import CurvePoint
-
-FINAL_FRACTION = 0.1
-"""The final score averages the episodes that end in this last fraction of training."""
+from kraby_study.records import FINAL_FRACTION, CurvePoint
 
 Episode = tuple[int, float, float]
 
