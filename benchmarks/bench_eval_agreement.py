@@ -2,7 +2,7 @@
 saved models; and the evaluation's cost as a share of training.
 
 Run: python benchmarks/bench_eval_agreement.py [--folder DIR] [--seeds 6] [--workers 2]
-    [--episodes 200] [env=gym env.id=Pendulum-v1 ppo=zoo budget=zoo ...]
+    [--episodes 200] [--tool-episodes N] [--scored] [env=gym env.id=Pendulum-v1 ppo=zoo ...]
 
 1. Trains the settings given (default: rl-zoo3's Pendulum-v1 settings at rl-zoo3's 100,000
    steps, ``ppo=zoo budget=zoo``) with this tool on ``--seeds`` seeds from 0 (``kraby-study
@@ -11,9 +11,12 @@ Run: python benchmarks/bench_eval_agreement.py [--folder DIR] [--seeds 6] [--wor
    number of evaluation episodes drawn from the run's own evaluation stream, with the
    standard error of that mean from its episodes.
 2. Scores every saved model again with SB3's ``evaluate_policy`` (deterministic, ``--episodes``
-   episodes on ``make_vec_env(ID, n_envs=1, seed=...)``, a seed no training stream uses, with
-   the model's VecNormalize statistics when it has them), the standard error from the
-   episode returns.
+   episodes on ``make_vec_env(ID, n_envs=1, seed=SB3_SEED + run seed)``: each model its own
+   episodes, so the models' evaluations are independent, as the tool's are; with the model's
+   VecNormalize statistics when it has them), the standard error from the episode returns.
+   ``--tool-episodes N`` scores the tool's side again on the first N episodes of each run's
+   evaluation stream (the stored score is its first ``eval_episodes``); ``--scored`` skips the
+   training and scores the store already in ``--folder``.
 3. Prints, per model, both scores, their difference and z = difference / sqrt(se_tool^2 +
    se_sb3^2); then the mean over the models of both and the z of that difference (the models'
    evaluations are independent, so its standard error is the root sum of squares over n);
@@ -39,8 +42,10 @@ from pathlib import Path
 import numpy as np
 
 SB3_SEED = 987_654_321
-"""Seed of SB3's evaluation env: its resets are SB3's seed + episode convention, apart from
-every training stream (children of SeedSequence(run seed)) and evaluation stream here."""
+"""Seed of SB3's evaluation env, plus the run's seed: its first reset is seeded with it and
+later ones continue the env's generator, apart from every training stream (children of
+SeedSequence(run seed)) and evaluation stream here. One seed for every model would score them
+all on one set of episodes, whose sampling error the mean over models would then share."""
 
 
 def train(folder: Path, seeds: int, workers: int, overrides: list[str]) -> Path:
@@ -58,14 +63,14 @@ def train(folder: Path, seeds: int, workers: int, overrides: list[str]) -> Path:
     return store
 
 
-def sb3_scores(model: object, env_id: str, episodes: int, normalizer_file: Path | None
-               ) -> np.ndarray:
-    """The episode returns of SB3's evaluate_policy on a fresh seeded env."""
+def sb3_scores(model: object, env_id: str, episodes: int, normalizer_file: Path | None,
+               seed: int) -> np.ndarray:
+    """The episode returns of SB3's evaluate_policy on a fresh env seeded ``seed``."""
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.evaluation import evaluate_policy
     from stable_baselines3.common.vec_env import VecNormalize
 
-    env = make_vec_env(env_id, n_envs=1, seed=SB3_SEED)
+    env = make_vec_env(env_id, n_envs=1, seed=seed)
     if normalizer_file is not None and normalizer_file.is_file():
         env = VecNormalize.load(str(normalizer_file), env)
         env.training, env.norm_reward = False, False
@@ -82,12 +87,18 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=6)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--episodes", type=int, default=200)
+    parser.add_argument("--tool-episodes", type=int, default=None,
+                        help="score the tool's side on this many episodes of each run's "
+                             "stream (default: the stored score's)")
+    parser.add_argument("--scored", action="store_true",
+                        help="score the store already in --folder, without training")
     parser.add_argument("overrides", nargs="*",
                         default=["env=gym", "env.id=Pendulum-v1", "ppo=zoo", "budget=zoo"])
     args = parser.parse_args()
     folder = args.folder or Path(tempfile.mkdtemp(prefix="agreement-"))
     folder.mkdir(parents=True, exist_ok=True)
-    store = train(folder, args.seeds, args.workers, list(args.overrides))
+    store = (folder / "agreement.db" if args.scored
+             else train(folder, args.seeds, args.workers, list(args.overrides)))
 
     import optuna
     import torch
@@ -116,15 +127,19 @@ def main() -> None:
 
             with stats.open("rb") as handle:
                 normalizer = pickle.load(handle)
-        episodes = int(study.user_attrs["kraby_definition"]["eval_episodes"])
+        stored = int(study.user_attrs["kraby_definition"]["eval_episodes"])
+        episodes = args.tool_episodes or stored
         if not rows:  # imports and first calls are not the evaluation's cost
             adapter_for(env).evaluate(model, env, 2, normalizer, seed=attrs["seed"])
         t0 = time.process_time()
         again = adapter_for(env).evaluate(model, env, episodes, normalizer, seed=attrs["seed"])
         seconds = time.process_time() - t0
-        tool, tool_se = float(trial.value), float(attrs["eval_errors"][0])
-        assert math.isclose(again.mean, tool, rel_tol=1e-9), "the stored score is not rescored"
-        theirs = sb3_scores(model, str(env["id"]), args.episodes, stats)
+        tool, tool_se = again.mean, again.error
+        if episodes == stored:
+            assert math.isclose(again.mean, float(trial.value), rel_tol=1e-9), (
+                "the stored score is not rescored")
+        theirs = sb3_scores(model, str(env["id"]), args.episodes, stats,
+                            SB3_SEED + int(attrs["seed"]))
         sb3, sb3_se = float(theirs.mean()), float(theirs.std(ddof=1) / math.sqrt(len(theirs)))
         z = (tool - sb3) / math.hypot(tool_se, sb3_se)
         rows.append((tool, tool_se, sb3, sb3_se, z, seconds, float(attrs["cpu_time"])))
