@@ -279,9 +279,11 @@ def test_evaluation_is_deterministic_for_a_model(tmp_path: Path) -> None:
     env = gym.make(kraby_envs.ENV_ID)
     model = PPO("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [8]})
     evaluate = adapter_for(settings["env"]).evaluate
-    first = evaluate(model, settings["env"], 4)
-    assert first == evaluate(model, settings["env"], 4)
-    assert -2.0 < first < 0
+    for seed in (None, 3):  # the fixed set of studies stored before; a run's own
+        first = evaluate(model, settings["env"], 4, seed=seed)
+        assert first == evaluate(model, settings["env"], 4, seed=seed)
+        assert len(first.returns) == 4 and -2.0 < first.mean < 0
+    assert evaluate(model, settings["env"], 4, seed=3) != evaluate(model, settings["env"], 4)
 
 
 # The wilcoxon pruner races a trial's seeds: a trial's seed scores are constructed here (the
@@ -312,7 +314,7 @@ def test_wilcoxon_pruner_stops_the_seeds_of_a_trial_worse_on_the_same_seeds(
     def learn(spec: object, seed: int, recorder: object, shards: int) -> object:
         return trial_module._Seed(env_steps=spec.steps)  # type: ignore[attr-defined]
 
-    def score(spec: object, run: object) -> None:
+    def score(spec: object, run: object, seed: int) -> None:
         delta = spec.settings["env"]["delta"]  # type: ignore[attr-defined]
         index = len(trained[spec.key])  # type: ignore[attr-defined]
         run.score = run.train_reward = SEED_SCORES[delta][index]  # type: ignore[attr-defined]
