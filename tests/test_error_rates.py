@@ -4,6 +4,7 @@ family-wise error of the step-down by simulation."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -189,3 +190,65 @@ def test_a_race_selects_within_the_margin(monkeypatch: pytest.MonkeyPatch, confi
     found = bench.race_selection((5, 10, "skewed", config, races, 35, 0.6))  # type: ignore[attr-defined]
     outside = found[4]
     assert outside <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / races)
+
+
+SPREAD_SIMULATIONS = 1000
+SPREAD_TOLERANCE = 0.05 + 3 * math.sqrt(0.05 * 0.95 / SPREAD_SIMULATIONS)
+"""alpha plus 3 Monte-Carlo standard errors at alpha (0.071 at 1,000 simulations)."""
+_spread_rates: dict[tuple[int, int, str, str], tuple[float, float]] = {}
+
+
+@pytest.fixture(scope="module")
+def bench() -> Iterator[object]:
+    """benchmarks/bench_error_rates.py, loaded once for the unequal-spread cells."""
+    with pytest.MonkeyPatch.context() as patch:
+        yield _bench_error_rates(patch)
+
+
+def _spread_rates_of(bench: object, k: int, n: int, noise: str, wide: str
+                     ) -> tuple[float, float]:
+    """The benchmark's P(false equivalent) and P(false worse) of one unequal-spread cell, once
+    for both answers' tests."""
+    key = (k, n, noise, wide)
+    if key not in _spread_rates:
+        _, _, _, equivalent, worse = bench.spread_error(  # type: ignore[attr-defined]
+            (k, n, noise, wide, SPREAD_SIMULATIONS, 40, 0.2))
+        _spread_rates[key] = (equivalent, worse)
+    return _spread_rates[key]
+
+
+BEYOND_ALPHA = {
+    # (values, seeds, noise, wide, answer) where the Welch t-tests of the contrast do not hold
+    # alpha, measured here above the tolerance. No test of the mean tried holds there at 3 to
+    # 10 seeds (docs/statistics.md, "Unequal spreads with skew"): a sample of the wide value
+    # that drew no failure, or none of the lognormal's long upper tail, looks like a normal
+    # sample of a higher (failing) or lower (right-skewed) mean with a small spread.
+    (2, 5, "failing seed", "tested", "equivalent"), (2, 10, "failing seed", "tested", "equivalent"),
+    (4, 10, "failing seed", "tested", "equivalent"), (2, 10, "failing seed", "best", "worse"),
+    (2, 5, "right-skewed", "tested", "worse"), (2, 10, "right-skewed", "tested", "worse"),
+    (4, 5, "right-skewed", "tested", "worse"), (4, 10, "right-skewed", "tested", "worse"),
+    (2, 3, "right-skewed", "best", "equivalent"), (2, 5, "right-skewed", "best", "equivalent"),
+    (2, 10, "right-skewed", "best", "equivalent"), (4, 5, "right-skewed", "best", "equivalent"),
+    (4, 10, "right-skewed", "best", "equivalent"),
+}
+SPREAD_CELLS = [
+    pytest.param(*cell, marks=pytest.mark.xfail(
+        strict=True, reason="beyond alpha: docs/statistics.md, unequal spreads with skew"))
+    if cell in BEYOND_ALPHA else cell
+    for cell in ((k, n, noise, wide, answer)
+                 for noise in ("normal", "failing seed", "right-skewed")
+                 for wide in ("tested", "best")
+                 for k, n in ((2, 3), (2, 5), (2, 10), (4, 3), (4, 5), (4, 10))
+                 for answer in ("equivalent", "worse"))]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("k", "n", "noise", "wide", "answer"), SPREAD_CELLS)
+def test_each_wrong_answer_with_unequal_spreads(bench: object, k: int, n: int, noise: str,
+                                                wide: str, answer: str) -> None:
+    # The benchmark's unequal-spread cells, smaller: sd 0.25 against 1 (the margin), the others
+    # exactly the margin below the best, the wide values the tested ones or the best. A false
+    # "equivalent" or a false "worse" at most alpha to within 3 Monte-Carlo SE; where it is
+    # not (BEYOND_ALPHA), the test is expected to fail, and passing there fails it (strict).
+    equivalent, worse = _spread_rates_of(bench, k, n, noise, wide)
+    assert (equivalent if answer == "equivalent" else worse) <= SPREAD_TOLERANCE
