@@ -10,7 +10,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kraby_study.comparison import compare_with_best, welch_greater_p, welch_two_sided_p
+from kraby_study.comparison import (
+    compare,
+    compare_with_best,
+    welch_greater_p,
+    welch_two_sided_p,
+)
 from kraby_study.config.compose import compose_config
 from kraby_study.errors import ConfigError
 from kraby_study.selection import select
@@ -134,19 +139,24 @@ def test_mean_interval_covers_at_five_seeds_and_more(shape: str, n: int) -> None
         assert coverage <= 0.95 + 3 * math.sqrt(0.95 * 0.05 / simulations)
 
 
-def _bench_error_rates(monkeypatch: pytest.MonkeyPatch) -> object:
-    """benchmarks/bench_error_rates.py as a module: the slow tier holds its measurements."""
+def _benchmark(monkeypatch: pytest.MonkeyPatch, name: str) -> object:
+    """benchmarks/<name>.py as a module: the slow tier holds its measurements."""
     import importlib.util
     import sys
     from pathlib import Path
 
-    path = Path(__file__).parents[1] / "benchmarks" / "bench_error_rates.py"
-    spec = importlib.util.spec_from_file_location("bench_error_rates", path)
+    path = Path(__file__).parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, "bench_error_rates", module)
+    monkeypatch.setitem(sys.modules, name, module)
     spec.loader.exec_module(module)
     return module
+
+
+def _bench_error_rates(monkeypatch: pytest.MonkeyPatch) -> object:
+    """benchmarks/bench_error_rates.py as a module."""
+    return _benchmark(monkeypatch, "bench_error_rates")
 
 
 @pytest.mark.slow
@@ -252,3 +262,24 @@ def test_each_wrong_answer_with_unequal_spreads(bench: object, k: int, n: int, n
     # not (BEYOND_ALPHA), the test is expected to fail, and passing there fails it (strict).
     equivalent, worse = _spread_rates_of(bench, k, n, noise, wide)
     assert (equivalent if answer == "equivalent" else worse) <= SPREAD_TOLERANCE
+
+
+def test_the_candidates_rules_reproduce_compare(monkeypatch: pytest.MonkeyPatch) -> None:
+    # bench_skewed_spreads.py puts other tests of the contrast into compare's rules; fed
+    # Welch's p-values, its rules must give compare's answers, or its comparison of tests is
+    # not one of tests alone. Random families: 2 to 5 values, 3 to 10 seeds, sds 0.05 to 2.
+    _bench_error_rates(monkeypatch)
+    candidates = _benchmark(monkeypatch, "bench_skewed_spreads")
+    rng = np.random.default_rng(40)
+    answered = np.zeros(2, dtype=int)
+    for _ in range(400):
+        k, n = int(rng.integers(2, 6)), int(rng.integers(3, 11))
+        x = -5.0 + rng.normal(size=(k, n)) * rng.uniform(0.05, 2.0, size=(k, 1))
+        x[1:] -= rng.uniform(0.0, 2.5, size=(k - 1, 1))
+        result = compare({g: x[g] for g in range(k)}, 0.2)
+        worse, equivalent = candidates.answers(  # type: ignore[attr-defined]
+            list(x), 0.2, candidates.welch, rng)  # type: ignore[attr-defined]
+        assert (worse, equivalent) == (set(result.worse), set(result.equivalent))
+        answered += [bool(worse), bool(equivalent)]
+    # Both answers are given often enough for the comparison to mean something.
+    assert min(answered) >= 20, answered
