@@ -36,8 +36,8 @@ further multiplicity. At delta = 0 no value is equivalent.
 Each kind of wrong answer has probability at most alpha; a wrong answer of either kind at most
 2 alpha (Bonferroni). Both are measured in ``benchmarks/bench_error_rates.py``, as far as the
 t approximation holds: it does not with skewed scores whose spreads differ. With spreads 1:4
-and a failing seed or lognormal (sigma 1) scores, a value truly on the margin was answered
-equivalent up to 0.2 of the time and worse up to 0.15 at 3 to 10 seeds, and no other test of
+and a failing seed or lognormal (sigma 1) scores, values truly on the margin were answered
+equivalent up to 0.217 of the time and worse up to 0.168 at 3 to 10 seeds, and no other test of
 the mean measured (``benchmarks/bench_skewed_spreads.py``: bootstrap-t, Yuen's, a stricter
 level, refusing on unequal spreads or visible skew) holds there either; docs/statistics.md,
 "Unequal spreads with skew". Reports say so (:func:`answers_name`).
