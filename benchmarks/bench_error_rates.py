@@ -26,6 +26,11 @@
   answer a truly equal value equivalent at 5 and 10 seeds; and races at the margin and at three
   times it: P(the race's selection is truly more than the margin below the best), the runs
   they use and how often the 10 seeds' budget cuts them short.
+- Unequal spreads with skew: 2 and 4 values x 3, 5 and 10 seeds, sd 0.25 against 1 (1:4, the
+  wide one's sd the margin), the others exactly the margin below the best, the wide values
+  either the tested ones or the best, on normal (the control), failing-seed and right-skewed
+  (lognormal sigma 1) noise: P(some value answered equivalent) and P(some value answered worse),
+  both false there. The last line's max equivalence error covers these cells too.
 - The most-repeatable and fastest rules under equal truths, at unequal n.
 
 ``--write-coverage`` stores the coverage table as ``kraby_study/coverage.csv``, from which
@@ -294,6 +299,18 @@ df (heavy tails); minus a lognormal with sigma 1 (a long lower tail, as a seed t
 less); a failing seed (N(0, 1), with probability 0.1 shifted by -4)."""
 EQUIVALENCE_SHAPES = [(2, 3), (2, 5), (2, 10), (3, 5), (5, 5), (5, 10), (8, 10)]
 POWER_EQUIVALENCE = [(2, 5), (2, 10), (5, 5), (5, 10)]
+SPREAD_NOISES = ("normal", "failing seed", "right-skewed")
+"""Noises of the unequal-spread cells: normal (the control), the failing seed, and a lognormal
+with sigma 1 (a long upper tail, skewness 6.2)."""
+SPREAD_SHAPES = [(2, 3), (2, 5), (2, 10), (4, 3), (4, 5), (4, 10)]
+WIDE = ("tested", "best")
+"""Which values of an unequal-spread cell spread four times as much as the others: the values
+tested (on the margin), or the best."""
+SPREADS = (0.25, 1.0)
+"""Sd of the narrow and the wide values of the unequal-spread cells (1:4): the wide one's sd is
+the margin at the default (0.2 x |LOCATION|), where "equivalent" can be answered at 5 and 10
+seeds; with the narrow one's sd the margin, it almost never is, and a false "equivalent" cannot
+be seen."""
 RACE_SHAPES = [(3, 10), (5, 10), (8, 10)]
 RACE_CONFIGS = ("slippage", "spaced")
 """Means of the raced values: ``slippage``, the best one margin above all the others (the
@@ -301,14 +318,15 @@ indifference zone's least favourable configuration); ``spaced``, a half margin a
 
 
 def unit_noise(rng: np.random.Generator, kind: str, size: tuple[int, ...]) -> np.ndarray:
-    """Noise of one of :data:`NOISES`, mean 0 and sd 1."""
+    """Noise of one of :data:`NOISES` or :data:`SPREAD_NOISES`, mean 0 and sd 1."""
     if kind == "normal":
         return rng.normal(size=size)
     if kind == "heavy-tailed t3":
         return rng.standard_t(3, size=size) / math.sqrt(3.0)
-    if kind == "skewed":
+    if kind in ("skewed", "right-skewed"):
         z = rng.lognormal(0.0, 1.0, size=size)
-        return -(z - math.exp(0.5)) / math.sqrt((math.e - 1) * math.e)
+        sign = -1.0 if kind == "skewed" else 1.0
+        return sign * (z - math.exp(0.5)) / math.sqrt((math.e - 1) * math.e)
     failed = rng.random(size) < 0.1
     x = rng.normal(size=size) + np.where(failed, -4.0, 0.0)
     return (x + 0.4) / math.sqrt(1 + 0.09 * 16)
@@ -333,6 +351,29 @@ def equivalence_error(job: tuple[int, int, str, int, int, float]
         wrong += any(g != 0 for g in result.equivalent)
         anything += any(g != 0 for g in result.equivalent) or bool(result.worse)
     return f"{k} x {n}", kind, wrong / simulations, anything / simulations
+
+
+def spread_error(job: tuple[int, int, str, str, int, int, float]
+                 ) -> tuple[str, str, str, float, float]:
+    """Unequal spreads (1:4, :data:`SPREADS`) with skew: the best at :data:`LOCATION`, the
+    k - 1 others exactly the margin below it, the ``wide`` values (the tested ones or the best)
+    four times as spread as the others. P(some other value answered equivalent), false since
+    each is truly on the margin; and P(some value answered worse), false since none is more
+    than the margin below the best."""
+    k, n, kind, wide, simulations, seed, fraction = job
+    rng = np.random.default_rng(seed)
+    delta = fraction * abs(LOCATION)
+    means = np.array([LOCATION] + [LOCATION - delta] * (k - 1))
+    narrow, broad = SPREADS
+    sds = np.array([broad if wide == "best" else narrow]
+                   + [broad if wide == "tested" else narrow] * (k - 1))
+    equivalent = worse = 0
+    for _ in range(simulations):
+        x = means[:, None] + sds[:, None] * unit_noise(rng, kind, (k, n))
+        result = compare({g: x[g] for g in range(k)}, fraction)
+        equivalent += any(g != 0 for g in result.equivalent)
+        worse += bool(result.worse)
+    return f"{k} x {n}", kind, wide, equivalent / simulations, worse / simulations
 
 
 def equivalence_power(job: tuple[int, int, str, int, int, float]) -> tuple[str, str, float]:
@@ -443,6 +484,10 @@ def main() -> None:
         equivalence = list(pool.map(equivalence_error, [
             (k, n, kind, sims, SEED + 500 + 10 * i + j, margin)
             for i, (k, n) in enumerate(EQUIVALENCE_SHAPES) for j, kind in enumerate(NOISES)]))
+        spread = list(pool.map(spread_error, [
+            (k, n, kind, wide, sims, SEED + 2000 + 100 * h + 10 * i + j, margin)
+            for h, wide in enumerate(WIDE) for i, (k, n) in enumerate(SPREAD_SHAPES)
+            for j, kind in enumerate(SPREAD_NOISES)]))
         found = list(pool.map(equivalence_power, [
             (k, n, kind, sims // 2, SEED + 700 + 10 * i + j, margin)
             for i, (k, n) in enumerate(POWER_EQUIVALENCE) for j, kind in enumerate(NOISES)]))
@@ -497,6 +542,17 @@ def main() -> None:
           "Bonferroni):")
     print(table(eq_frame.pivot_table(index="values x seeds", columns="noise",
                                      values="P(any wrong answer)", sort=False).reset_index()))
+    spread_frame = pd.DataFrame(spread, columns=["values x seeds", "noise", "wide",
+                                                 "P(false equivalent)", "P(false worse)"])
+    narrow, broad = SPREADS
+    print(f"\nUnequal spreads with skew ({sims:,} simulations each, Monte-Carlo SE {se:.3f} at "
+          f"0.05): sd {narrow:g} against {broad:g} (the margin), the others exactly the margin "
+          "below the best; wide: the values tested are the wide ones, or the best is. "
+          "P(some value answered equivalent) and P(some value answered worse), both false here:")
+    print(table(spread_frame.pivot_table(
+        index=["values x seeds", "wide"], columns="noise",
+        values=["P(false equivalent)", "P(false worse)"], sort=False).pipe(
+            lambda f: f.set_axis([f"{a}, {b}" for a, b in f.columns], axis=1)).reset_index()))
     print(f"\nPower: share of truly equal values answered equivalent ({sims // 2:,} "
           "simulations each):")
     print(table(pd.DataFrame(found, columns=["values x seeds", "noise", "power"]).pivot_table(
@@ -534,10 +590,17 @@ def main() -> None:
           f", {worst_race['noise']}, {worst_race['means']}, margin "
           f"{worst_race['margin (sd)']:g} sd); min power at 10 seeds "
           f"{min(p for shape, _, p in found if shape.endswith('x 10')):.3f}")
+    worst_worse = spread_frame.loc[spread_frame["P(false worse)"].idxmax()]
+    print(f"max P(false worse) with unequal spreads {worst_worse['P(false worse)']:.3f} "
+          f"({worst_worse['values x seeds']}, {worst_worse['noise']}, wide "
+          f"{worst_worse['wide']}); max P(false equivalent) at equal spreads "
+          f"{float(eq_frame['P(false equivalent)'].max()):.3f}")
+    equivalence_max = max(float(eq_frame["P(false equivalent)"].max()),
+                          float(spread_frame["P(false equivalent)"].max()))
     # Rounded down, so that the line never shows more coverage than was measured.
     print(f"max family-wise error {worst:.3f} over {len(SHAPES)} shapes (alpha {ALPHA:g}); "
           f"min coverage at n>=5 {math.floor(least * 100 + 1e-9) / 100:.2f}; "
-          f"max equivalence error {float(eq_frame['P(false equivalent)'].max()):.3f}")
+          f"max equivalence error {equivalence_max:.3f}")
 
 
 if __name__ == "__main__":

@@ -4,12 +4,18 @@ family-wise error of the step-down by simulation."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
 from scipy import stats
 
-from kraby_study.comparison import compare_with_best, welch_greater_p, welch_two_sided_p
+from kraby_study.comparison import (
+    compare,
+    compare_with_best,
+    welch_greater_p,
+    welch_two_sided_p,
+)
 from kraby_study.config.compose import compose_config
 from kraby_study.errors import ConfigError
 from kraby_study.selection import select
@@ -133,19 +139,24 @@ def test_mean_interval_covers_at_five_seeds_and_more(shape: str, n: int) -> None
         assert coverage <= 0.95 + 3 * math.sqrt(0.95 * 0.05 / simulations)
 
 
-def _bench_error_rates(monkeypatch: pytest.MonkeyPatch) -> object:
-    """benchmarks/bench_error_rates.py as a module: the slow tier holds its measurements."""
+def _benchmark(monkeypatch: pytest.MonkeyPatch, name: str) -> object:
+    """benchmarks/<name>.py as a module: the slow tier holds its measurements."""
     import importlib.util
     import sys
     from pathlib import Path
 
-    path = Path(__file__).parents[1] / "benchmarks" / "bench_error_rates.py"
-    spec = importlib.util.spec_from_file_location("bench_error_rates", path)
+    path = Path(__file__).parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, "bench_error_rates", module)
+    monkeypatch.setitem(sys.modules, name, module)
     spec.loader.exec_module(module)
     return module
+
+
+def _bench_error_rates(monkeypatch: pytest.MonkeyPatch) -> object:
+    """benchmarks/bench_error_rates.py as a module."""
+    return _benchmark(monkeypatch, "bench_error_rates")
 
 
 @pytest.mark.slow
@@ -189,3 +200,86 @@ def test_a_race_selects_within_the_margin(monkeypatch: pytest.MonkeyPatch, confi
     found = bench.race_selection((5, 10, "skewed", config, races, 35, 0.6))  # type: ignore[attr-defined]
     outside = found[4]
     assert outside <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / races)
+
+
+SPREAD_SIMULATIONS = 1000
+SPREAD_TOLERANCE = 0.05 + 3 * math.sqrt(0.05 * 0.95 / SPREAD_SIMULATIONS)
+"""alpha plus 3 Monte-Carlo standard errors at alpha (0.071 at 1,000 simulations)."""
+_spread_rates: dict[tuple[int, int, str, str], tuple[float, float]] = {}
+
+
+@pytest.fixture(scope="module")
+def bench() -> Iterator[object]:
+    """benchmarks/bench_error_rates.py, loaded once for the unequal-spread cells."""
+    with pytest.MonkeyPatch.context() as patch:
+        yield _bench_error_rates(patch)
+
+
+def _spread_rates_of(bench: object, k: int, n: int, noise: str, wide: str
+                     ) -> tuple[float, float]:
+    """The benchmark's P(false equivalent) and P(false worse) of one unequal-spread cell, once
+    for both answers' tests."""
+    key = (k, n, noise, wide)
+    if key not in _spread_rates:
+        _, _, _, equivalent, worse = bench.spread_error(  # type: ignore[attr-defined]
+            (k, n, noise, wide, SPREAD_SIMULATIONS, 40, 0.2))
+        _spread_rates[key] = (equivalent, worse)
+    return _spread_rates[key]
+
+
+BEYOND_ALPHA = {
+    # (values, seeds, noise, wide, answer) where the Welch t-tests of the contrast do not hold
+    # alpha, measured here above the tolerance. No test of the mean tried holds there at 3 to
+    # 10 seeds (docs/statistics.md, "Unequal spreads with skew"): a sample of the wide value
+    # that drew no failure, or none of the lognormal's long upper tail, looks like a normal
+    # sample of a higher (failing) or lower (right-skewed) mean with a small spread.
+    (2, 5, "failing seed", "tested", "equivalent"), (2, 10, "failing seed", "tested", "equivalent"),
+    (4, 10, "failing seed", "tested", "equivalent"), (2, 10, "failing seed", "best", "worse"),
+    (2, 5, "right-skewed", "tested", "worse"), (2, 10, "right-skewed", "tested", "worse"),
+    (4, 5, "right-skewed", "tested", "worse"), (4, 10, "right-skewed", "tested", "worse"),
+    (2, 3, "right-skewed", "best", "equivalent"), (2, 5, "right-skewed", "best", "equivalent"),
+    (2, 10, "right-skewed", "best", "equivalent"), (4, 5, "right-skewed", "best", "equivalent"),
+    (4, 10, "right-skewed", "best", "equivalent"),
+}
+SPREAD_CELLS = [
+    pytest.param(*cell, marks=pytest.mark.xfail(
+        strict=True, reason="beyond alpha: docs/statistics.md, unequal spreads with skew"))
+    if cell in BEYOND_ALPHA else cell
+    for cell in ((k, n, noise, wide, answer)
+                 for noise in ("normal", "failing seed", "right-skewed")
+                 for wide in ("tested", "best")
+                 for k, n in ((2, 3), (2, 5), (2, 10), (4, 3), (4, 5), (4, 10))
+                 for answer in ("equivalent", "worse"))]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("k", "n", "noise", "wide", "answer"), SPREAD_CELLS)
+def test_each_wrong_answer_with_unequal_spreads(bench: object, k: int, n: int, noise: str,
+                                                wide: str, answer: str) -> None:
+    # The benchmark's unequal-spread cells, smaller: sd 0.25 against 1 (the margin), the others
+    # exactly the margin below the best, the wide values the tested ones or the best. A false
+    # "equivalent" or a false "worse" at most alpha to within 3 Monte-Carlo SE; where it is
+    # not (BEYOND_ALPHA), the test is expected to fail, and passing there fails it (strict).
+    equivalent, worse = _spread_rates_of(bench, k, n, noise, wide)
+    assert (equivalent if answer == "equivalent" else worse) <= SPREAD_TOLERANCE
+
+
+def test_the_candidates_rules_reproduce_compare(monkeypatch: pytest.MonkeyPatch) -> None:
+    # bench_skewed_spreads.py puts other tests of the contrast into compare's rules; fed
+    # Welch's p-values, its rules must give compare's answers, or its comparison of tests is
+    # not one of tests alone. Random families: 2 to 5 values, 3 to 10 seeds, sds 0.05 to 2.
+    _bench_error_rates(monkeypatch)
+    candidates = _benchmark(monkeypatch, "bench_skewed_spreads")
+    rng = np.random.default_rng(40)
+    answered = np.zeros(2, dtype=int)
+    for _ in range(400):
+        k, n = int(rng.integers(2, 6)), int(rng.integers(3, 11))
+        x = -5.0 + rng.normal(size=(k, n)) * rng.uniform(0.05, 2.0, size=(k, 1))
+        x[1:] -= rng.uniform(0.0, 2.5, size=(k - 1, 1))
+        result = compare({g: x[g] for g in range(k)}, 0.2)
+        worse, equivalent = candidates.answers(  # type: ignore[attr-defined]
+            list(x), 0.2, candidates.welch, rng)  # type: ignore[attr-defined]
+        assert (worse, equivalent) == (set(result.worse), set(result.equivalent))
+        answered += [bool(worse), bool(equivalent)]
+    # Both answers are given often enough for the comparison to mean something.
+    assert min(answered) >= 20, answered
