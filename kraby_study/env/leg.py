@@ -25,7 +25,8 @@ DEFAULTS: dict[str, Any] = {"observation": "default", "delta": 0.5, "time_step":
 one (a model drawn from settings stored by an older version)."""
 
 GIF_TARGETS = 3
-"""Episodes the GIF draws: the first of the fixed targets evaluation scores."""
+"""Episodes the GIF draws: the first fixed targets (the evaluation set of studies stored before
+runs drew their own)."""
 GIF_STEPS = 32
 """Env steps per target in the GIF."""
 HOLD_MS = 700

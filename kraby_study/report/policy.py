@@ -1,9 +1,11 @@
-"""Seeing a trained policy: an animated GIF of a saved model's first evaluation episodes.
+"""Seeing a trained policy: an animated GIF of a saved model on a few fixed episodes.
 
 Rendered offscreen from the SB3 model file (and its VecNormalize statistics, if it was trained
 with them) and the environment settings the run was trained with, by the env's adapter
 (:mod:`kraby_study.env`): the leg reaching its first fixed targets, a Gymnasium env's first
-seeded evaluation episodes. Actions are deterministic, so a rerun draws the same GIF.
+episodes of the fixed set (the same for every GIF, so that GIFs of two values show the same
+starts; a run's score comes from episodes of its own). Actions are deterministic, so a rerun
+draws the same GIF.
 """
 
 from __future__ import annotations
