@@ -353,6 +353,18 @@ def equivalence_error(job: tuple[int, int, str, int, int, float]
     return f"{k} x {n}", kind, wrong / simulations, anything / simulations
 
 
+def spread_cell(k: int, wide: str, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """The true means and sds of an unequal-spread cell: the best at :data:`LOCATION`, the
+    k - 1 others exactly the margin below it; the wide values (the larger of
+    :data:`SPREADS`) the tested ones (``wide`` "tested") or the best ("best")."""
+    delta = fraction * abs(LOCATION)
+    means = np.array([LOCATION] + [LOCATION - delta] * (k - 1))
+    narrow, broad = SPREADS
+    sds = np.array([broad if wide == "best" else narrow]
+                   + [broad if wide == "tested" else narrow] * (k - 1))
+    return means, sds
+
+
 def spread_error(job: tuple[int, int, str, str, int, int, float]
                  ) -> tuple[str, str, str, float, float]:
     """Unequal spreads (1:4, :data:`SPREADS`) with skew: the best at :data:`LOCATION`, the
@@ -362,11 +374,7 @@ def spread_error(job: tuple[int, int, str, str, int, int, float]
     than the margin below the best."""
     k, n, kind, wide, simulations, seed, fraction = job
     rng = np.random.default_rng(seed)
-    delta = fraction * abs(LOCATION)
-    means = np.array([LOCATION] + [LOCATION - delta] * (k - 1))
-    narrow, broad = SPREADS
-    sds = np.array([broad if wide == "best" else narrow]
-                   + [broad if wide == "tested" else narrow] * (k - 1))
+    means, sds = spread_cell(k, wide, fraction)
     equivalent = worse = 0
     for _ in range(simulations):
         x = means[:, None] + sds[:, None] * unit_noise(rng, kind, (k, n))

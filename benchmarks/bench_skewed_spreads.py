@@ -37,7 +37,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pandas as pd
-from bench_error_rates import LOCATION, SPREADS, table, unit_noise
+from bench_error_rates import LOCATION, SPREADS, spread_cell, table, unit_noise
 from scipy import stats as sps
 
 from kraby_study.comparison import ALPHA, MARGIN, holm, margin_weights, welch_pairs
@@ -176,11 +176,7 @@ def error(job: tuple[str, int, int, str, str, int, int, float]
     wide values (sd 1 against 0.25) the tested ones or the best."""
     name, k, n, kind, wide, simulations, seed, fraction = job
     rng = np.random.default_rng(seed)
-    delta = fraction * abs(LOCATION)
-    means = np.array([LOCATION] + [LOCATION - delta] * (k - 1))
-    narrow, broad = SPREADS
-    sds = np.array([broad if wide == "best" else narrow]
-                   + [broad if wide == "tested" else narrow] * (k - 1))
+    means, sds = spread_cell(k, wide, fraction)
     false_equivalent = false_worse = 0
     for _ in range(simulations):
         x = means[:, None] + sds[:, None] * unit_noise(rng, kind, (k, n))
