@@ -101,7 +101,7 @@ def test_a_study_trained_with_two_torch_versions_is_warned(workdir: Path) -> Non
     storage = optuna.storages.RDBStorage(url, skip_table_creation=True)
     study = optuna.load_study(study_name="gamma", storage=storage)
     [(key, record)] = records(study).items()
-    other = dict(record, torch="2.12.0", hostname="node-b")
+    other = dict(record, torch="2.12.0", hostname="node-b", cpu="Intel Xeon (AVX-512)")
     study.set_user_attr(PROVENANCE_PREFIX + "elsewhere", other)
     # As if a second machine had trained one of the trials (finished trials are read-only to
     # Optuna, so its attribute is rewritten in its table).
@@ -116,6 +116,14 @@ def test_a_study_trained_with_two_torch_versions_is_warned(workdir: Path) -> Non
     assert f"Warning: trials differ in torch: {here} (3 trials), 2.12.0 (1 trial)." in page
     assert f"| hostname | {socket.gethostname()} (3 trials), node-b (1 trial) |" in page
     assert "differ in hostname" not in page  # machines may differ; their software may not
+    # Two CPU models: the page says what that does to the seeds' numbers.
+    here_cpu = record["cpu"]
+    assert (f"Warning: trials differ in cpu: {here_cpu} (3 trials), Intel Xeon (AVX-512) (1 "
+            "trial); the same settings and seed give the same numbers bit for bit only on one "
+            "CPU model with the same software") in page
+    assert "its trials (every attempt, a lost node's too; a Ray node by its node id, else a " \
+        "host by its name): 2. CPU models: 2 (" in page
+    assert "ray_node" not in page  # no trial ran on Ray
 
 
 SPACE = """\
