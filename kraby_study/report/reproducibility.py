@@ -35,9 +35,9 @@ from kraby_study.run.provenance import ENV_FIELDS, PACKAGES
 
 FILE = "reproducibility.md"
 
-HARDWARE = ("cpu", "cores", "platform", "hostname")
+HARDWARE = ("cpu", "cpu_capability", "cores", "platform", "hostname")
 SOFTWARE = ("kraby_study", "python", *PACKAGES, "git_commit", "git_dirty")
-CHECKED = ("cpu", "cores", "platform", "kraby_study", "python", *PACKAGES, "git_commit",
+CHECKED = ("cpu", "cpu_capability", "cores", "platform", "kraby_study", "python", *PACKAGES, "git_commit",
            "git_dirty", *ENV_FIELDS)
 """Fields that can move a trial's numbers: trials that differ in one are warned about (the
 hostname, the Ray node, the folder and the command line may differ freely)."""
