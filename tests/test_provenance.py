@@ -104,7 +104,8 @@ def test_a_study_trained_with_two_torch_versions_is_warned(workdir: Path) -> Non
     storage = optuna.storages.RDBStorage(url, skip_table_creation=True)
     study = optuna.load_study(study_name="gamma", storage=storage)
     [(key, record)] = records(study).items()
-    other = dict(record, torch="2.12.0", hostname="node-b", cpu="Intel Xeon (AVX-512)")
+    other = dict(record, torch="2.12.0", hostname="node-b", cpu="Intel Xeon (AVX-512)",
+                 cpu_capability="DEFAULT")
     study.set_user_attr(PROVENANCE_PREFIX + "elsewhere", other)
     # As if a second machine had trained one of the trials (finished trials are read-only to
     # Optuna, so its attribute is rewritten in its table).
@@ -127,6 +128,8 @@ def test_a_study_trained_with_two_torch_versions_is_warned(workdir: Path) -> Non
     assert "its trials (every attempt, a lost node's too; a Ray node by its node id, else a " \
         "host by its name): 2. CPU models: 2 (" in page
     assert "ray_node" not in page  # no trial ran on Ray
+    assert (f"Warning: trials differ in cpu_capability: {record['cpu_capability']} (3 trials), "
+            "DEFAULT (1 trial); torch's kernels then sum in another order") in page
 
 
 SPACE = """\

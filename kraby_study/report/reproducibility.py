@@ -37,14 +37,18 @@ FILE = "reproducibility.md"
 
 HARDWARE = ("cpu", "cpu_capability", "cores", "platform", "hostname")
 SOFTWARE = ("kraby_study", "python", *PACKAGES, "git_commit", "git_dirty")
-CHECKED = ("cpu", "cpu_capability", "cores", "platform", "kraby_study", "python", *PACKAGES, "git_commit",
-           "git_dirty", *ENV_FIELDS)
+CHECKED = ("cpu", "cpu_capability", "cores", "platform", "kraby_study", "python", *PACKAGES,
+           "git_commit", "git_dirty", *ENV_FIELDS)
 """Fields that can move a trial's numbers: trials that differ in one are warned about (the
 hostname, the Ray node, the folder and the command line may differ freely)."""
 CPU_MODELS = ("; the same settings and seed give the same numbers bit for bit only on one CPU "
               "model with the same software, so a run of this study repeated on another of "
               "these CPU models agrees in distribution, not to the bit (docs/reproducibility.md)")
 """What the warning on trials of several CPU models adds."""
+EXPLAINED = {"cpu": CPU_MODELS,
+             "cpu_capability": "; torch's kernels then sum in another order, so the same seed "
+                               "gives other numbers (docs/reproducibility.md)"}
+"""What a warning on a field adds: what the difference does to the seeds' numbers."""
 
 
 def started(trials: Sequence[StoredTrial]) -> list[StoredTrial]:
@@ -84,7 +88,7 @@ def warnings(trials: Sequence[StoredTrial], records: dict[str, dict[str, str]]) 
         counts = field_counts(recorded, records, name)
         if len(counts) > 1:
             lines.append(f"trials differ in {name}: {counted_text(counts)}"
-                         + (CPU_MODELS if name == "cpu" else ""))
+                         + EXPLAINED.get(name, ""))
     dirty = field_counts(recorded, records, "git_dirty").get("yes", 0)
     if dirty:
         lines.append(f"{dirty} trial{'s' if dirty != 1 else ''} ran from a git checkout with "
