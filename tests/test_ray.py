@@ -28,7 +28,9 @@ from conftest import (
 )
 from optuna.trial import TrialState
 
+from kraby_study.errors import StoreError
 from kraby_study.records import PROVENANCE_PREFIX, RAY_NODE
+from kraby_study.store.rows import reading
 from kraby_study.store.store import opened
 
 pytest.importorskip("ray")
@@ -262,9 +264,15 @@ def test_a_lost_node_has_its_trials_run_on_the_others(workdir: Path, cluster: Cl
     lost = cluster.node_id(second)
     db = workdir / "ray.db"
 
-    def on_both_nodes() -> bool:  # each node's raylet has a trial actor below it
-        return all(any(cmdline(c).startswith(b"ray::Trial") for c in descendants([r]))
-                   for r in cluster.raylets())
+    def on_both_nodes() -> bool:  # each node has a trial that started (its record stored)
+        if not db.exists():
+            return False
+        try:
+            with reading(sqlite_url(db)) as reader:
+                return {r.get(RAY_NODE) for study in reader.studies()
+                        for r in study.provenance.values()} == {head, lost}
+        except StoreError:  # the command is still creating the store
+            return False
 
     code, out = killed_midway(workdir, [f"ray.address={cluster.address}",
                                         f"storage={sqlite_url(db)}"],
