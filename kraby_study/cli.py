@@ -374,10 +374,11 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 def standings_table(rows: Sequence[StudyStanding]) -> list[str]:
     """``list``'s table: one line per study, columns padded to their widest cell."""
-    header = ("study", "kind", "complete", "failed", "pruned", "running", "selected so far")
+    header = ("study", "kind", "complete", "failed", "pruned", "running", "ran on",
+              "selected so far")
     table = [header] + [(p.name, p.kind.value, f"{p.tally.complete}/{p.tally.planned}",
                          str(p.tally.failed), str(p.tally.pruned), str(p.tally.running),
-                         p.selected) for p in rows]
+                         p.placement.text(), p.selected) for p in rows]
     widths = [max(len(row[i]) for row in table) for i in range(len(header))]
     return ["  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True))
             for row in table]

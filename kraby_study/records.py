@@ -592,6 +592,41 @@ def provenance_key(facts: Mapping[str, str]) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:12]
 
 
+RAY_NODE = "ray_node"
+"""The provenance field of a trial run on Ray: the Ray node id of the actor that ran it."""
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where a study's trials ran, read from its provenance records (every attempt that
+    started, a lost node's too): the nodes and the CPU models."""
+
+    nodes: int
+    """Distinct machines: Ray nodes by node id (a node started again gets a new id), and by
+    hostname the trials run without Ray."""
+    cpus: tuple[str, ...]
+    """The distinct CPU models, sorted."""
+
+    @classmethod
+    def of(cls, records: Iterable[Mapping[str, Any]]) -> Placement:
+        """The placement of these provenance records."""
+        machines: set[str] = set()
+        cpus: set[str] = set()
+        for record in records:
+            node = record.get(RAY_NODE)
+            machines.add(f"ray:{node}" if node else f"host:{record.get('hostname')}")
+            cpus.add(str(record.get("cpu", "unknown")))
+        return cls(nodes=len(machines), cpus=tuple(sorted(cpus)))
+
+    def text(self) -> str:
+        """``-`` with no record, else ``N node(s)``, with the CPU models counted when more
+        than one: the study's seeds are then not reproducible bit for bit across them."""
+        if not self.nodes:
+            return "-"
+        where = f"{self.nodes} node{'s' if self.nodes != 1 else ''}"
+        return where if len(self.cpus) < 2 else f"{where}, {len(self.cpus)} CPU models"
+
+
 def trial_seeds(trial: StoredTrial, per_trial: int = 1) -> list[int]:
     """The seeds a trial trained: its seed and the next ``per_trial - 1`` (a search trial
     trains several one after another); none when it has no seed stored."""

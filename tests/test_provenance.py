@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
 import socket
 import subprocess
+import sys
 from importlib import metadata
 from pathlib import Path
 
@@ -15,6 +17,7 @@ from conftest import SERVER, TINY, fresh_database, load, run_cli, sqlite_url
 
 from kraby_study.records import PROVENANCE_PREFIX
 from kraby_study.run.provenance import PACKAGES, git_state, hide_passwords
+from kraby_study.store.store import opened
 
 SWEEP = ["run", "study=gamma", *TINY, "study.values=[0.8,0.99]", "workers=2"]
 
@@ -101,7 +104,8 @@ def test_a_study_trained_with_two_torch_versions_is_warned(workdir: Path) -> Non
     storage = optuna.storages.RDBStorage(url, skip_table_creation=True)
     study = optuna.load_study(study_name="gamma", storage=storage)
     [(key, record)] = records(study).items()
-    other = dict(record, torch="2.12.0", hostname="node-b")
+    other = dict(record, torch="2.12.0", hostname="node-b", cpu="Intel Xeon (AVX-512)",
+                 cpu_capability="DEFAULT")
     study.set_user_attr(PROVENANCE_PREFIX + "elsewhere", other)
     # As if a second machine had trained one of the trials (finished trials are read-only to
     # Optuna, so its attribute is rewritten in its table).
@@ -116,6 +120,16 @@ def test_a_study_trained_with_two_torch_versions_is_warned(workdir: Path) -> Non
     assert f"Warning: trials differ in torch: {here} (3 trials), 2.12.0 (1 trial)." in page
     assert f"| hostname | {socket.gethostname()} (3 trials), node-b (1 trial) |" in page
     assert "differ in hostname" not in page  # machines may differ; their software may not
+    # Two CPU models: the page says what that does to the seeds' numbers.
+    here_cpu = record["cpu"]
+    assert (f"Warning: trials differ in cpu: {here_cpu} (3 trials), Intel Xeon (AVX-512) (1 "
+            "trial); the same settings and seed give the same numbers bit for bit only on one "
+            "CPU model with the same software") in page
+    assert "its trials (every attempt, a lost node's too; a Ray node by its node id, else a " \
+        "host by its name): 2. CPU models: 2 (" in page
+    assert "ray_node" not in page  # no trial ran on Ray
+    assert (f"Warning: trials differ in cpu_capability: {record['cpu_capability']} (3 trials), "
+            "DEFAULT (1 trial); torch's kernels then sum in another order") in page
 
 
 SPACE = """\
@@ -158,3 +172,38 @@ def test_a_password_on_the_command_line_is_nowhere_in_the_store_or_the_report(
     for path in (workdir / "reports").rglob("*"):
         if path.is_file():
             assert secret.encode() not in path.read_bytes(), path
+
+
+def trained(workdir: Path, name: str, **env: str) -> tuple[float, list[float], dict[str, str]]:
+    """A TINY ``train`` run in a fresh process with ``env`` added to its environment: its
+    score, its curve and its provenance record."""
+    url = sqlite_url(workdir / f"{name}.db")
+    done = subprocess.run([sys.executable, "-m", "kraby_study.cli", "train", *TINY,
+                           "budget.steps=2048", f"storage={url}"], cwd=workdir,
+                          env={**os.environ, **env}, capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout + done.stderr
+    with opened(url, create=False, writer=False) as store:
+        (study,) = store.study_names()
+        ledger = store.load(study)
+        (trial,) = ledger.trials()
+        curve = ledger.curves([trial.number]).mean_reward.tolist()
+        record = ledger.provenances()[trial.user_attrs["provenance"]]
+    return float(trial.value), curve, record
+
+
+def test_a_seed_is_bit_for_bit_on_one_instruction_set_and_not_across_two(workdir: Path) -> None:
+    """What "reproducible" means (docs/reproducibility.md): the same settings and seed give the
+    same numbers to the bit on one CPU and software, and other numbers when torch's kernels
+    run another instruction set (ATEN_CPU_CAPABILITY=default: no SIMD, as on an older CPU),
+    since they then add in another order. The record says which set a trial ran."""
+    import torch
+
+    here = str(torch.backends.cpu.get_cpu_capability())
+    if here == "DEFAULT":
+        pytest.skip("this CPU has no SIMD set for torch to give up")
+    first, again, other = (trained(workdir, "first"), trained(workdir, "again"),
+                           trained(workdir, "other", ATEN_CPU_CAPABILITY="default"))
+    assert again[:2] == first[:2]  # score and every curve point, to the bit
+    assert other[0] != first[0] and other[1] != first[1]
+    assert abs(other[0] - first[0]) < 0.1 * abs(first[0])  # another run, not another result
+    assert (first[2]["cpu_capability"], other[2]["cpu_capability"]) == (here, "DEFAULT")

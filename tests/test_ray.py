@@ -28,7 +28,9 @@ from conftest import (
 )
 from optuna.trial import TrialState
 
-from kraby_study.records import PROVENANCE_PREFIX
+from kraby_study.errors import StoreError
+from kraby_study.records import PROVENANCE_PREFIX, RAY_NODE
+from kraby_study.store.rows import reading
 from kraby_study.store.store import opened
 
 pytest.importorskip("ray")
@@ -106,16 +108,26 @@ class Cluster:
         self.folder, self.port = folder, port
         self.address = f"127.0.0.1:{port}"
 
-    def start(self, head: bool) -> int:
-        """Start a node; returns its raylet's process id."""
+    def start(self, head: bool, cpus: int = 1, python: str | None = None) -> int:
+        """Start a node of ``cpus`` CPUs (its workers run ``python``, by default this
+        interpreter); returns its raylet's process id."""
         before = set(self.raylets())
         where = (["--head", f"--port={self.port}", "--include-dashboard=false",
                   f"--temp-dir={self.folder}"] if head else [f"--address={self.address}"])
-        subprocess.run([RAY, "start", *where, "--num-cpus=1", "--node-ip-address=127.0.0.1",
-                        "--object-store-memory=100000000"], check=True,
-                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        ray = [RAY] if python is None else [
+            python, "-c", "from ray.scripts.scripts import main; main()"]
+        subprocess.run([*ray, "start", *where, f"--num-cpus={cpus}",
+                        "--node-ip-address=127.0.0.1", "--object-store-memory=100000000"],
+                       check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         (raylet,) = set(self.raylets()) - before
         return raylet
+
+    @staticmethod
+    def node_id(raylet: int) -> str:
+        """The Ray node id of a node, from its raylet's command line."""
+        (node,) = [arg.split(b"=", 1)[1].decode() for arg in cmdline(raylet).split(b"\0")
+                   if arg.startswith(b"--node_id=")]
+        return node
 
     def raylets(self) -> list[int]:
         return [p for p in ray_processes(str(self.folder)) if b"raylet/raylet" in cmdline(p)]
@@ -247,13 +259,20 @@ def test_a_killed_ray_worker_has_its_trial_run_again(workdir: Path) -> None:
 
 @pytest.mark.slow
 def test_a_lost_node_has_its_trials_run_on_the_others(workdir: Path, cluster: Cluster) -> None:
-    cluster.start(head=True)
+    head = cluster.node_id(cluster.start(head=True))
     second = cluster.start(head=False)
+    lost = cluster.node_id(second)
     db = workdir / "ray.db"
 
-    def on_both_nodes() -> bool:  # each node's raylet has a trial actor below it
-        return all(any(cmdline(c).startswith(b"ray::Trial") for c in descendants([r]))
-                   for r in cluster.raylets())
+    def on_both_nodes() -> bool:  # each node has a trial that started (its record stored)
+        if not db.exists():
+            return False
+        try:
+            with reading(sqlite_url(db)) as reader:
+                return {r.get(RAY_NODE) for study in reader.studies()
+                        for r in study.provenance.values()} == {head, lost}
+        except StoreError:  # the command is still creating the store
+            return False
 
     code, out = killed_midway(workdir, [f"ray.address={cluster.address}",
                                         f"storage={sqlite_url(db)}"],
@@ -262,6 +281,52 @@ def test_a_lost_node_has_its_trials_run_on_the_others(workdir: Path, cluster: Cl
     assert code == 0, out
     assert "worker lost on Ray" in out
     each_run_complete_once(db)
+    # Each trial stores the node that ran it: trials started on both nodes (the study keeps
+    # the lost node's record), and each trial the lost node held ran again on the head.
+    study = load(db, "clip_range")
+    records = {k[len(PROVENANCE_PREFIX):]: v for k, v in study.user_attrs.items()
+               if k.startswith(PROVENANCE_PREFIX)}
+    assert {r[RAY_NODE] for r in records.values()} == {head, lost}
+    node = {f"clip_range={t.params['clip_range']} seed 0":
+            records[t.user_attrs["provenance"]][RAY_NODE] for t in study.trials}
+    rerun = [line.split(":")[0] for line in out.splitlines()
+             if "(worker lost on Ray (" in line and "), rerun" in line]
+    assert rerun and all(node[label] == head for label in rerun), (rerun, node)
+    # list counts both nodes.
+    listed = subprocess.run([sys.executable, "-m", "kraby_study.cli", "list",
+                             f"storage={sqlite_url(db)}"], capture_output=True, text=True,
+                            check=True, cwd=workdir).stdout
+    assert " 2 nodes " in listed, listed
+
+
+@pytest.mark.slow
+def test_a_node_without_the_project_fails_its_trial_in_one_line(
+        workdir: Path, cluster: Cluster) -> None:
+    import sysconfig
+
+    site = sysconfig.get_paths()["purelib"]
+    if Path(__import__("kraby_study").__file__).is_relative_to(site):
+        pytest.skip("kraby-study is installed into site-packages, not editable")
+    # A node whose Python has Ray and every dependency (this environment's site-packages),
+    # but not kraby-study: an editable install's finder is only read from a site folder.
+    bare = workdir / "bare"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(bare)], check=True)
+    (bare_site,) = bare.glob("lib/python*/site-packages")
+    (bare_site / "deps.pth").write_text(site + "\n")
+    cluster.start(head=True, cpus=0)  # every trial goes to the bare node
+    node = cluster.node_id(cluster.start(head=False, python=str(bare / "bin" / "python")))
+    db = workdir / "ray.db"
+    proc = spawn_cli("run", "study=clip_range", *TINY, "study.values=[0.2]", "budget.seeds=1",
+                     "executor=ray", f"ray.address={cluster.address}",
+                     f"storage={sqlite_url(db)}", cwd=workdir)
+    out, _ = proc.communicate(timeout=300)
+    assert proc.returncode == 1, out
+    (trial,) = load(db, "clip_range").get_trials()
+    assert trial.state == TrialState.FAIL
+    reason = str(trial.user_attrs["failure"])
+    assert reason.startswith("error: Python package 'kraby_study' is not installed on Ray node ")
+    assert f"(node id {node[:8]}): install kraby-study there (docs/ray.md)" in reason
+    assert len(reason.splitlines()) == 1
 
 
 @pytest.mark.slow

@@ -23,8 +23,10 @@ from kraby_study.config.compose import compose_config
 from kraby_study.config.schema import KrabyConfig
 from kraby_study.config.storage import DEFAULT_STORAGE, plain_storage
 from kraby_study.records import (
+    RAY_NODE,
     Failure,
     Outcome,
+    Placement,
     StudyAttrs,
     TrialAttrs,
     TrialResult,
@@ -39,6 +41,8 @@ from kraby_study.store.rows import reading
 from kraby_study.store.store import Store, opened
 
 INTERRUPTED = failure(Failure.INTERRUPTED, "its command stopped")
+EPYC = {"hostname": "vm", "cpu": "AMD EPYC", "torch": "2.13.0+cpu"}
+XEON = {"hostname": "vm2", "cpu": "Intel Xeon", "torch": "2.13.0+cpu"}
 
 
 def _claim(ledger: StudyLedger, key: str, values: list[Any], name: str) -> int:
@@ -63,11 +67,17 @@ def add_states_sweep(store: Store) -> None:
     for index in (7, 10, 11):
         runs[index].outcome = Outcome.PENDING  # queued, not run
     ledger = add_sweep(store, "states", "ppo.gamma", values, runs)
-    _claim(ledger, "v1-s3", values, "gamma")  # left running
+    running = _claim(ledger, "v1-s3", values, "gamma")  # left running
+    ledger.note_provenance(running, EPYC | {RAY_NODE: "node-a"})
     number = _claim(ledger, "v2-s2", values, "gamma")
+    ledger.note_provenance(number, XEON | {RAY_NODE: "node-b"})  # on a node then lost:
     ledger.requeue(number, INTERRUPTED)  # a new attempt is queued ...
-    _complete(ledger, _claim(ledger, "v2-s2", values, "gamma"), -0.25)  # ... and completes
-    ledger.requeue(_claim(ledger, "v2-s3", values, "gamma"), INTERRUPTED)  # waits again
+    rerun = _claim(ledger, "v2-s2", values, "gamma")
+    ledger.note_provenance(rerun, EPYC | {RAY_NODE: "node-a"})
+    _complete(ledger, rerun, -0.25)  # ... and completes on another node
+    waits = _claim(ledger, "v2-s3", values, "gamma")
+    ledger.note_provenance(waits, EPYC)  # a local worker of the host "vm"
+    ledger.requeue(waits, INTERRUPTED)  # waits again
     gamma = {"gamma": CategoricalDistribution(values)}
     add_trials(store, "states", [
         create_trial(state=TrialState.PRUNED, params={"gamma": 0.1}, distributions=gamma,
@@ -162,7 +172,7 @@ def optuna_standings(url: str) -> list[StudyStanding]:
 def shown(standing: StudyStanding) -> tuple[Any, ...]:
     counts = standing.tally
     return (standing.name, standing.kind, counts.counts(), counts.pending, counts.running,
-            standing.selected)
+            standing.selected, standing.placement)
 
 
 def test_rows_give_the_standings_optunas_trials_give(store_url: str, workdir: Path,
@@ -186,10 +196,17 @@ def test_rows_give_the_standings_optunas_trials_give(store_url: str, workdir: Pa
     assert "selected by auc" in by_name["auc"].selected
     assert "selected by fastest_tied" in by_name["fastest"].selected
     assert by_name["observation"].selected.startswith("observation=")
+    # Where trials ran: two Ray nodes (one lost, its trial rerun on the other) and a host, of
+    # two CPU models; every attempt counts. A study without records says nothing.
+    assert by_name["states"].placement == Placement(nodes=3, cpus=("AMD EPYC", "Intel Xeon"))
+    assert by_name["states"].placement.text() == "3 nodes, 2 CPU models"
+    assert by_name["search"].placement.text() == "-"
     # The command prints the table of Optuna's standings, to the character.
     capsys.readouterr()
     assert run_cli("list", f"storage={store_url}") == 0
-    assert capsys.readouterr().out == "".join(f"{line}\n" for line in standings_table(expected))
+    out = capsys.readouterr().out
+    assert out == "".join(f"{line}\n" for line in standings_table(expected))
+    assert "ran on" in out.splitlines()[0] and "3 nodes, 2 CPU models" in out
 
 
 def test_each_counted_row_is_its_optuna_trial(store_url: str, workdir: Path) -> None:

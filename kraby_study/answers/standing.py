@@ -8,13 +8,21 @@ same rules (:func:`kraby_study.records.counted`, :func:`kraby_study.records.tall
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from kraby_study.answers.selected import Curves, selected_short
-from kraby_study.records import StoredTrial, StudyAttrs, StudyKind, Tally, counted, tally
+from kraby_study.records import (
+    Placement,
+    StoredTrial,
+    StudyAttrs,
+    StudyKind,
+    Tally,
+    counted,
+    tally,
+)
 from kraby_study.store.rows import reading
 
 if TYPE_CHECKING:
@@ -32,11 +40,14 @@ class StudyStanding:
     (searches)."""
     selected: str
     """What it selects so far, in a few words (``-`` when nothing is complete)."""
+    placement: Placement
+    """Where its trials ran: how many nodes, and on how many CPU models."""
 
 
 def study_standing(ledger: StudyLedger) -> StudyStanding:
     """Counts and the selection so far of a study a command holds."""
-    return standing(ledger.name, ledger.attrs, ledger.trials(), ledger.maximize, ledger.curves)
+    return standing(ledger.name, ledger.attrs, ledger.trials(), ledger.maximize, ledger.curves,
+                    ledger.provenances().values())
 
 
 def store_standings(url: str) -> list[StudyStanding]:
@@ -49,15 +60,17 @@ def store_standings(url: str) -> list[StudyStanding]:
     """
     with reading(url) as reader:
         return [standing(study.name, study.attrs, study.trials, study.maximize,
-                         partial(reader.curves, study.name))
+                         partial(reader.curves, study.name), study.provenance.values())
                 for study in reader.studies()]
 
 
 def standing(name: str, attrs: StudyAttrs, trials: Sequence[StoredTrial], maximize: bool,
-             curves: Curves) -> StudyStanding:
+             curves: Curves, records: Iterable[Mapping[str, Any]] = ()) -> StudyStanding:
     """A study's standing from all its trials (Optuna's or rows): counted, tallied against the
-    runs planned, and what its rule selects among them."""
+    runs planned, what its rule selects among them, and where they ran (its provenance
+    ``records``)."""
     kept = counted(trials)
     return StudyStanding(name=name, kind=StudyKind.of(attrs.kind),
                          tally=tally(kept, attrs.planned),
-                         selected=selected_short(attrs, kept, maximize, curves))
+                         selected=selected_short(attrs, kept, maximize, curves),
+                         placement=Placement.of(records))

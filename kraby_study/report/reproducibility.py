@@ -16,8 +16,10 @@ from typing import Any
 
 from kraby_study.records import (
     LEGACY_SEEDING,
+    RAY_NODE,
     SEEDING_TEXT,
     Outcome,
+    Placement,
     StoredTrial,
     StudyKind,
     TrialAttrs,
@@ -35,12 +37,20 @@ from kraby_study.run.provenance import ENV_FIELDS, PACKAGES
 
 FILE = "reproducibility.md"
 
-HARDWARE = ("cpu", "cores", "platform", "hostname")
+HARDWARE = ("cpu", "cpu_capability", "cores", "platform", "hostname")
 SOFTWARE = ("kraby_study", "python", *PACKAGES, "git_commit", "git_dirty")
-CHECKED = ("cpu", "cores", "platform", "kraby_study", "python", *PACKAGES, "git_commit",
-           "git_dirty", *ENV_FIELDS)
+CHECKED = ("cpu", "cpu_capability", "cores", "platform", "kraby_study", "python", *PACKAGES,
+           "git_commit", "git_dirty", *ENV_FIELDS)
 """Fields that can move a trial's numbers: trials that differ in one are warned about (the
-hostname, the folder and the command line may differ freely)."""
+hostname, the Ray node, the folder and the command line may differ freely)."""
+CPU_MODELS = ("; the same settings and seed give the same numbers bit for bit only on one CPU "
+              "model with the same software, so a run of this study repeated on another of "
+              "these CPU models agrees in distribution, not to the bit (docs/reproducibility.md)")
+"""What the warning on trials of several CPU models adds."""
+EXPLAINED = {"cpu": CPU_MODELS,
+             "cpu_capability": "; torch's kernels then sum in another order, so the same seed "
+                               "gives other numbers (docs/reproducibility.md)"}
+"""What a warning on a field adds: what the difference does to the seeds' numbers."""
 
 
 def started(trials: Sequence[StoredTrial]) -> list[StoredTrial]:
@@ -79,7 +89,8 @@ def warnings(trials: Sequence[StoredTrial], records: dict[str, dict[str, str]]) 
     for name in CHECKED:
         counts = field_counts(recorded, records, name)
         if len(counts) > 1:
-            lines.append(f"trials differ in {name}: {counted_text(counts)}")
+            lines.append(f"trials differ in {name}: {counted_text(counts)}"
+                         + EXPLAINED.get(name, ""))
     dirty = field_counts(recorded, records, "git_dirty").get("yes", 0)
     if dirty:
         lines.append(f"{dirty} trial{'s' if dirty != 1 else ''} ran from a git checkout with "
@@ -213,6 +224,24 @@ def _env_block(trials: Sequence[StoredTrial], records: dict[str, dict[str, str]]
                 "its version and commit are below).")
 
 
+def _hardware(records: dict[str, dict[str, str]]) -> tuple[str, ...]:
+    """The hardware fields, with the Ray node when any trial ran on Ray."""
+    ray = any(record.get(RAY_NODE) for record in records.values())
+    return (*HARDWARE, RAY_NODE) if ray else HARDWARE
+
+
+def _placement_line(records: dict[str, dict[str, str]]) -> str:
+    """How many nodes and CPU models ran the study, every attempt counted (a lost node's
+    too)."""
+    placement = Placement.of(records.values())
+    if not placement.nodes:
+        return "Nodes: none recorded."
+    models = "; ".join(placement.cpus)
+    return (f"Nodes that ran its trials (every attempt, a lost node's too; a Ray node by its "
+            f"node id, else a host by its name): {placement.nodes}. CPU models: "
+            f"{len(placement.cpus)} ({models}).")
+
+
 def reproducibility_blocks(data: StudyData) -> list[Block]:
     """The page's blocks."""
     trials = started(data.trials)
@@ -232,7 +261,8 @@ def reproducibility_blocks(data: StudyData) -> list[Block]:
                Heading("What was compared", 2), *_compared_block(data),
                Heading("Budget", 2), Items(_budget_block(data, trials)),
                Heading("Environment", 2), _env_block(trials, records),
-               Heading("Hardware", 2), _facts_table(trials, records, HARDWARE),
+               Heading("Hardware", 2), Items([_placement_line(records)]),
+               _facts_table(trials, records, _hardware(records)),
                Heading("Software and code", 2), _facts_table(trials, records, SOFTWARE),
                Heading("Commands", 2),
                Items([f"`{c}` ({n} trial{'s' if n != 1 else ''})"

@@ -51,6 +51,17 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine() or "unknown"
 
 
+def _cpu_capability() -> str:
+    """The instruction set torch's own kernels use here (AVX512, AVX2, DEFAULT, ...): it
+    decides the order of their sums, so another one gives other numbers for the same seed."""
+    try:
+        import torch
+
+        return str(torch.backends.cpu.get_cpu_capability())
+    except Exception:  # noqa: BLE001 - an older or odd torch: the field says so
+        return "unknown"
+
+
 @cache
 def machine_facts() -> dict[str, str]:
     """The machine and software a trial trains with, as text (gathered once per process)."""
@@ -59,6 +70,7 @@ def machine_facts() -> dict[str, str]:
         "python": platform.python_version(),
         "platform": platform.platform(),
         "cpu": cpu_model(),
+        "cpu_capability": _cpu_capability(),
         "cores": str(os.cpu_count() or 0),
         "hostname": socket.gethostname(),
     }

@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import os
 import queue
+import re
 import socket
 import time
 from collections.abc import Iterator
@@ -25,6 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from kraby_study.errors import ClusterLost, ConfigError, first_line
 from kraby_study.plan.spec import TrialSpec
+from kraby_study.records import RAY_NODE, Failure, Outcome, TrialResult, failure
 from kraby_study.run.pool import Event, as_event
 from kraby_study.run.provenance import trial_facts
 from kraby_study.run.worker import attempt
@@ -74,7 +76,9 @@ class TrialActor:
             self._outbox.put(("checkpoint", number, step, value))
             return self._replies.get()
 
-        self._outbox.put(("started", number, trial_facts(spec.settings["env"])))
+        node = ray.get_runtime_context().get_node_id()
+        self._outbox.put(("started", number,
+                          {**trial_facts(spec.settings["env"]), RAY_NODE: node}))
         self._outbox.put(("result", number, attempt(spec, self._shards, checkpoint, progress)))
 
     def drain(self, wait: float) -> list[tuple[Any, ...]]:
@@ -168,7 +172,11 @@ class RayPool:
             try:
                 got = ray.get(ref)
             except ray.exceptions.RayError as err:
-                self._gone(slot, f"lost on Ray ({type(err).__name__})", out)
+                cannot = _cannot_start(err)
+                if cannot is None:
+                    self._gone(slot, f"lost on Ray ({type(err).__name__})", out)
+                else:
+                    self._failed(slot, cannot, out)
                 continue
             if ref is slot.run:
                 slot.run = None  # the result comes through the outbox
@@ -190,6 +198,16 @@ class RayPool:
         _kill(slot.actor)
         if slot.number is not None:
             out.append(Event("died", slot.number, (slot.spec, why)))
+
+    def _failed(self, slot: _Slot, why: str, out: list[Event]) -> None:
+        """An actor that could not start on its node: its trial fails with the reason (a node
+        without the project would fail it again)."""
+        self._slots.remove(slot)
+        _kill(slot.actor)
+        if slot.number is not None:
+            out.append(Event("result", slot.number, TrialResult(
+                outcome=Outcome.FAILED, env_steps=0, wall_time=0.0,
+                failure=failure(Failure.ERROR, why))))
 
     def _note_reach(self, answered: bool, busy: list[_Slot]) -> None:
         """Stop after ``patience`` seconds in which no trial's actor answered.
@@ -235,6 +253,36 @@ class RayPool:
             for slot in self._slots:
                 _kill(slot.actor)
         self._slots.clear()
+
+
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+_MISSING = re.compile(r"No module named '([^']+)'")
+
+
+def _cannot_start(err: Exception) -> str | None:
+    """One line for an actor whose creation failed on its node (the project or a package it
+    imports is not installed there), naming what is missing and the node; None for any other
+    loss (a killed process, a lost node: the trial runs again)."""
+    if not (isinstance(err, ray.exceptions.RayActorError) and err.actor_init_failed):
+        return None
+    lines = [_ANSI.sub("", line).strip() for line in str(err).splitlines()]
+    last = next((line for line in reversed(lines) if line.strip("^ ")), type(err).__name__)
+    node = _node_of(err.actor_id)
+    missing = _MISSING.search(last)
+    if missing:
+        return (f"Python package {missing[1].split('.')[0]!r} is not installed on Ray node "
+                f"{node}: install kraby-study there (docs/ray.md)")
+    return f"a trial cannot start on Ray node {node}: {last}"
+
+
+def _node_of(actor_id: str | None) -> str:
+    """``<ip> (node id <first 8 hex digits>)`` of the node an actor was placed on, as the
+    cluster's actor table has it; ``unknown`` when it has no answer."""
+    try:
+        address = ray._private.state.actors(actor_id)["Address"]
+        return f"{address['IPAddress']} (node id {str(address['NodeID'])[:8]})"
+    except Exception:  # noqa: BLE001 - a private table: its absence must not hide the error
+        return "unknown"
 
 
 def _kill(actor: Any) -> None:

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 import sqlalchemy as sa
 
 from kraby_study.errors import StoreError, first_line
-from kraby_study.records import StudyAttrs, StudyKind, param_name
+from kraby_study.records import PROVENANCE_PREFIX, StudyAttrs, StudyKind, param_name
 from kraby_study.store.tables import read_curves
 from kraby_study.store.url import check_url, reading_url, sqlite_path
 
@@ -111,6 +111,8 @@ class StudyRows:
     maximize: bool
     """Whether higher values are better (kraby-study's studies all maximise)."""
     trials: list[TrialRow]
+    provenance: dict[str, dict[str, Any]]
+    """Its provenance records by key (what made its trials: ``list`` counts their nodes)."""
 
 
 class StoreReader:
@@ -166,7 +168,7 @@ class StoreReader:
         """
         try:
             with self._engine.connect() as connection:
-                names, attrs, _ = _read_studies(connection)
+                names, attrs, _, _ = _read_studies(connection)
         except sa.exc.SQLAlchemyError as err:
             raise StoreError(f"cannot read the store {self.url}: {first_line(err)}") from None
         ids = {study_name: study_id for study_id, study_name in names.items()}
@@ -180,7 +182,7 @@ class StoreReader:
             return read_curves(connection, study_id, numbers_of, numbers)
 
     def _read(self, connection: sa.Connection) -> list[StudyRows]:
-        names, attrs, maximize = _read_studies(connection)
+        names, attrs, maximize, provenance = _read_studies(connection)
         swept = {study_id: param_name(str(a.definition["parameter"]))
                  for study_id, a in attrs.items()
                  if StudyKind.of(a.kind).swept and "parameter" in a.definition}
@@ -207,14 +209,15 @@ class StoreReader:
                 user_attrs=user_attrs.get(trial_id, {}), system_attrs=fixed))
         self._ids = {name: (study_id, numbers_of[study_id]) for study_id, name in names.items()}
         return [StudyRows(name=name, attrs=attrs[study_id],
-                          maximize=maximize.get(study_id, False), trials=rows[study_id])
+                          maximize=maximize.get(study_id, False), trials=rows[study_id],
+                          provenance=provenance[study_id])
                 for study_id, name in names.items()]
 
 
-def _read_studies(
-        connection: sa.Connection) -> tuple[dict[int, str], dict[int, StudyAttrs], dict[int, bool]]:
-    """By study id, in creation order: names, attributes, and whether the first objective is
-    maximised."""
+def _read_studies(connection: sa.Connection) -> tuple[
+        dict[int, str], dict[int, StudyAttrs], dict[int, bool], dict[int, dict[str, Any]]]:
+    """By study id, in creation order: names, attributes, whether the first objective is
+    maximised, and the provenance records by key."""
     names = dict(connection.execute(
         sa.select(_studies.c.study_id, _studies.c.study_name)
         .order_by(_studies.c.study_id)).all())
@@ -225,7 +228,12 @@ def _read_studies(
     maximize = {study_id: direction == "MAXIMIZE" for study_id, direction in
                 connection.execute(sa.select(_directions.c.study_id, _directions.c.direction)
                                    .where(_directions.c.objective == 0))}
-    return names, {study_id: StudyAttrs.of(stored[study_id]) for study_id in names}, maximize
+    provenance = {study_id: {key[len(PROVENANCE_PREFIX):]: value
+                             for key, value in stored[study_id].items()
+                             if key.startswith(PROVENANCE_PREFIX) and isinstance(value, dict)}
+                  for study_id in names}
+    return (names, {study_id: StudyAttrs.of(stored[study_id]) for study_id in names}, maximize,
+            provenance)
 
 
 def _read_values(connection: sa.Connection) -> dict[int, list[float]]:
