@@ -607,7 +607,8 @@ def build_parser() -> argparse.ArgumentParser:
         ("confirm", cmd_confirm, "retrain a search's top configurations (or a sweep's top "
          "values, or baselines) on fresh seeds, into study NAME-confirm"),
         ("best", cmd_best, "print a study's selected settings (or a campaign's, --campaign) and "
-         "write them as ./conf/ppo/NAME.yaml"),
+         "write them as ./conf/ppo/NAME.yaml (--format zoo: as an rl-zoo3 hyperparameter file "
+         "./zoo/NAME.yml)"),
         ("report", cmd_report, "redraw every figure and table of the stored studies into "
          "--out (default reports/); --study-name NAME for one"),
     ]
