@@ -514,18 +514,16 @@ def write_hyperparams_file(settings: dict[str, Any], steps: int, description: st
     one line, before anything is written, when they are not a Gymnasium id's."""
     from pathlib import Path
 
-    from kraby_study.config.zoo import study_settings, write_hyperparams
+    from kraby_study.config.zoo import study_settings, train_command, write_hyperparams
     from kraby_study.plan.spec import OPTIONAL_PPO
 
     complete = {"env": settings.get("env", {}),
                 "ppo": {**OPTIONAL_PPO, **settings.get("ppo", {})}}
     read = study_settings(complete, steps, what)
     path = Path(ZOO_DIR) / f"{config_name}.yml"
-    write_hyperparams(read, description, path)
-    packages = " ".join(str(p) for p in complete["env"].get("packages", []))
-    print(f"wrote {path}: train it with `python -m rl_zoo3.train --algo ppo --env "
-          f"{read.env_id} -conf {path}" + (f" --gym-packages {packages}" if packages else "")
-          + "`")
+    packages = [str(p) for p in complete["env"].get("packages", [])]
+    write_hyperparams(read, description, path, packages)
+    print(f"wrote {path}: train it with `{train_command(read.env_id, path, packages)}`")
     return 0
 
 
@@ -542,8 +540,8 @@ def write_zoo(overrides: Sequence[str], name: str | None, fmt: str = "ppo") -> i
     from kraby_study.config.validate import to_container
     from kraby_study.config.zoo import zoo_settings
 
-    cfg = compose_config(with_default(
-        [*(o for o in overrides if not o.startswith("ppo=")), "ppo=zoo"], "budget", "zoo"))
+    chosen = [*(o for o in overrides if not o.startswith("ppo=")), "ppo=zoo"]
+    cfg = compose_config(with_default(chosen, "budget", "zoo") if fmt == "zoo" else chosen)
     read = zoo_settings(str(cfg.env.id))
     config_name = name or "zoo_" + re.sub(r"[^A-Za-z0-9_-]+", "_", read.env_id)
     if not config_name.replace("_", "").replace("-", "").isalnum():

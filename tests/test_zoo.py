@@ -161,6 +161,18 @@ def test_the_round_trip_holds_for_every_key_and_string_the_translation_reads() -
         (zoo.NORM_REWARD_OFF, "lin_0.0003", "lin_0.3")
 
 
+@pytest.mark.parametrize(("change", "named"), [
+    ({"learning_rate_schedule": "cosine"}, "learning_rate_schedule 'cosine'"),
+    ({"activation": "gelu"}, "activation 'gelu'"),
+    ({"gamma": None}, "lack gamma"),
+])
+def test_what_rl_zoo3_cannot_write_is_refused_by_name(change: dict, named: str) -> None:
+    read = zoo.zoo_settings("Pendulum-v1")
+    ppo = {k: v for k, v in {**read.ppo, **change}.items() if v is not None}
+    with pytest.raises(ConfigError, match=named):
+        zoo.to_entry(zoo.ZooSettings(read.env_id, ppo, read.env, read.n_timesteps, "x"))
+
+
 def _loaded_by_rl_zoo3(path: Path, env_id: str, logs: Path) -> tuple[Any, dict[str, Any],
                                                                      dict[str, Any]]:
     """rl-zoo3's own reading of a -conf file: its ExperimentManager's read_hyperparameters,
@@ -229,6 +241,7 @@ def test_best_format_zoo_writes_a_gym_study_s_selection(
         capsys: pytest.CaptureFixture[str]) -> None:
     stored = resolved_settings(zoo_config("Pendulum-v1", "ppo.learning_rate_schedule=linear",
                                           "env.normalize=true", "env.normalize_reward=false"))
+    stored["env"]["packages"] = ["my_envs"]  # a package that registers the id, as stored
     store = Store(sqlite_url(workdir / "k.db"))
     try:
         _gym_sweep(store, monkeypatch, stored)
@@ -237,8 +250,10 @@ def test_best_format_zoo_writes_a_gym_study_s_selection(
     assert run_cli("best", "--study-name", "gam", "--format", "zoo", "--storage",
                    sqlite_url(workdir / "k.db")) == 0
     path = workdir / "zoo" / "best_gam.yml"
-    assert "python -m rl_zoo3.train --algo ppo --env Pendulum-v1 -conf zoo/best_gam.yml" in \
-        capsys.readouterr().out
+    command = ("python -m rl_zoo3.train --algo ppo --env Pendulum-v1 -conf zoo/best_gam.yml "
+               "--gym-packages my_envs")
+    assert f"`{command}`" in capsys.readouterr().out
+    assert f"# Train: {command}\n" in path.read_text()
     body = yaml.safe_load(path.read_text())
     assert list(body) == ["Pendulum-v1"]
     entry = body["Pendulum-v1"]

@@ -176,7 +176,8 @@ def to_entry(settings: ZooSettings) -> dict[str, Any]:
     to_entry(s))`` gives ``s``'s settings back.
 
     Raises:
-        ConfigError: A setting is missing, or a schedule is neither constant nor linear.
+        ConfigError: A setting is missing, a schedule is neither constant nor linear, or the
+            activation is not one :data:`ACTIVATIONS` names.
     """
     ppo = settings.ppo
     missing = sorted(set(SB3_DEFAULTS) - set(ppo))
@@ -202,6 +203,9 @@ def to_entry(settings: ZooSettings) -> dict[str, Any]:
         entry[key] = f"lin_{float(ppo[key])!r}" if schedule == "linear" else ppo[key]
     entry.update({"use_sde": bool(ppo["use_sde"]), "sde_sample_freq": ppo["sde_sample_freq"]})
     names = {setting: name for name, setting in ACTIVATIONS.items()}
+    if ppo["activation"] not in names:
+        raise ConfigError(f"activation {ppo['activation']!r}: rl-zoo3 entries read here take "
+                          f"{', '.join(names)}")
     kwargs = []
     for key, setting in POLICY_KWARGS.items():
         value = ppo[setting]
@@ -226,8 +230,8 @@ def study_settings(settings: dict[str, Any], steps: int, what: str) -> ZooSettin
     env = settings.get("env", {})
     if "id" not in env:
         raise ConfigError(f"--format zoo writes rl-zoo3 settings for a Gymnasium id, and {what} "
-                          "trained the leg (env=leg), whose batched world of legs rl-zoo3 "
-                          "cannot make: write it with --format ppo")
+                          "trained the leg (env=leg) in kraby-study's batched world of legs, "
+                          "which rl-zoo3 does not build: write it with --format ppo")
     for key, empty in (("kwargs", {}), ("max_episode_steps", None)):
         if env.get(key, empty) != empty:
             raise ConfigError(f"{what} has env.{key}={env[key]!r} for {env['id']}, which an "
@@ -238,12 +242,19 @@ def study_settings(settings: dict[str, Any], steps: int, what: str) -> ZooSettin
                        int(steps), zoo_version())
 
 
-def write_hyperparams(settings: ZooSettings, description: str, path: Path) -> dict[str, Any]:
-    """An rl-zoo3 hyperparameter file, ``{env id: entry}``, for ``python -m rl_zoo3.train
-    --algo ppo --env ID -conf PATH``; the entry written."""
+def train_command(env_id: str, path: Path, packages: list[str] | None = None) -> str:
+    """The command that trains an rl-zoo3 hyperparameter file's settings for ``env_id``."""
+    return (f"python -m rl_zoo3.train --algo ppo --env {env_id} -conf {path}"
+            + (f" --gym-packages {' '.join(packages)}" if packages else ""))
+
+
+def write_hyperparams(settings: ZooSettings, description: str, path: Path,
+                      packages: list[str] | None = None) -> dict[str, Any]:
+    """An rl-zoo3 hyperparameter file, ``{env id: entry}``, for :func:`train_command` (with
+    ``--gym-packages`` for an id the ``packages`` register); the entry written."""
     entry = to_entry(settings)
     text = (f"# Written by kraby-study best --format zoo: {description}.\n"
-            f"# Train: python -m rl_zoo3.train --algo ppo --env {settings.env_id} -conf {path}\n"
+            f"# Train: {train_command(settings.env_id, path, packages)}\n"
             + yaml.safe_dump({settings.env_id: entry}, sort_keys=False))
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
