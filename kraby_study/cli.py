@@ -455,8 +455,13 @@ def cmd_confirm(args: argparse.Namespace) -> int:
     return ended(summary)
 
 
+ZOO_DIR = "zoo"
+"""Where ``best --format zoo`` writes rl-zoo3 hyperparameter files, in the working folder."""
+
+
 def cmd_best(args: argparse.Namespace) -> int:
-    """Print a study's selected settings and write them as a ppo config file."""
+    """Print a study's selected settings and write them as a ppo config file, or as an rl-zoo3
+    hyperparameter file (``--format zoo``)."""
     from pathlib import Path
 
     from kraby_study.answers.campaign import campaign_selection
@@ -471,7 +476,7 @@ def cmd_best(args: argparse.Namespace) -> int:
         if chosen or args.campaign:
             raise ConfigError("--zoo writes rl-zoo3's settings, not a study's: drop "
                               "--study-name and --campaign")
-        return write_zoo(overrides, args.name)
+        return write_zoo(overrides, args.name, args.format)
     if chosen and args.campaign:
         raise ConfigError("give --campaign NAME or --study-name NAME, not both")
     cfg = compose_config(overrides)
@@ -483,6 +488,16 @@ def cmd_best(args: argparse.Namespace) -> int:
     with opened(cfg.storage, create=False, writer=False) as store:
         chosen = (campaign_selection(store, args.campaign, options) if args.campaign
                   else require_selection(store.load(name), options))
+    if args.format == "zoo":
+        what = f"campaign {args.campaign!r}" if args.campaign else f"study {name!r}"
+        if chosen.steps is None:
+            raise StoreError(f"{what} stores no budget steps for its selected trial, which an "
+                             "rl-zoo3 file needs as n_timesteps")
+        for line in chosen.front:
+            print(line)
+        print(f"best: {chosen.description}")
+        return write_hyperparams_file(chosen.settings, chosen.steps, chosen.description,
+                                      config_name, what)
     path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
     write_ppo_config(chosen.settings, chosen.env_keys, chosen.description, path)
     for line in chosen.front:
@@ -493,9 +508,31 @@ def cmd_best(args: argparse.Namespace) -> int:
     return 0
 
 
-def write_zoo(overrides: Sequence[str], name: str | None) -> int:
+def write_hyperparams_file(settings: dict[str, Any], steps: int, description: str,
+                           config_name: str, what: str) -> int:
+    """``best --format zoo``: write stored or composed settings (``env`` and ``ppo``) and a
+    budget as ./zoo/NAME.yml, an rl-zoo3 hyperparameter file for their Gymnasium id; refused in
+    one line, before anything is written, when they are not a Gymnasium id's."""
+    from pathlib import Path
+
+    from kraby_study.config.zoo import study_settings, train_command, write_hyperparams
+    from kraby_study.plan.spec import OPTIONAL_PPO
+
+    complete = {"env": settings.get("env", {}),
+                "ppo": {**OPTIONAL_PPO, **settings.get("ppo", {})}}
+    read = study_settings(complete, steps, what)
+    path = Path(ZOO_DIR) / f"{config_name}.yml"
+    packages = [str(p) for p in complete["env"].get("packages", [])]
+    write_hyperparams(read, description, path, packages)
+    print(f"wrote {path}: train it with `{train_command(read.env_id, path, packages)}`")
+    return 0
+
+
+def write_zoo(overrides: Sequence[str], name: str | None, fmt: str = "ppo") -> int:
     """``best --zoo env=gym env.id=ID``: write the settings ppo=zoo reads for the id (with the
-    command's own ppo overrides) as ./conf/ppo/NAME.yaml, so they can be read and changed."""
+    command's own ppo overrides) as ./conf/ppo/NAME.yaml, so they can be read and changed, or
+    (``--format zoo``) back as an rl-zoo3 file at budget.steps (default budget=zoo, its own
+    n_timesteps)."""
     import re
     from pathlib import Path
 
@@ -504,13 +541,19 @@ def write_zoo(overrides: Sequence[str], name: str | None) -> int:
     from kraby_study.config.validate import to_container
     from kraby_study.config.zoo import zoo_settings
 
-    cfg = compose_config([*(o for o in overrides if not o.startswith("ppo=")), "ppo=zoo"])
+    chosen = [*(o for o in overrides if not o.startswith("ppo=")), "ppo=zoo"]
+    cfg = compose_config(with_default(chosen, "budget", "zoo") if fmt == "zoo" else chosen)
     read = zoo_settings(str(cfg.env.id))
     config_name = name or "zoo_" + re.sub(r"[^A-Za-z0-9_-]+", "_", read.env_id)
     if not config_name.replace("_", "").replace("-", "").isalnum():
         raise ConfigError(f"--name {config_name!r}: use letters, digits, _ and -")
-    path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
     settings = {"env": to_container(cfg.env), "ppo": to_container(cfg.ppo)}
+    if fmt == "zoo":
+        return write_hyperparams_file(
+            settings, int(cfg.budget.steps),
+            f"rl-zoo3 {read.version}'s PPO settings for {read.env_id}, as ppo=zoo reads them",
+            config_name, f"ppo=zoo for {read.env_id}")
+    path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
     write_ppo_config(settings, ["normalize", "normalize_reward"],
                      f"rl-zoo3 {read.version}'s PPO settings for {read.env_id} (its budget, "
                      f"n_timesteps {read.n_timesteps:,}, is budget=zoo)", path)
@@ -563,7 +606,8 @@ def build_parser() -> argparse.ArgumentParser:
         ("confirm", cmd_confirm, "retrain a search's top configurations (or a sweep's top "
          "values, or baselines) on fresh seeds, into study NAME-confirm"),
         ("best", cmd_best, "print a study's selected settings (or a campaign's, --campaign) and "
-         "write them as ./conf/ppo/NAME.yaml"),
+         "write them as ./conf/ppo/NAME.yaml (--format zoo: as an rl-zoo3 hyperparameter file "
+         "./zoo/NAME.yml)"),
         ("report", cmd_report, "redraw every figure and table of the stored studies into "
          "--out (default reports/); --study-name NAME for one"),
     ]
@@ -633,12 +677,18 @@ def build_parser() -> argparse.ArgumentParser:
         "seconds among the best arm and those shown equivalent to it). `kraby-study best "
         "--study-name NAME-confirm compare.select=RULE` re-selects a stored confirm by another "
         "rule without retraining.\n\n" + EPILOG)
-    parsers["best"].add_argument("--name", help="config name to write in ./conf/ppo/ (default "
-                                 "best_<study>, or campaign_<NAME>)")
+    parsers["best"].add_argument("--name", help="config name to write in ./conf/ppo/ (./zoo/ "
+                                 "with --format zoo; default best_<study>, or campaign_<NAME>)")
     parsers["best"].add_argument("--zoo", action="store_true",
                                  help="write rl-zoo3's published PPO settings for env.id "
                                  "(ppo=zoo, needs env=gym env.id=ID and the [zoo] extra) "
                                  "instead of a study's (default name zoo_<id>)")
+    parsers["best"].add_argument(
+        "--format", choices=("ppo", "zoo"), default="ppo",
+        help="ppo (default): a ppo config file in ./conf/ppo/; zoo: an rl-zoo3 hyperparameter "
+        "file ./zoo/NAME.yml for the settings' Gymnasium id, in rl-zoo3's keys, n_timesteps "
+        "the study's budget steps, for python -m rl_zoo3.train --algo ppo --env ID -conf FILE "
+        "(an env=gym study's; with --zoo, rl-zoo3's settings written back)")
     parsers["best"].add_argument("--campaign", metavar="NAME",
                                  help="write the settings a finished campaign ends with (its "
                                  "last stage's selected value, with every earlier winner)")

@@ -51,7 +51,8 @@ def campaign_selection(store: Store, name: str, options: CompareOptions | None =
                             f"in {last['name']}, mean final score {chosen.mean:.4g} over "
                             f"{len(chosen.trials)} seed(s), {chosen.rule}, margin "
                             f"{chosen.margin:.3g} in score units)",
-                settings=chosen.trials[0].user_attrs.get("settings", {}), env_keys=env_keys)
+                settings=chosen.trials[0].user_attrs.get("settings", {}), env_keys=env_keys,
+                steps=chosen.trials[0].user_attrs.get("steps"))
 
 
 def campaign_records(store: Store, name: str | None = None) -> dict[str, dict[str, Any]]:

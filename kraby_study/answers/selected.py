@@ -67,6 +67,9 @@ class Selection:
     """Env settings the study varied: written with the ppo settings so they travel together."""
     front: list[str] = field(default_factory=list)
     """A two-objective search's front, one line per trial, for ``best`` to print first."""
+    steps: int | None = None
+    """Env steps of each of its runs (the budget it trained at; None for trials stored
+    without it)."""
 
 
 def selection_of(ledger: StudyLedger, options: CompareOptions | None = None
@@ -89,7 +92,7 @@ def selection_of(ledger: StudyLedger, options: CompareOptions | None = None
                                      f"{len(chosen.trials)} seed(s){rule_text(chosen)}"
                                      f"{answer_text(chosen)}",
                          settings=chosen.trials[0].user_attrs.get("settings", {}),
-                         env_keys=env_keys)
+                         env_keys=env_keys, steps=chosen.trials[0].user_attrs.get("steps"))
     if attrs.kind == StudyKind.SEARCH and two_objectives(definition):
         return front_selection(ledger.name, definition, trials, attrs.select, options)
     trial = best_trial(trials, ledger.maximize)
@@ -101,7 +104,8 @@ def selection_of(ledger: StudyLedger, options: CompareOptions | None = None
     return Selection(short=trial_short(trial),
                      description=f"trial {trial.number} of {attrs.kind or 'study'} "
                                  f"{ledger.name!r}: score {value:.4g} ({params})",
-                     settings=trial.user_attrs.get("settings", {}), env_keys=env_keys)
+                     settings=trial.user_attrs.get("settings", {}), env_keys=env_keys,
+                     steps=trial.user_attrs.get("steps"))
 
 
 def front_selection(name: str, definition: dict[str, Any], trials: Sequence[StoredTrial],
@@ -121,7 +125,8 @@ def front_selection(name: str, definition: dict[str, Any], trials: Sequence[Stor
                                  f"{chosen.score:.4g}, cost {chosen.cost:.3g} CPU s per seed "
                                  f"({params}); selected by {found.choice.rule_text}",
                      settings=trial.user_attrs.get("settings", {}),
-                     env_keys=searched_env_keys(definition), front=front_lines(found))
+                     env_keys=searched_env_keys(definition), front=front_lines(found),
+                     steps=trial.user_attrs.get("steps"))
 
 
 def selected_short(attrs: StudyAttrs, trials: Sequence[StoredTrial], maximize: bool,

@@ -3,9 +3,10 @@
 rl-zoo3's ``hyperparams/ppo.yml`` (package ``rl-zoo3``, extra ``kraby-study[zoo]``) is read as
 YAML from the installed package's files; rl_zoo3 itself is never imported, and its strings
 (``lin_0.001``, ``policy_kwargs: "dict(...)"``, ``normalize: "{...}"``) are parsed, never
-evaluated: :func:`translate` is the one translation into this project's schema. Keys an entry
-leaves out keep the defaults rl-zoo3 leaves in force (SB3's PPO defaults, one env). An entry
-that uses what the schema cannot express is refused, naming it.
+evaluated: :func:`translate` is the one translation into this project's schema, and
+:func:`to_entry` the one translation back (``best --format zoo``), both reading the same tables
+of keys. Keys an entry leaves out keep the defaults rl-zoo3 leaves in force (SB3's PPO
+defaults, one env). An entry that uses what the schema cannot express is refused, naming it.
 
 The resolver ``${zoo:KEY}`` (conf/ppo/zoo.yaml, conf/budget/zoo.yaml) reads ``env.id`` from
 the config being composed.
@@ -42,7 +43,14 @@ rl-zoo3's one env."""
 NUMBERS = ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "ent_coef", "vf_coef",
            "max_grad_norm", "n_envs", "sde_sample_freq")
 SCHEDULED = ("learning_rate", "clip_range")
+"""Settings rl-zoo3 writes as a number (constant) or ``lin_<number>`` (linear to 0)."""
 ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu"}
+"""``nn.NAME`` of policy_kwargs' activation_fn -> the setting ``activation``."""
+POLICY_KWARGS = {"log_std_init": "log_std_init", "ortho_init": "ortho_init",
+                 "activation_fn": "activation", "net_arch": "net_arch"}
+"""policy_kwargs' keys read and written, in rl-zoo3's order -> the setting each one is."""
+NORM_REWARD_OFF = "{'norm_obs': True, 'norm_reward': False}"
+"""rl-zoo3's normalize for observations only (``env.normalize_reward: false``)."""
 CURVE_POINTS = 50
 """Learning-curve points of budget=zoo: its curve bin is n_timesteps / 50."""
 BUDGET_SEEDS = 10
@@ -158,6 +166,101 @@ def translate(env_id: str, entry: dict[str, Any], version: str = "unknown") -> Z
     return ZooSettings(env_id, ppo, env, steps, version)
 
 
+def to_entry(settings: ZooSettings) -> dict[str, Any]:
+    """The inverse of :func:`translate`: settings as one ppo.yml entry, in rl-zoo3's own keys.
+
+    Every number is written, ``batch_size`` explicitly (null: the whole rollout, n_steps x
+    n_envs); a linear schedule as ``lin_<number>``; ``policy_kwargs`` as rl-zoo3 writes it,
+    ``"dict(...)"`` of what differs from SB3's defaults (left out when nothing does);
+    ``normalize`` when it is on, ``true`` or :data:`NORM_REWARD_OFF`. ``translate(env_id,
+    to_entry(s))`` gives ``s``'s settings back.
+
+    Raises:
+        ConfigError: A setting is missing, a schedule is neither constant nor linear, or the
+            activation is not one :data:`ACTIVATIONS` names.
+    """
+    ppo = settings.ppo
+    missing = sorted(set(SB3_DEFAULTS) - set(ppo))
+    if missing:
+        raise ConfigError(f"the settings for {settings.env_id} lack {', '.join(missing)}, "
+                          "which an rl-zoo3 entry needs")
+    entry: dict[str, Any] = {}
+    if settings.env.get("normalize"):
+        entry["normalize"] = True if settings.env.get("normalize_reward", True) \
+            else NORM_REWARD_OFF
+    entry.update({"n_envs": int(ppo["n_envs"]), "n_timesteps": int(settings.n_timesteps),
+                  "policy": "MlpPolicy"})
+    for key in NUMBERS:
+        if key != "sde_sample_freq":
+            entry.setdefault(key, ppo[key])
+    if ppo["batch_size"] is None:
+        entry["batch_size"] = int(ppo["n_steps"]) * int(ppo["n_envs"])
+    for key in SCHEDULED:
+        schedule = ppo[f"{key}_schedule"]
+        if schedule not in ("constant", "linear"):
+            raise ConfigError(f"{key}_schedule {schedule!r}: rl-zoo3 writes constant or linear "
+                              "schedules only")
+        entry[key] = f"lin_{float(ppo[key])!r}" if schedule == "linear" else ppo[key]
+    entry.update({"use_sde": bool(ppo["use_sde"]), "sde_sample_freq": ppo["sde_sample_freq"]})
+    names = {setting: name for name, setting in ACTIVATIONS.items()}
+    if ppo["activation"] not in names:
+        raise ConfigError(f"activation {ppo['activation']!r}: rl-zoo3 entries read here take "
+                          f"{', '.join(names)}")
+    kwargs = []
+    for key, setting in POLICY_KWARGS.items():
+        value = ppo[setting]
+        if value == SB3_DEFAULTS[setting]:
+            continue
+        text = f"nn.{names[value]}" if setting == "activation" else repr(
+            [int(w) for w in value] if setting == "net_arch" else value)
+        kwargs.append(f"{key}={text}")
+    if kwargs:
+        entry["policy_kwargs"] = f"dict({', '.join(kwargs)})"
+    return entry
+
+
+def study_settings(settings: dict[str, Any], steps: int, what: str) -> ZooSettings:
+    """A study's stored settings (env and complete ppo, as ``best`` reads them) and budget
+    steps, for :func:`to_entry`.
+
+    Raises:
+        ConfigError: ``what`` (the study, in words) trained what an rl-zoo3 hyperparameter
+            file cannot say: the leg, a time limit of its own or keyword arguments of the id.
+    """
+    env = settings.get("env", {})
+    if "id" not in env:
+        raise ConfigError(f"--format zoo writes rl-zoo3 settings for a Gymnasium id, and {what} "
+                          "trained the leg (env=leg) in kraby-study's batched world of legs, "
+                          "which rl-zoo3 does not build: write it with --format ppo")
+    for key, empty in (("kwargs", {}), ("max_episode_steps", None)):
+        if env.get(key, empty) != empty:
+            raise ConfigError(f"{what} has env.{key}={env[key]!r} for {env['id']}, which an "
+                              "rl-zoo3 hyperparameter file that ppo=zoo reads back cannot hold")
+    return ZooSettings(str(env["id"]), dict(settings["ppo"]),
+                       {"normalize": bool(env.get("normalize", False)),
+                        "normalize_reward": bool(env.get("normalize_reward", True))},
+                       int(steps), zoo_version())
+
+
+def train_command(env_id: str, path: Path, packages: list[str] | None = None) -> str:
+    """The command that trains an rl-zoo3 hyperparameter file's settings for ``env_id``."""
+    return (f"python -m rl_zoo3.train --algo ppo --env {env_id} -conf {path}"
+            + (f" --gym-packages {' '.join(packages)}" if packages else ""))
+
+
+def write_hyperparams(settings: ZooSettings, description: str, path: Path,
+                      packages: list[str] | None = None) -> dict[str, Any]:
+    """An rl-zoo3 hyperparameter file, ``{env id: entry}``, for :func:`train_command` (with
+    ``--gym-packages`` for an id the ``packages`` register); the entry written."""
+    entry = to_entry(settings)
+    text = (f"# Written by kraby-study best --format zoo: {description}.\n"
+            f"# Train: {train_command(settings.env_id, path, packages)}\n"
+            + yaml.safe_dump({settings.env_id: entry}, sort_keys=False))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    return entry
+
+
 def _number(value: Any, key: str, refuse: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise refuse(f"{key}: {value!r} (a number is expected)")
@@ -219,14 +322,14 @@ def _policy_kwargs(text: str, refuse: Any) -> dict[str, Any]:
     for key, value in given.items():
         if key == "log_std_init" and isinstance(value, int | float) \
                 and not isinstance(value, bool):
-            out[key] = float(value)
+            out[POLICY_KWARGS[key]] = float(value)
         elif key == "ortho_init" and isinstance(value, bool):
-            out[key] = value
+            out[POLICY_KWARGS[key]] = value
         elif key == "activation_fn" and isinstance(value, str) \
                 and value.removeprefix("nn.") in ACTIVATIONS:
-            out["activation"] = ACTIVATIONS[value.removeprefix("nn.")]
+            out[POLICY_KWARGS[key]] = ACTIVATIONS[value.removeprefix("nn.")]
         elif key == "net_arch":
-            out["net_arch"] = _net_arch(value, refuse)
+            out[POLICY_KWARGS[key]] = _net_arch(value, refuse)
         else:
             raise refuse(f"policy_kwargs {key}={value!r}")
     return out
