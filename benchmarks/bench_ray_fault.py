@@ -33,17 +33,14 @@ from bench_head import kill_marked
 
 from kraby_study.store.store import opened
 
+# Reading a cluster's processes from /proc is a test fixture (tests/processes.py), shared here.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from processes import cmdline, descendants  # noqa: E402
+
 RAY = str(Path(sys.executable).with_name("ray"))
 # Trial actors at the command's own priority, as the product sets for a Ray of its own.
 ENV = dict(os.environ, RAY_USAGE_STATS_ENABLED="0", RAY_AUTH_MODE="disabled",
            RAY_worker_niceness="0", PYTHONUNBUFFERED="1")
-
-
-def cmdline(pid: int) -> bytes:
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes()
-    except OSError:
-        return b""
 
 
 class Cluster:
@@ -73,28 +70,11 @@ class Cluster:
                 and b"raylet/raylet" in cmdline(int(p.name))]
 
     def has_actor(self, raylet: int) -> bool:
-        return any(cmdline(p).startswith(b"ray::Trial") for p in below([raylet]))
+        return any(cmdline(p).startswith(b"ray::Trial") for p in descendants([raylet]))
 
     def stop(self) -> None:
         kill_marked(str(self.folder))
         subprocess.run(["rm", "-rf", str(self.folder)], check=False)
-
-
-def below(pids: list[int]) -> list[int]:
-    parents: dict[int, list[int]] = {}
-    for proc in Path("/proc").iterdir():
-        if proc.name.isdigit():
-            try:
-                ppid = int((proc / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            parents.setdefault(ppid, []).append(int(proc.name))
-    out, todo = [], list(pids)
-    while todo:
-        for child in parents.get(todo.pop(), []):
-            out.append(child)
-            todo.append(child)
-    return out
 
 
 @contextmanager
@@ -172,7 +152,7 @@ def main() -> None:
             time.sleep(args.after)
             victim = made.raylets[2]
             killed_at = time.perf_counter() - t0
-            for pid in [victim, *below([victim])]:
+            for pid in [victim, *descendants([victim])]:
                 try:
                     os.kill(pid, 9)
                 except ProcessLookupError:

@@ -27,6 +27,7 @@ from conftest import (
     wait_for,
 )
 from optuna.trial import TrialState
+from processes import cmdline, descendants
 
 from kraby_study.errors import StoreError
 from kraby_study.records import PROVENANCE_PREFIX, RAY_NODE
@@ -61,36 +62,10 @@ def scores(db: Path, name: str) -> dict[str, tuple[float, list[float]]]:
             for n, t in trials.items()}
 
 
-def cmdline(pid: int) -> bytes:
-    """A process's command line; empty once it is gone."""
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes()
-    except OSError:
-        return b""
-
-
 def ray_processes(marker: str) -> list[int]:
     """Processes whose command line holds ``marker`` (a cluster's own temporary folder)."""
     return [int(p.name) for p in Path("/proc").iterdir()
             if p.name.isdigit() and marker.encode() in cmdline(int(p.name))]
-
-
-def descendants(pids: list[int]) -> list[int]:
-    """The processes below these (Ray's agents and workers are children of a raylet)."""
-    parents: dict[int, list[int]] = {}
-    for proc in Path("/proc").iterdir():
-        if proc.name.isdigit():
-            try:
-                ppid = int((proc / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            parents.setdefault(ppid, []).append(int(proc.name))
-    out, todo = [], list(pids)
-    while todo:
-        for child in parents.get(todo.pop(), []):
-            out.append(child)
-            todo.append(child)
-    return out
 
 
 def kill_all(pids: list[int]) -> None:
