@@ -104,7 +104,7 @@ def main() -> None:
     import torch
     from stable_baselines3 import PPO
 
-    from kraby_study.env import adapter_for, normalizer_path
+    from kraby_study.env import adapter_for, normalizer_path, saved_normalizer
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     torch.set_num_threads(1)
@@ -121,12 +121,7 @@ def main() -> None:
         path = Path(attrs["model_path"])
         model = PPO.load(str(path), device="cpu")
         stats = normalizer_path(path)
-        normalizer = None
-        if stats.is_file():
-            import pickle
-
-            with stats.open("rb") as handle:
-                normalizer = pickle.load(handle)
+        normalizer = saved_normalizer(path)
         stored = int(study.user_attrs["kraby_definition"]["eval_episodes"])
         episodes = args.tool_episodes or stored
         if not rows:  # imports and first calls are not the evaluation's cost

@@ -14,14 +14,13 @@ studies whose runs were scored on training episodes (sweeps and confirm studies)
 from __future__ import annotations
 
 import argparse
-import pickle
 import statistics
 from pathlib import Path
 
 import optuna
 from stable_baselines3 import PPO
 
-from kraby_study.env import adapter_for, normalizer_path
+from kraby_study.env import adapter_for, saved_normalizer
 
 
 def main() -> None:
@@ -39,8 +38,7 @@ def main() -> None:
         if trial.state != optuna.trial.TrialState.COMPLETE or not path or not Path(path).is_file():
             continue
         env = attrs["settings"]["env"]
-        stats = normalizer_path(path)
-        normalizer = pickle.loads(stats.read_bytes()) if stats.is_file() else None
+        normalizer = saved_normalizer(path)
         score = adapter_for(env).evaluate(PPO.load(path, device="cpu"), env, args.episodes,
                                           normalizer, seed=attrs.get("seed")).mean
         group = ", ".join(f"{k}={v}" for k, v in trial.params.items()) or "all"

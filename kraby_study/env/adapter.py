@@ -95,3 +95,15 @@ def normalizer_path(model_path: str | Path) -> Path:
     its zip."""
     path = Path(model_path)
     return path.with_name(f"{path.stem}.vecnormalize.pkl")
+
+
+def saved_normalizer(model_path: str | Path) -> Any:
+    """The VecNormalize statistics saved beside a model (:func:`normalizer_path`), or None when
+    it was trained without them."""
+    import pickle
+
+    stats = normalizer_path(model_path)
+    if not stats.is_file():
+        return None
+    with stats.open("rb") as handle:
+        return pickle.load(handle)  # noqa: S301 - written by this project's trial

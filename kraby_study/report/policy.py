@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from kraby_study.env import adapter_for, normalizer_path
+from kraby_study.env import adapter_for, saved_normalizer
 
 FRAME_SIZE = (160, 120)
 """Width and height of a frame (pixels), before the caption strip."""
@@ -70,13 +70,7 @@ def render_policy(model_path: str, settings: dict[str, Any], path: Path,
     env = dict(settings.get("env") or {})
     adapter = adapter_for(env)
     model = PPO.load(model_path, device="cpu")
-    normalizer = None
-    stats = normalizer_path(model_path)
-    if stats.exists():
-        import pickle
-
-        with stats.open("rb") as handle:
-            normalizer = pickle.load(handle)  # noqa: S301 - written by this project's trial
+    normalizer = saved_normalizer(model_path)
     font = _font(11)
     frames, durations = [], []
     for frame in adapter.frames(model, env, size, normalizer):

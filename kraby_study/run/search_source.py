@@ -99,6 +99,7 @@ class SearchSource(StudySource):
         pruner = pruner_name(cfg)
         seed_scores = pruner == "wilcoxon"
         names = objectives(cfg)
+        eval_set, episodes = evaluation_of(cfg)
         # Optuna takes no intermediate value from a trial of several objectives.
         every = None if seed_scores or len(names) == 2 else checkpoint_every(cfg)
         return TrialSpec(
@@ -108,7 +109,7 @@ class SearchSource(StudySource):
             model_path=model_path(cfg, self.ledger.name, key),
             checkpoint_every=every, seed_scores=seed_scores, seeds=int(cfg.budget.seeds),
             objective=names[0], cost=names[1] if len(names) == 2 else None,
-            eval_episodes=evaluation_of(cfg)[1], eval_set=evaluation_of(cfg)[0],
+            eval_set=eval_set, eval_episodes=episodes,
             label=short_label(params, key),
             tensorboard_run=tensorboard_run(cfg, self.ledger.name, key),
             seeding=seeding_of(cfg))
