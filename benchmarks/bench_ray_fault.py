@@ -109,6 +109,13 @@ def reruns(out: str) -> int:
     return sum(1 for line in out.splitlines() if re.search(r"\), rerun", line))
 
 
+def launch(args: argparse.Namespace, address: str, db: Path) -> subprocess.Popen[str]:
+    """The study's command on the cluster at ``address`` into ``db``, started in ``db``'s
+    folder, its output (stderr with it) read as text."""
+    return subprocess.Popen(command(args, address, db), cwd=db.parent, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=16384)
@@ -122,8 +129,7 @@ def main() -> None:
         with cluster(1) as made:
             db = folder / "clean.db"
             t0 = time.perf_counter()
-            proc = subprocess.Popen(command(args, made.address, db), cwd=folder, env=ENV,
-                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+            proc = launch(args, made.address, db)
             assert proc.stdout is not None
             first_start = None
             lines = []
@@ -144,8 +150,7 @@ def main() -> None:
         with cluster(2) as made:
             db = folder / "lost_node.db"
             t0 = time.perf_counter()
-            proc = subprocess.Popen(command(args, made.address, db), cwd=folder, env=ENV,
-                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+            proc = launch(args, made.address, db)
             while not all(made.has_actor(r) for r in made.raylets):
                 assert proc.poll() is None, proc.communicate()[0]
                 time.sleep(0.2)
@@ -170,8 +175,7 @@ def main() -> None:
         with cluster(3) as made:
             db = folder / "lost_head.db"
             t0 = time.perf_counter()
-            proc = subprocess.Popen(command(args, made.address, db), cwd=folder, env=ENV,
-                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+            proc = launch(args, made.address, db)
             assert proc.stdout is not None
             ended = 0
             for line in proc.stdout:
