@@ -390,6 +390,12 @@ def first_points(curves: pd.DataFrame) -> pd.DataFrame:
     return curves.sort_values(["number", "step"], kind="stable")
 
 
+def best_mean(summary: pd.DataFrame) -> float:
+    """The mean final score of the summary's best value; NaN when none is best."""
+    best = summary.index[summary["mark"] == "best"]
+    return float(summary.loc[best[0], "final_mean"]) if len(best) else math.nan
+
+
 def study_threshold(curves: pd.DataFrame, summary: pd.DataFrame,
                     threshold: float | None) -> tuple[float, bool, float]:
     """The reward a learning curve must reach.
@@ -410,8 +416,7 @@ def study_threshold(curves: pd.DataFrame, summary: pd.DataFrame,
     untrained = float(np.mean(first)) if len(first) else math.nan
     if threshold is not None:
         return float(threshold), False, untrained
-    best = summary.index[summary["mark"] == "best"]
-    best_final = float(summary.loc[best[0], "final_mean"]) if len(best) else math.nan
+    best_final = best_mean(summary)
     if not (np.isfinite(untrained) and np.isfinite(best_final)):
         return math.nan, True, untrained
     return float(default_threshold(untrained, best_final)), True, untrained
@@ -511,9 +516,7 @@ def add_failed_seeds(summary: pd.DataFrame, seeds: pd.DataFrame, untrained: floa
     ``failed_seeds`` (count), ``failed_seeds_low`` and ``failed_seeds_high`` (the exact
     interval of the rate); and the failure line (NaN when it is not defined: no best, no
     curve, or a best that learned nothing)."""
-    best = summary.index[summary["mark"] == "best"]
-    best_mean = float(summary.loc[best[0], "final_mean"]) if len(best) else math.nan
-    line = failure_line(untrained, best_mean)
+    line = failure_line(untrained, best_mean(summary))
     groups = dict(iter(seeds.groupby("vi", sort=True)))
     found = [failed_seeds(groups[vi]["final_score"].tolist() if vi in groups else [], line)
              for vi in summary.index]
