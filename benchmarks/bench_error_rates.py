@@ -12,8 +12,8 @@
 - Coverage of every interval a report prints, at n = 2, 3, 4, 5, 10, on normal, left-skewed
   (skew-normal, shape -4), right-skewed (lognormal, sigma 0.5), strongly right-skewed
   (lognormal, sigma 1) and failing-seed (N(0, 1), with probability 0.1 shifted by -4) data.
-  The final score, AUC and training-time intervals are one method, ``stats.mean_interval``
-  (measured through ``stats.mean_intervals``, of which it is one row): the studentised
+  The final score, AUC and training-time intervals are one method, ``mean_interval``
+  (measured through ``mean_intervals``, of which it is one row): the studentised
   bootstrap (bootstrap-t) interval from 5 seeds on, 2,000 resamples, Hall's skewness-corrected
   t interval below; they share one row. Hall's interval at every n (the learning-curve bands)
   and the plain Student-t interval are measured on the same samples and printed apart (not in
@@ -56,11 +56,18 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from kraby_study import stats
-from kraby_study.comparison import ALPHA, MARGIN, compare, compare_with_best, holm
-from kraby_study.coverage import COVERAGE_PATH
+from kraby_study.decision.comparison import ALPHA, MARGIN, compare, compare_with_best, holm
+from kraby_study.decision.coverage import COVERAGE_PATH
+from kraby_study.decision.intervals import (
+    hall_interval,
+    iqm_interval,
+    mean_intervals,
+    t_interval,
+)
+from kraby_study.decision.measures import iqr, iqr_unbiased, p_improvement_interval
+from kraby_study.decision.race import race
+from kraby_study.decision.verdict import verdict
 from kraby_study.plan.spec import RaceRules
-from kraby_study.race import race
 
 SEED = 20240522
 SHAPES: list[tuple[str, list[int], list[float]]] = [
@@ -123,7 +130,7 @@ mean's intervals cover 0.87 to 0.91 there) and a failing-seed mixture."""
 def old_rule(scores: dict[int, np.ndarray]) -> list[int]:
     """The replaced rule: Holm over each value's two-sided Welch p against the best.
 
-    The Welch tests (Welch-Satterthwaite df, as ``stats.welch_p``) are computed here in one
+    The Welch tests (Welch-Satterthwaite df, as ``welch_p``) are computed here in one
     vectorised call: one ``scipy.stats.ttest_ind`` per pair cost most of the benchmark's time.
     Simulated samples always spread, so ``welch_p``'s constant-sample rule never applies.
     """
@@ -220,18 +227,18 @@ def coverage(job: tuple[str, int, int, int]) -> list[dict[str, object]]:
     samples = dist.rvs(size=(simulations, 3, n), random_state=rng)
     iqm_hits = 0
     for x in samples[:, 0]:
-        low, high = stats.iqm_interval(x)
+        low, high = iqm_interval(x)
         iqm_hits += low <= iqm_truth <= high
     first = samples[:, 0]
-    # The report's interval of a mean, all samples at once (stats.mean_interval is one row of it).
-    _, low, high = stats.mean_intervals(first)
+    # The report's interval of a mean, all samples at once (mean_interval is one row of it).
+    _, low, high = mean_intervals(first)
     mean_hits = int(np.sum((low <= mu) & (mu <= high)))
     mean_width = float(np.sum(high - low))
     centred = first - first.mean(axis=1, keepdims=True)
     skewness = np.mean(centred ** 3, axis=1) / np.mean(centred ** 2, axis=1) ** 1.5
-    hall_low, hall_high = stats.hall_interval(first.mean(axis=1), first.std(axis=1, ddof=1), n,
+    hall_low, hall_high = hall_interval(first.mean(axis=1), first.std(axis=1, ddof=1), n,
                                               skewness)
-    low, high = stats.t_interval(first.mean(axis=1), first.std(axis=1, ddof=1), n)
+    low, high = t_interval(first.mean(axis=1), first.std(axis=1, ddof=1), n)
     plain_hits = int(np.sum((low <= mu) & (mu <= high)))
     hall_hits = int(np.sum((hall_low <= mu) & (mu <= hall_high)))
     plain_width = float(np.mean(high - low))
@@ -239,7 +246,7 @@ def coverage(job: tuple[str, int, int, int]) -> list[dict[str, object]]:
               HALL: float(np.mean(hall_high - hall_low)) / plain_width}
     improvement_hits = 0
     for better, other in zip(samples[:, 1] + sd, samples[:, 2], strict=True):
-        low, high = stats.p_improvement_interval(better, other)
+        low, high = p_improvement_interval(better, other)
         improvement_hits += low <= improvement_truth <= high
     return [
         {"interval": MEAN_INTERVAL, "distribution": name,
@@ -264,8 +271,8 @@ def repeatable(simulations: int, seed: int) -> dict[str, float]:
     raw = fair = 0
     for _ in range(simulations):
         a, b = rng.normal(size=2), rng.normal(size=10)
-        raw += stats.iqr(a) < stats.iqr(b)
-        fair += stats.iqr_unbiased(a) < stats.iqr_unbiased(b)
+        raw += iqr(a) < iqr(b)
+        fair += iqr_unbiased(a) < iqr_unbiased(b)
     return {"raw IQR": raw / simulations, "rescaled IQR": fair / simulations}
 
 
@@ -283,7 +290,7 @@ def fastest(simulations: int, seed: int) -> dict[str, float]:
         old += means[0] < means[1] or (np.isnan(means[1]) and not np.isnan(means[0]))
         restricted = {g: (float(np.mean(np.minimum(t, end))) if len(r) else math.nan)
                       for g, (t, r) in enumerate(zip(times, reached, strict=True))}
-        result = stats.verdict({0: [0.0] * 3, 1: [0.0] * 10}, {}, restricted, {}, {})
+        result = verdict({0: [0.0] * 3, 1: [0.0] * 10}, {}, restricted, {}, {})
         new += result.fastest == 0
         decided += result.fastest is not None
     return {"old (mean over seeds that reached)": old / simulations,

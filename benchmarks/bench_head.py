@@ -43,7 +43,8 @@ from kraby_study.cli import open_writer, run_options
 from kraby_study.config.compose import compose_config
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.plan.sweep import expand_study
-from kraby_study.records import RAY_NODE, CurvePoint, Outcome, TrialResult
+from kraby_study.records.attributes import RAY_NODE, CurvePoint, TrialResult
+from kraby_study.records.stored import Outcome
 from kraby_study.run.pool import Event
 from kraby_study.run.provenance import trial_facts
 from kraby_study.run.study_run import run_plan

@@ -2,7 +2,7 @@
 
 Two parts:
 
-- ``--store URL``: replays racing (``kraby_study.race.race``, the rules ``racing.*`` and
+- ``--store URL``: replays racing (``kraby_study.decision.race.race``, the rules ``racing.*`` and
   ``compare.margin`` would use; ``--margin``, default ``compare.margin``'s 0.2) on every
   complete fixed-design sweep of a store (every value with all its seeds) and prints, per
   study, the runs the race uses against the fixed design's, the values it drops (shown worse)
@@ -39,21 +39,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kraby_study.comparison import MARGIN, compare_with_best
+from kraby_study.decision.comparison import MARGIN, compare_with_best
+from kraby_study.decision.measures import auc
+from kraby_study.decision.race import race
+from kraby_study.decision.selection import select
 from kraby_study.plan.spec import RaceRules
-from kraby_study.race import race
-from kraby_study.records import (
-    Outcome,
-    SelectRule,
-    StudyKind,
-    TrialAttrs,
-    counted,
-    outcome,
-    parse_sweep_key,
-    value_label,
-)
-from kraby_study.selection import select
-from kraby_study.stats import auc
+from kraby_study.records.attributes import SelectRule, StudyKind, TrialAttrs
+from kraby_study.records.stored import Outcome, counted, outcome, parse_sweep_key
+from kraby_study.records.values import value_label
 from kraby_study.store.store import opened_for_reading
 
 SEED = 20261125

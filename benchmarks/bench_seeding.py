@@ -29,7 +29,8 @@ import argparse
 import numpy as np
 from scipy import stats
 
-from kraby_study.records import Outcome, counted, outcome, seed_text, stored_seeding
+from kraby_study.records.definition import seed_text, stored_seeding
+from kraby_study.records.stored import Outcome, counted, outcome
 from kraby_study.store.store import opened_for_reading
 
 LAGS = (1, 2, 4, 8, 16)

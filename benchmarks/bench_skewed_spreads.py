@@ -40,7 +40,7 @@ import pandas as pd
 from bench_error_rates import LOCATION, SPREADS, spread_cell, table, unit_noise
 from scipy import stats as sps
 
-from kraby_study.comparison import ALPHA, MARGIN, holm, margin_weights, welch_pairs
+from kraby_study.decision.comparison import ALPHA, MARGIN, holm, margin_weights, welch_pairs
 
 SEED = 20240540
 RESAMPLES = 999

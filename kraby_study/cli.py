@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from kraby_study.answers.standing import StudyStanding
     from kraby_study.plan.preview import Count
     from kraby_study.plan.spec import StudyPlan
-    from kraby_study.records import Tally
+    from kraby_study.records.stored import Tally
     from kraby_study.run.executor import Executor
     from kraby_study.run.runner import CommandRun
 
@@ -466,9 +466,9 @@ def cmd_best(args: argparse.Namespace) -> int:
 
     from kraby_study.answers.campaign import campaign_selection
     from kraby_study.answers.selected import require_selection
-    from kraby_study.comparison import CompareOptions
     from kraby_study.config.conf_dirs import USER_CONF_DIR
     from kraby_study.config.ppo_file import write_ppo_config
+    from kraby_study.decision.comparison import CompareOptions
     from kraby_study.store.store import opened
 
     chosen, overrides = stored_study(flag_overrides(args, [STORAGE, BEST_OF]))

@@ -236,7 +236,7 @@ def bootstrap_t_reference(values: list[float], level: float = 0.95,
     ``np.quantile`` at (1 -+ level) / 2."""
     import numpy as np
 
-    from kraby_study.stats import BOOTSTRAP_SEED, _resample_plan
+    from kraby_study.decision.intervals import BOOTSTRAP_SEED, _resample_plan
 
     x = np.sort(np.asarray(values, dtype=float))
     n, mean = len(x), float(np.mean(x))

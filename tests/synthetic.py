@@ -18,18 +18,10 @@ from optuna.distributions import CategoricalDistribution, FloatDistribution, Int
 from optuna.trial import TrialState, create_trial
 
 from kraby_study.answers.raced import ended_runs, race_record
+from kraby_study.decision.race import race
 from kraby_study.plan.spec import RaceRules, fingerprint
-from kraby_study.race import race
-from kraby_study.records import (
-    CurvePoint,
-    Failure,
-    Outcome,
-    StudyAttrs,
-    TrialAttrs,
-    failure,
-    latest_by_key,
-    sweep_key,
-)
+from kraby_study.records.attributes import CurvePoint, StudyAttrs, TrialAttrs
+from kraby_study.records.stored import Failure, Outcome, failure, latest_by_key, sweep_key
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
 

@@ -37,20 +37,13 @@ from synthetic import add_trials
 from kraby_study.answers.raced import ended_runs, race_record
 from kraby_study.answers.selected import sweep_selection
 from kraby_study.config.compose import compose_config
+from kraby_study.decision.race import race
 from kraby_study.plan.campaign import campaign_of
 from kraby_study.plan.spec import StudyPlan
 from kraby_study.plan.sweep import expand_study
-from kraby_study.race import race
-from kraby_study.records import (
-    StudyAttrs,
-    Tally,
-    TrialAttrs,
-    counted,
-    latest_by_key,
-    param_name,
-    parse_sweep_key,
-    tally,
-)
+from kraby_study.records.attributes import StudyAttrs, TrialAttrs
+from kraby_study.records.stored import Tally, counted, latest_by_key, parse_sweep_key, tally
+from kraby_study.records.values import param_name
 from kraby_study.report import write_report
 from kraby_study.run.campaign_run import run_campaign
 from kraby_study.run.plan_source import PlanSource

@@ -13,7 +13,7 @@ from kraby_study.config.compose import compose_config
 from kraby_study.errors import ConfigError
 from kraby_study.plan.sweep import expand_study
 from kraby_study.plan.train import train_plan
-from kraby_study.records import sweep_key, train_key
+from kraby_study.records.stored import sweep_key, train_key
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 STUDY_FILES = sorted((CONF / "study").glob("*.yaml"))

@@ -15,7 +15,7 @@ from kraby_study.config.compose import compose_config
 from kraby_study.plan.confirm import Arm, distinct_arms
 from kraby_study.plan.settings import resolved_settings
 from kraby_study.plan.space import fitted_params
-from kraby_study.records import counted
+from kraby_study.records.stored import counted
 
 SPACE = """\
 name: tiny
@@ -191,7 +191,8 @@ def test_a_confirm_of_an_evaluation_search_scores_on_a_test_set_the_search_never
 
     from kraby_envs.rollout import evaluation_targets
     from kraby_study.env import adapter_for
-    from kraby_study.records import EVAL_EPISODES, trial_seeds
+    from kraby_study.records.definition import EVAL_EPISODES
+    from kraby_study.records.stored import trial_seeds
 
     space = SPACE.replace("name: tiny", "name: evaluated").replace("trials: 4", "trials: 2")
     finished_search(workdir, "evaluated", space, "optuna", "search=evaluated", "--workers",

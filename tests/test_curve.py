@@ -6,7 +6,7 @@ expected value below is worked out by hand next to the episodes it comes from.
 
 from __future__ import annotations
 
-from kraby_study.records import CurvePoint
+from kraby_study.records.attributes import CurvePoint
 from kraby_study.run.curve import bin_curve, final_score, mean_curve
 
 

@@ -10,16 +10,17 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kraby_study.comparison import (
+from kraby_study.config.compose import compose_config
+from kraby_study.decision.comparison import (
     compare,
     compare_with_best,
     welch_greater_p,
     welch_two_sided_p,
 )
-from kraby_study.config.compose import compose_config
+from kraby_study.decision.measures import expected_normal_iqr, iqr_unbiased
+from kraby_study.decision.selection import select
+from kraby_study.decision.verdict import verdict, welch_p
 from kraby_study.errors import ConfigError
-from kraby_study.selection import select
-from kraby_study.stats import expected_normal_iqr, iqr_unbiased, verdict, welch_p
 
 FIVE_SEEDS = [150.0, 160.0, 140.0, 165.0, 154.5]  # mean 153.9
 
@@ -126,7 +127,7 @@ def test_mean_interval_covers_at_five_seeds_and_more(shape: str, n: int) -> None
     # The summary's interval of a mean (the bootstrap-t from 5 seeds on) on normal and on
     # right-skewed data (lognormal, sigma 0.5), where the Student-t interval covers 0.916 at
     # n = 5 and Hall's 0.928: at least 0.93 to within 3 Monte-Carlo SE (0.0075).
-    from kraby_study.stats import mean_intervals
+    from kraby_study.decision.intervals import mean_intervals
 
     simulations = 10_000
     dist = stats.norm() if shape == "normal" else stats.lognorm(0.5)

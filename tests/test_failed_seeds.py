@@ -12,7 +12,7 @@ import pytest
 from conftest import sqlite_url
 from synthetic import Run, add_sweep
 
-from kraby_study.failed_seeds import failed_seeds, failure_line
+from kraby_study.decision.failed_seeds import failed_seeds, failure_line
 from kraby_study.report import write_report
 from kraby_study.store.store import Store
 

@@ -14,11 +14,12 @@ from conftest import load, run_cli
 
 from kraby_study.config.compose import compose_config
 from kraby_study.env import adapter_for, normalizer_path
-from kraby_study.env.gym_env import evaluation_seeds, sub_env_seeds
+from kraby_study.env.gym_env import evaluation_seeds
+from kraby_study.env.gym_vec import sub_env_seeds
 from kraby_study.errors import ConfigError
 from kraby_study.plan.settings import resolved_settings
 from kraby_study.plan.spec import OPTIONAL_PPO, TrialSpec
-from kraby_study.records import Outcome
+from kraby_study.records.stored import Outcome
 
 TESTS = Path(__file__).resolve().parent
 GYM = ["env=gym", "env.id=Pendulum-v1"]

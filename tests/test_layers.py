@@ -22,9 +22,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("config", ("kraby_study.config",)),
     ("plan", ("kraby_study.plan",)),
     ("store", ("kraby_study.store",)),
-    ("stats", ("kraby_study.stats", "kraby_study.comparison", "kraby_study.coverage",
-               "kraby_study.selection", "kraby_study.race",
-               "kraby_study.front", "kraby_study.failed_seeds")),
+    ("decision", ("kraby_study.decision",)),
     ("answers", ("kraby_study.answers",)),
     ("run", ("kraby_study.run",)),
     ("report", ("kraby_study.report",)),
@@ -58,6 +56,15 @@ def modules() -> dict[str, Path]:
     return found
 
 
+def _is_module(name: str) -> bool:
+    """Whether a dotted name of our packages is a module or package (a file or folder)."""
+    head, *rest = name.split(".")
+    if head not in PACKAGES:
+        return False
+    where = PACKAGES[head].joinpath(*rest)
+    return where.with_suffix(".py").is_file() or (where / "__init__.py").is_file()
+
+
 def imports(path: Path, module: str) -> list[tuple[str, int, bool]]:
     """(imported module, line, at module level) for each import of our packages in a file,
     wherever it stands (inside functions and TYPE_CHECKING blocks too)."""
@@ -74,8 +81,10 @@ def imports(path: Path, module: str) -> list[tuple[str, int, bool]]:
             if node.level:
                 parent = package.split(".")
                 base = ".".join(parent[: len(parent) - node.level + 1] + ([base] if base else []))
-            names = [base]
-        for name in names:
+            # ``from package import module`` imports the module, not the package's face.
+            names = [f"{base}.{alias.name}" if _is_module(f"{base}.{alias.name}") else base
+                     for alias in node.names]
+        for name in dict.fromkeys(names):
             if name.split(".")[0] in PACKAGES:
                 found.append((name, node.lineno, id(node) in top))
     return found
@@ -143,3 +152,55 @@ def test_reading_where_studies_stand_loads_no_optuna_hydra_pandas_or_scipy_stats
     loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             check=True).stdout.strip()
     assert loaded == "", f"answers.standing loads {loaded}"
+
+
+def import_cycles() -> list[list[str]]:
+    """Every group of modules that import each other in a loop (strongly connected components of
+    the import graph, imports inside functions counted), largest first."""
+    known = modules()
+    graph = {module: sorted({name for name, _, _ in imports(path, module) if name in known
+                             and name != module})
+             for module, path in known.items()}
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles: list[list[str]] = []
+
+    def visit(module: str) -> None:  # Tarjan's algorithm
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        for name in graph[module]:
+            if name not in index:
+                visit(name)
+                low[module] = min(low[module], low[name])
+            elif name in stack:
+                low[module] = min(low[module], index[name])
+        if low[module] == index[module]:
+            group = []
+            while True:
+                top = stack.pop()
+                group.append(top)
+                if top == module:
+                    break
+            if len(group) > 1:
+                cycles.append(sorted(group))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return sorted(cycles, key=len, reverse=True)
+
+
+def test_no_modules_import_each_other_in_a_loop() -> None:
+    """A loop of imports (env's adapters and their registry, say) hides which module is the
+    lower one; the registry stands apart from the adapters (docs/architecture.md)."""
+    assert import_cycles() == []
+
+
+def test_the_cycle_finder_finds_a_loop(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    first, second = tmp_path / "first.py", tmp_path / "second.py"
+    first.write_text("from kraby_study.second import x\n")
+    second.write_text("def f():\n    from kraby_study.first import y\n")
+    monkeypatch.setattr(sys.modules[__name__], "modules",
+                        lambda: {"kraby_study.first": first, "kraby_study.second": second})
+    assert import_cycles() == [["kraby_study.first", "kraby_study.second"]]

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from kraby_study.comparison import Answer, CompareOptions, compare, compare_with_best, holm
 from kraby_study.config.compose import compose_config
+from kraby_study.decision.comparison import Answer, CompareOptions, compare, compare_with_best, holm
+from kraby_study.decision.front import Point, front_choice
+from kraby_study.decision.race import race
+from kraby_study.decision.selection import RULES, select
 from kraby_study.errors import ConfigError
-from kraby_study.front import Point, front_choice
 from kraby_study.plan.spec import RaceRules
-from kraby_study.race import race
-from kraby_study.selection import RULES, select
 
 DEVIATIONS = np.array([-2.0, -1.0, 0.0, 1.0, 2.0])
 """Five seeds' deviations from their mean: sd sqrt(10 / 4) = 1.581."""
@@ -207,7 +207,7 @@ def test_options_come_from_the_config() -> None:
 def test_low_measured_coverage_is_printed_from_five_seeds_on() -> None:
     # From 5 seeds on, the rows of kraby_study/coverage.csv below 0.93 (lognormal sigma 1, a
     # failing seed) are printed beside intervals from that many seeds; the others are not.
-    from kraby_study.coverage import LOW, coverage_note, coverage_table
+    from kraby_study.decision.coverage import LOW, coverage_note, coverage_table
 
     table = coverage_table()
     at_ten = table[table["n"] == 10]

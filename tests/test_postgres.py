@@ -31,7 +31,7 @@ from conftest import (
 from optuna.trial import TrialState
 
 from kraby_study.errors import DatabaseLost
-from kraby_study.records import counted, latest_by_key
+from kraby_study.records.stored import counted, latest_by_key
 from kraby_study.run.runner import Retrying
 
 pytestmark = [pytest.mark.postgres,
@@ -144,7 +144,7 @@ def test_a_sweep_on_postgresql_runs_and_lists(workdir: Path, pg_url: str,
 
 OPEN_STUDY = """\
 import sys
-from kraby_study.records import StudyAttrs
+from kraby_study.records.attributes import StudyAttrs
 from kraby_study.store.store import Store
 store = Store(sys.argv[1])
 store.define("shared", StudyAttrs(kind="sweep", definition={"values": [1, 2]},

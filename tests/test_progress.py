@@ -7,7 +7,8 @@ import re
 
 import pytest
 
-from kraby_study.records import Outcome, TrialResult
+from kraby_study.records.attributes import TrialResult
+from kraby_study.records.stored import Outcome
 from kraby_study.run.progress import REASON_CHARS, Progress
 
 A, B, C = "clip_range=0.2 seed 1", "clip_range=0.4 seed 0", "lr=0.0031 gamma=0.91 (t7)"

@@ -15,7 +15,7 @@ import pytest
 import sqlalchemy as sa
 from conftest import SERVER, TINY, fresh_database, load, run_cli, sqlite_url
 
-from kraby_study.records import PROVENANCE_PREFIX
+from kraby_study.records.attributes import PROVENANCE_PREFIX
 from kraby_study.run.provenance import PACKAGES, git_state, hide_passwords
 from kraby_study.store.store import opened
 

@@ -34,21 +34,13 @@ from conftest import (
 from optuna.trial import TrialState
 
 from kraby_study.answers.raced import race_of
-from kraby_study.comparison import compare_with_best, paired_greater_matrix
 from kraby_study.config.compose import compose_config
+from kraby_study.decision.comparison import compare_with_best, paired_greater_matrix
+from kraby_study.decision.race import race
 from kraby_study.plan.spec import RaceRules, TrialSpec
 from kraby_study.plan.sweep import expand_study
-from kraby_study.race import race
-from kraby_study.records import (
-    Outcome,
-    StudyAttrs,
-    TrialAttrs,
-    TrialResult,
-    counted,
-    latest_by_key,
-    outcome,
-    parse_sweep_key,
-)
+from kraby_study.records.attributes import StudyAttrs, TrialAttrs, TrialResult
+from kraby_study.records.stored import Outcome, counted, latest_by_key, outcome, parse_sweep_key
 from kraby_study.run.pool import Event
 from kraby_study.run.study_run import run_plan
 from kraby_study.store.store import opened

@@ -30,7 +30,7 @@ from optuna.trial import TrialState
 from processes import cmdline, descendants
 
 from kraby_study.errors import StoreError
-from kraby_study.records import PROVENANCE_PREFIX, RAY_NODE
+from kraby_study.records.attributes import PROVENANCE_PREFIX, RAY_NODE
 from kraby_study.store.rows import reading
 from kraby_study.store.store import opened
 

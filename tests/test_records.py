@@ -12,13 +12,13 @@ import pytest
 from optuna.distributions import FloatDistribution, IntDistribution
 from optuna.trial import FrozenTrial, TrialState, create_trial
 
-from kraby_study.records import (
+from kraby_study.answers.seed_scores import samples
+from kraby_study.decision.selection import select
+from kraby_study.records.attributes import StudyAttrs, TrialAttrs
+from kraby_study.records.stored import (
     Failure,
     Outcome,
-    StudyAttrs,
     Tally,
-    TrialAttrs,
-    best_trial,
     counted,
     failure,
     failure_kind,
@@ -28,12 +28,10 @@ from kraby_study.records import (
     parse_sweep_key,
     search_key,
     sweep_key,
-    swept_value,
     tally,
     train_key,
-    value_key,
 )
-from kraby_study.selection import samples, select
+from kraby_study.records.values import best_trial, swept_value, value_key
 
 COMPLETE, PRUNED, FAIL = TrialState.COMPLETE, TrialState.PRUNED, TrialState.FAIL
 RUNNING, WAITING = TrialState.RUNNING, TrialState.WAITING

@@ -31,12 +31,14 @@ from synthetic import (
 )
 
 from kraby_study.answers.selected import selection_of, sweep_selection
+from kraby_study.decision.intervals import hall_interval, t_interval
+from kraby_study.decision.selection import select
+from kraby_study.decision.verdict import welch_p
 from kraby_study.errors import ConfigError, StoreError
 from kraby_study.plan.spec import RaceRules
-from kraby_study.records import Outcome, StudyAttrs, TrialAttrs
+from kraby_study.records.attributes import StudyAttrs, TrialAttrs
+from kraby_study.records.stored import Outcome
 from kraby_study.report import ReportIndex, run_report, sweep_plots, write_report
-from kraby_study.selection import select
-from kraby_study.stats import hall_interval, t_interval, welch_p
 from kraby_study.store.store import Store, opened
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

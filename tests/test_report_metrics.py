@@ -16,7 +16,8 @@ from optuna.trial import TrialState, create_trial
 from scipy import stats
 from synthetic import Run, add_sweep, add_trials, write_curves
 
-from kraby_study.records import Outcome, StudyAttrs, TrialAttrs
+from kraby_study.records.attributes import StudyAttrs, TrialAttrs
+from kraby_study.records.stored import Outcome
 from kraby_study.report import ReportIndex, write_report
 from kraby_study.store.store import Store
 
@@ -147,7 +148,7 @@ def test_auc_is_the_mean_of_each_seed_curve(report: ReportIndex) -> None:
 
 
 def test_curve_bands_are_hall_intervals_per_value_and_step() -> None:
-    from kraby_study.report.sweep_tables import curve_bands
+    from kraby_study.decision.summary import curve_bands
 
     rewards = {(0, 100): [1.0, 2.0, 3.0, 10.0], (0, 200): [4.0, 4.0, 4.0, 4.0],
                (1, 100): [0.5], (1, 200): [2.0, 4.0, 9.0]}
@@ -336,8 +337,8 @@ def test_threshold_option_changes_reach(store_url: str, report: ReportIndex,
 def test_summary_intervals_are_bootstrap_t_from_five_seeds() -> None:
     # Value "six": 6 complete seeds (right-skewed scores, times and AUCs): the bootstrap-t
     # interval with report.bootstrap resamples. Value "three": 3 seeds, Hall's interval.
-    from kraby_study.report.sweep_tables import SEED_COLUMNS, add_curve_metrics, summarise
-    from kraby_study.stats import bootstrap_t_interval
+    from kraby_study.decision.intervals import bootstrap_t_interval
+    from kraby_study.decision.summary import SEED_COLUMNS, add_curve_metrics, summarise
 
     finals = {0: [1.0, 1.5, 2.0, 2.5, 3.0, 9.0], 1: [2.0, 4.0, 9.0]}
     times = {0: [10.0, 11.0, 12.0, 13.0, 15.0, 30.0], 1: [20.0, 20.0, 26.0]}
@@ -367,7 +368,7 @@ def test_summary_intervals_are_bootstrap_t_from_five_seeds() -> None:
 def test_few_seeds_note_prints_the_measured_coverage(report: ReportIndex) -> None:
     # learning_rate has values of 4, 4, 1 and 3 complete seeds: the summary's notes give the
     # measured coverage (kraby_study/coverage.csv) of every interval at n = 3 and n = 4.
-    from kraby_study.coverage import coverage_table
+    from kraby_study.decision.coverage import coverage_table
 
     text = (report.out / "learning_rate" / "summary.md").read_text()
     table = coverage_table()

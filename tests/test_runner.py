@@ -14,7 +14,8 @@ from typing import Any
 import pytest
 
 from kraby_study.plan.spec import TrialSpec
-from kraby_study.records import Failure, Outcome, TrialResult, failure_kind
+from kraby_study.records.attributes import TrialResult
+from kraby_study.records.stored import Failure, Outcome, failure_kind
 from kraby_study.run.pool import Event
 from kraby_study.run.progress import Progress
 from kraby_study.run.runner import MAX_WORKER_DEATHS, CommandRun, run_trials

@@ -11,7 +11,8 @@ from optuna.trial import TrialState
 
 from kraby_study.config.compose import compose_config
 from kraby_study.plan.space import validate_search
-from kraby_study.records import Outcome, StudyAttrs, TrialResult
+from kraby_study.records.attributes import StudyAttrs, TrialResult
+from kraby_study.records.stored import Outcome
 from kraby_study.run.sampling import make_pruner
 from kraby_study.run.search_source import SearchSource
 from kraby_study.store.ledger import StudyLedger
@@ -306,7 +307,7 @@ SEED_SCORES = {
 
 def test_wilcoxon_pruner_stops_the_seeds_of_a_trial_worse_on_the_same_seeds(
         workdir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from kraby_study.records import TrialAttrs
+    from kraby_study.records.attributes import TrialAttrs
     from kraby_study.run import trial as trial_module
     from kraby_study.run.sampling import distributions, make_sampler
     from kraby_study.run.trial import run_trial

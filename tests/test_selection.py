@@ -1,4 +1,4 @@
-"""The selection rules (kraby_study.selection) on constructed data, checked by hand."""
+"""The selection rules (kraby_study.decision.selection) on constructed data, checked by hand."""
 
 from __future__ import annotations
 
@@ -9,10 +9,11 @@ import pytest
 from optuna.distributions import FloatDistribution
 from optuna.trial import FrozenTrial, TrialState, create_trial
 
+from kraby_study.answers.seed_scores import samples, selected_index
+from kraby_study.decision.selection import select
+from kraby_study.decision.verdict import holm_vs_best
 from kraby_study.errors import ConfigError
-from kraby_study.records import SelectRule
-from kraby_study.selection import samples, select, selected_index
-from kraby_study.stats import holm_vs_best
+from kraby_study.records.attributes import SelectRule
 
 # Three values of n_epochs: 30 is best, 10 is statistically tied with it (its seeds overlap 30's),
 # 1 is far worse; 30 is the slowest, 1 the fastest, 10 in between.

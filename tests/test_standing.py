@@ -22,20 +22,9 @@ from kraby_study.cli import standings_table
 from kraby_study.config.compose import compose_config
 from kraby_study.config.schema import KrabyConfig
 from kraby_study.config.storage import DEFAULT_STORAGE, plain_storage
-from kraby_study.records import (
-    RAY_NODE,
-    Failure,
-    Outcome,
-    Placement,
-    StudyAttrs,
-    TrialAttrs,
-    TrialResult,
-    counted,
-    failure,
-    outcome,
-    search_key,
-    swept_value,
-)
+from kraby_study.records.attributes import RAY_NODE, Placement, StudyAttrs, TrialAttrs, TrialResult
+from kraby_study.records.stored import Failure, Outcome, counted, failure, outcome, search_key
+from kraby_study.records.values import swept_value
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.rows import reading
 from kraby_study.store.store import Store, opened

@@ -11,31 +11,29 @@ import pytest
 from conftest import bootstrap_t_reference, hall_bounds, newcombe_bounds
 from scipy import stats
 
-from kraby_study.comparison import holm
-from kraby_study.stats import (
-    ALPHA,
+from kraby_study.decision.comparison import ALPHA, holm
+from kraby_study.decision.intervals import (
     BAND_NAME,
-    HOLM_NAME,
     INTERVAL_NAME,
     IQM_INTERVAL_NAME,
-    Verdict,
-    auc,
     bootstrap_t_interval,
-    compare_to_best,
-    default_threshold,
     describe,
-    first_reach,
     hall_interval,
     iqm,
     iqm_interval,
-    iqr,
     mean_interval,
-    p_improvement,
-    p_improvement_interval,
     sample_skewness,
     t_interval,
-    verdict,
 )
+from kraby_study.decision.measures import (
+    auc,
+    default_threshold,
+    first_reach,
+    iqr,
+    p_improvement,
+    p_improvement_interval,
+)
+from kraby_study.decision.verdict import HOLM_NAME, Verdict, compare_to_best, verdict
 
 NAN = math.nan
 SPREAD = [3.1, 0.4, 2.2, 5.9, 1.7, 4.4, 2.8, 3.6, 0.9, 5.1]

@@ -27,7 +27,7 @@ from conftest import (
 )
 from optuna.trial import TrialState
 
-from kraby_study.records import is_interrupted, latest_by_key, sweep_key
+from kraby_study.records.stored import is_interrupted, latest_by_key, sweep_key
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 

@@ -17,13 +17,14 @@ from optuna.study import StudyDirection
 
 from kraby_study.answers.search_front import front_lines, search_front
 from kraby_study.answers.selected import selected_value
-from kraby_study.comparison import welch_greater_p
 from kraby_study.config.compose import compose_config
+from kraby_study.decision.comparison import welch_greater_p
+from kraby_study.decision.front import Point, cheapest_tied, pareto_front, spread
 from kraby_study.errors import ConfigError
-from kraby_study.front import Point, cheapest_tied, pareto_front, spread
 from kraby_study.plan.confirm import ConfirmedStudy, confirm_rule
 from kraby_study.plan.space import search_definition
-from kraby_study.records import SelectRule, StudyAttrs, check_objective, stored_floor
+from kraby_study.records.attributes import SelectRule, StudyAttrs
+from kraby_study.records.definition import check_objective, stored_floor
 
 SPACE = """\
 name: two

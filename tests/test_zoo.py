@@ -17,7 +17,7 @@ from kraby_study.config.compose import compose_config
 from kraby_study.errors import ConfigError
 from kraby_study.plan.settings import resolved_settings
 from kraby_study.plan.spec import OPTIONAL_PPO, TrialSpec
-from kraby_study.records import Outcome
+from kraby_study.records.stored import Outcome
 from kraby_study.store.store import Store
 
 CLASSIC = ["Pendulum-v1", "CartPole-v1", "MountainCar-v0", "MountainCarContinuous-v0",

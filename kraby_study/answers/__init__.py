@@ -2,5 +2,5 @@
 ends with, the winners later studies take, and the configurations ``confirm`` retrains.
 
 Reads the store (:mod:`kraby_study.store`) and applies the selection rules
-(:mod:`kraby_study.selection`); the runner, the CLI and campaigns read answers from here.
+(:mod:`kraby_study.decision.selection`); the runner, the CLI and campaigns read answers from here.
 """

@@ -6,9 +6,9 @@ from __future__ import annotations
 from typing import Any
 
 from kraby_study.answers.selected import Selection, sweep_selection
-from kraby_study.comparison import CompareOptions
+from kraby_study.decision.comparison import CompareOptions
 from kraby_study.errors import StoreError
-from kraby_study.records import param_name, value_label
+from kraby_study.records.values import param_name, value_label
 from kraby_study.store.store import Store
 
 

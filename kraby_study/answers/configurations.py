@@ -6,26 +6,13 @@ from typing import Any
 
 from kraby_study.answers.search_front import search_front
 from kraby_study.answers.selected import searched_env_keys
+from kraby_study.decision.front import spread
 from kraby_study.errors import StoreError
-from kraby_study.front import spread
 from kraby_study.plan.confirm import Arm, ConfirmedStudy
-from kraby_study.records import (
-    REWARDS,
-    Outcome,
-    StudyKind,
-    counted,
-    objective_names,
-    outcome,
-    param_name,
-    score,
-    search_key,
-    stored_floor,
-    swept_value,
-    trial_seeds,
-    two_objectives,
-    value_key,
-    value_label,
-)
+from kraby_study.records.attributes import StudyKind
+from kraby_study.records.definition import REWARDS, objective_names, stored_floor, two_objectives
+from kraby_study.records.stored import Outcome, counted, outcome, search_key, trial_seeds
+from kraby_study.records.values import param_name, score, swept_value, value_key, value_label
 from kraby_study.store.ledger import StudyLedger
 
 
@@ -33,7 +20,8 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
     """The ``top`` best configurations of a search (distinct complete trials, best first) or
     of a sweep (values by mean final score), with the seeds its trials used. Of a
     two-objective search, up to ``top`` trials of its front spread along it
-    (:func:`kraby_study.front.spread`: the best score, the cheapest, the rest in cost order).
+    (:func:`kraby_study.decision.front.spread`: the best score, the cheapest, the rest in cost
+    order).
 
     Raises:
         StoreError: The study is neither a search nor a sweep, or has fewer than ``top``

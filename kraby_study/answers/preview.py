@@ -18,17 +18,9 @@ from kraby_study.plan.campaign import Campaign, Stage, stage_file
 from kraby_study.plan.preview import Count, plan_count, stage_count
 from kraby_study.plan.spec import fingerprint
 from kraby_study.plan.sweep import expand_study
-from kraby_study.records import (
-    SEEDING_TEXT,
-    Outcome,
-    StudyAttrs,
-    Tally,
-    counted,
-    outcome,
-    seed_text,
-    stored_seeding,
-    tally,
-)
+from kraby_study.records.attributes import StudyAttrs
+from kraby_study.records.definition import SEEDING_TEXT, seed_text, stored_seeding
+from kraby_study.records.stored import Outcome, Tally, counted, outcome, tally
 from kraby_study.store.rows import has_store, reading
 from kraby_study.store.url import shown_url
 

@@ -1,4 +1,4 @@
-"""Where a raced study stands, replayed from its stored runs (:mod:`kraby_study.race`)."""
+"""Where a raced study stands, replayed from its stored runs (:mod:`kraby_study.decision.race`)."""
 
 from __future__ import annotations
 
@@ -7,16 +7,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from kraby_study.decision.race import Drop, Race, race
 from kraby_study.plan.spec import RaceRules
-from kraby_study.race import Drop, Race, race
-from kraby_study.records import (
-    Outcome,
-    StoredTrial,
-    latest_by_key,
-    outcome,
-    parse_sweep_key,
-    value_key,
-)
+from kraby_study.records.stored import Outcome, StoredTrial, latest_by_key, outcome, parse_sweep_key
+from kraby_study.records.values import value_key
 
 
 def place(key: str, seeds: list[int]) -> tuple[int, int] | None:

@@ -20,12 +20,11 @@ from omegaconf import DictConfig, open_dict
 
 from kraby_study.config.winner import Lookup
 from kraby_study.plan.campaign import Campaign, Stage, stage_config
-from kraby_study.records import (
+from kraby_study.records.attributes import StudyAttrs, StudyKind
+from kraby_study.records.definition import (
     EVAL_EPISODES,
     EVAL_SET,
     SEEDING,
-    StudyAttrs,
-    StudyKind,
     stored_eval_episodes,
     stored_eval_set,
     stored_seeding,

@@ -1,24 +1,18 @@
 """A stored two-objective search's front and its selection: what ``list``, ``best``,
-``confirm`` and the report read of it (:mod:`kraby_study.front` holds the rules)."""
+``confirm`` and the report read of it (:mod:`kraby_study.decision.front` holds the rules)."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from kraby_study.comparison import CompareOptions
+from kraby_study.decision.comparison import CompareOptions
+from kraby_study.decision.front import FRONT_RULES, FrontChoice, Point, front_choice, pareto_front
 from kraby_study.errors import ConfigError
-from kraby_study.front import FRONT_RULES, FrontChoice, Point, front_choice, pareto_front
-from kraby_study.records import (
-    Outcome,
-    SelectRule,
-    StoredTrial,
-    TrialAttrs,
-    cost,
-    floor_score,
-    outcome,
-    score,
-)
+from kraby_study.records.attributes import SelectRule, TrialAttrs
+from kraby_study.records.definition import floor_score
+from kraby_study.records.stored import Outcome, StoredTrial, outcome
+from kraby_study.records.values import cost, score
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,10 @@
 """The settings a stored study selected: a sweep's value under its rule, a search's best trial.
 
 "Best" is the statistics' word: the highest mean final score (a sweep's value) or the highest
-score (a search's trial). "Selected" is what a study's rule picks (:mod:`kraby_study.selection`):
-under ``final_score`` the best value, under ``fastest_equivalent`` the fastest value shown
-equivalent to it. Every function takes the command's
-:class:`kraby_study.comparison.CompareOptions` (margin, ``report.min_seeds`` and
+score (a search's trial). "Selected" is what a study's rule picks
+(:mod:`kraby_study.decision.selection`): under ``final_score`` the best value, under
+``fastest_equivalent`` the fastest value shown equivalent to it. Every function takes the command's
+:class:`kraby_study.decision.comparison.CompareOptions` (margin, ``report.min_seeds`` and
 ``compare.select``, a rule read instead of the stored one); the defaults without one.
 """
 
@@ -21,28 +21,21 @@ from kraby_study.answers.search_front import (
     front_short,
     search_front,
 )
-from kraby_study.comparison import CompareOptions, compare, seeds_needed
+from kraby_study.answers.seed_scores import samples, swept_values, time_measure
+from kraby_study.decision.comparison import CompareOptions, compare, seeds_needed
+from kraby_study.decision.selection import RULES, mean_by_value
 from kraby_study.errors import StoreError
-from kraby_study.records import (
-    Outcome,
-    SelectRule,
-    StoredTrial,
-    StudyAttrs,
-    StudyKind,
-    Tally,
+from kraby_study.records.attributes import SelectRule, StudyAttrs, StudyKind
+from kraby_study.records.definition import stored_floor, two_objectives
+from kraby_study.records.stored import Outcome, StoredTrial, Tally, counted, outcome, tally
+from kraby_study.records.values import (
     best_trial,
-    counted,
-    outcome,
     param_name,
     score,
-    stored_floor,
     swept_value,
-    tally,
-    two_objectives,
     value_key,
     value_label,
 )
-from kraby_study.selection import RULES, mean_by_value, samples, swept_values, time_measure
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -112,7 +105,7 @@ def front_selection(name: str, definition: dict[str, Any], trials: Sequence[Stor
                     select: str | None = None,
                     options: CompareOptions | None = None) -> Selection | None:
     """A two-objective search's selection by its rule (:func:`front_rule` of its stored
-    ``select``; :func:`kraby_study.front.front_choice`), with the front (above the search's
+    ``select``; :func:`kraby_study.decision.front.front_choice`), with the front (above the search's
     floor, if it has one)."""
     found = search_front(trials, stored_floor(definition), front_rule(select, options), options)
     if found.choice is None:
@@ -172,7 +165,7 @@ class SweepSelection:
 
 def sweep_selection(ledger: StudyLedger, options: CompareOptions | None = None
                     ) -> SweepSelection | None:
-    """What a swept study's stored rule (:mod:`kraby_study.selection`) selects among its
+    """What a swept study's stored rule (:mod:`kraby_study.decision.selection`) selects among its
     complete runs (of a raced study, among the values its race did not drop); None when none
     is complete."""
     return selected_value(ledger.attrs, counted(ledger.trials()), ledger.curves, options)

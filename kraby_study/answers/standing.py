@@ -14,15 +14,8 @@ from functools import partial
 from typing import TYPE_CHECKING, Any
 
 from kraby_study.answers.selected import Curves, selected_short
-from kraby_study.records import (
-    Placement,
-    StoredTrial,
-    StudyAttrs,
-    StudyKind,
-    Tally,
-    counted,
-    tally,
-)
+from kraby_study.records.attributes import Placement, StudyAttrs, StudyKind
+from kraby_study.records.stored import StoredTrial, Tally, counted, tally
 from kraby_study.store.rows import reading
 
 if TYPE_CHECKING:

@@ -13,9 +13,11 @@ from typing import TYPE_CHECKING, Any
 
 from omegaconf import DictConfig
 
-from kraby_study.comparison import CompareOptions
+from kraby_study.decision.comparison import CompareOptions
 from kraby_study.errors import ConfigError, StoreError
-from kraby_study.records import StudyKind, counted, tally, value_label
+from kraby_study.records.attributes import StudyKind
+from kraby_study.records.stored import counted, tally
+from kraby_study.records.values import value_label
 
 if TYPE_CHECKING:
     from kraby_study.answers.selected import SweepSelection

@@ -14,7 +14,8 @@ from omegaconf import DictConfig, OmegaConf
 from kraby_study.config.schema import PPOConfig
 from kraby_study.env import adapter_for, check_scheme
 from kraby_study.errors import ConfigError
-from kraby_study.records import EVAL_SETS, FINAL_FRACTION, REWARDS, SelectRule
+from kraby_study.records.attributes import SelectRule
+from kraby_study.records.definition import EVAL_SETS, FINAL_FRACTION, REWARDS
 from kraby_study.store.url import check_url
 
 

@@ -8,13 +8,8 @@ independent seed streams), evaluates a policy and gives the frames of a few epis
 """
 
 from kraby_envs.seeding import SCHEMES, check_scheme
-from kraby_study.env.adapter import (
-    EnvAdapter,
-    Frame,
-    adapter_for,
-    normalizer_path,
-    saved_normalizer,
-)
+from kraby_study.env.adapter import EnvAdapter, Frame, normalizer_path, saved_normalizer
+from kraby_study.env.registry import adapter_for
 
 __all__ = ["SCHEMES", "check_scheme", "EnvAdapter", "Frame", "adapter_for", "normalizer_path",
            "saved_normalizer"]

@@ -77,18 +77,6 @@ class EnvAdapter(Protocol):
         ...
 
 
-def adapter_for(env: Mapping[str, Any]) -> EnvAdapter:
-    """The adapter of a run's env settings (a dict or a config node): gym when they name an
-    ``id``, else the leg."""
-    # keys(), not `in`: a config node's `in` is False for a missing value (env=gym, no id yet).
-    if "id" in env.keys():
-        from kraby_study.env.gym_env import GYM
-
-        return GYM
-    from kraby_study.env.leg import LEG
-
-    return LEG
-
 
 def normalizer_path(model_path: str | Path) -> Path:
     """Where a model's VecNormalize statistics are saved: ``<model>.vecnormalize.pkl`` beside

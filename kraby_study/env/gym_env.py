@@ -18,7 +18,6 @@ from __future__ import annotations
 import importlib
 import json
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
 from functools import cache
 from importlib import metadata
 from typing import Any
@@ -50,25 +49,6 @@ ACTIONS = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary
 OBSERVATIONS = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
 """Observation spaces its MlpPolicy takes (a Dict needs MultiInputPolicy, not offered)."""
 
-
-@dataclass(frozen=True)
-class SubEnvSeeds:
-    """The seeds of one sub-env of a run."""
-
-    reset: int
-    action: int
-    observation: int
-
-
-def sub_env_seeds(seed: int, n_envs: int, scheme: str) -> list[SubEnvSeeds]:
-    """The seeds of a run's ``n_envs`` sub-envs under ``scheme`` (streams or offset)."""
-    from kraby_envs.seeding import check_scheme
-
-    if check_scheme(scheme) == "offset":
-        return [SubEnvSeeds(seed + i, seed + i, seed + i) for i in range(n_envs)]
-    children = np.random.SeedSequence(seed).spawn(n_envs)
-    words = [[int(w) for w in child.generate_state(3, np.uint64)] for child in children]
-    return [SubEnvSeeds(*w) for w in words]
 
 
 def evaluation_seeds(episodes: int, seed: int | None = None) -> list[int]:

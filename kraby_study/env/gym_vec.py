@@ -7,16 +7,36 @@ config never loads.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from kraby_study.env.gym_env import sub_env_seeds
+
+@dataclass(frozen=True)
+class SubEnvSeeds:
+    """The seeds of one sub-env of a run."""
+
+    reset: int
+    action: int
+    observation: int
+
+
+def sub_env_seeds(seed: int, n_envs: int, scheme: str) -> list[SubEnvSeeds]:
+    """The seeds of a run's ``n_envs`` sub-envs under ``scheme`` (streams or offset)."""
+    from kraby_envs.seeding import check_scheme
+
+    if check_scheme(scheme) == "offset":
+        return [SubEnvSeeds(seed + i, seed + i, seed + i) for i in range(n_envs)]
+    children = np.random.SeedSequence(seed).spawn(n_envs)
+    words = [[int(w) for w in child.generate_state(3, np.uint64)] for child in children]
+    return [SubEnvSeeds(*w) for w in words]
 
 
 class StreamSeededVecEnv(DummyVecEnv):
     """A DummyVecEnv whose ``seed(s)`` gives sub-env i the seeds of stream i of ``s``
-    (:func:`kraby_study.env.gym_env.sub_env_seeds`) instead of SB3's ``s + i``.
+    (:func:`sub_env_seeds`) instead of SB3's ``s + i``.
 
     Args:
         env_fns: One function per sub-env, each making it.

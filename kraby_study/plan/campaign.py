@@ -18,7 +18,7 @@ from kraby_study.config.compose import compose_config
 from kraby_study.config.validate import RUN_LENGTH, to_container, validate_run_length
 from kraby_study.config.winner import Lookup, references, winners_from
 from kraby_study.errors import ConfigError
-from kraby_study.records import SelectRule
+from kraby_study.records.attributes import SelectRule
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,9 @@ from kraby_study.plan.spec import (
     with_evaluation,
     with_seeding,
 )
-from kraby_study.records import REWARDS, SelectRule, StudyKind, sweep_key
+from kraby_study.records.attributes import SelectRule, StudyKind
+from kraby_study.records.definition import REWARDS
+from kraby_study.records.stored import sweep_key
 
 TEST_SEED = 1000
 """A new confirm study's first seed when confirm.seed is null."""

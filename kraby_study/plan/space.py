@@ -26,7 +26,8 @@ from kraby_study.plan.spec import (
     with_evaluation,
     with_seeding,
 )
-from kraby_study.records import REWARDS, check_objective, stored_objective, value_key
+from kraby_study.records.definition import REWARDS, check_objective, stored_objective
+from kraby_study.records.values import value_key
 
 SAMPLERS = ("tpe", "random", "nsga2")
 PRUNERS = ("median", "hyperband", "wilcoxon", "none")

@@ -8,13 +8,13 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
-from kraby_study.records import (
+from kraby_study.records.attributes import StudyAttrs
+from kraby_study.records.definition import (
     EVAL_EPISODES,
     EVAL_SET,
     LEGACY_EVAL_SET,
     LEGACY_SEEDING,
     SEEDING,
-    StudyAttrs,
 )
 
 OPTIONAL_PPO: dict[str, Any] = {
@@ -168,7 +168,7 @@ class StudyPlan:
     campaign: dict[str, Any] | None = None
     """A campaign stage's place in its campaign (``Campaign.record``)."""
     racing: RaceRules | None = None
-    """How its seeds race (:mod:`kraby_study.race`); None: every value gets every seed."""
+    """How its seeds race (:mod:`kraby_study.decision.race`); None: every value gets every seed."""
 
     def notes(self) -> StudyAttrs:
         """What is stored beside the definition: rule, inputs, campaign."""

@@ -21,7 +21,9 @@ from kraby_study.plan.settings import (
     with_value,
 )
 from kraby_study.plan.spec import StudyPlan, TrialSpec, seeding_of, with_seeding
-from kraby_study.records import StudyKind, param_name, sweep_key, value_key, value_label
+from kraby_study.records.attributes import StudyKind
+from kraby_study.records.stored import sweep_key
+from kraby_study.records.values import param_name, value_key, value_label
 
 
 def run_seeds(cfg: DictConfig) -> list[int]:

@@ -7,7 +7,8 @@ from omegaconf import DictConfig
 from kraby_study.config.validate import validate_env, validate_ppo, validate_run_length
 from kraby_study.plan.settings import model_path, resolved_settings, tensorboard_run
 from kraby_study.plan.spec import StudyPlan, TrialSpec, fingerprint, seeding_of, with_seeding
-from kraby_study.records import StudyKind, train_key
+from kraby_study.records.attributes import StudyKind
+from kraby_study.records.stored import train_key
 
 
 def train_plan(cfg: DictConfig) -> StudyPlan:

@@ -11,9 +11,14 @@ import time
 from pathlib import Path
 from typing import Any, TextIO
 
-from kraby_study.comparison import seeds_needed
+from kraby_study.answers.search_evidence import build_search, is_two_objective
+from kraby_study.answers.study_data import StudyData, load_study, select_studies
+from kraby_study.answers.sweep_evidence import build_sweep, option
+from kraby_study.decision.comparison import seeds_needed
+from kraby_study.decision.intervals import BAND_NAME, BOOTSTRAP_REPETITIONS, interval_name
+from kraby_study.decision.verdict import HOLM_NAME
 from kraby_study.errors import ConfigError, first_line
-from kraby_study.records import StudyKind
+from kraby_study.records.attributes import StudyKind
 from kraby_study.report import search_output, sweep_output
 from kraby_study.report.campaign_output import campaigns, write_campaign
 from kraby_study.report.document import (
@@ -26,12 +31,9 @@ from kraby_study.report.document import (
     to_html,
     to_markdown,
 )
-from kraby_study.report.load import StudyData, check_format, load_study, select_studies
 from kraby_study.report.reproducibility import write_reproducibility
-from kraby_study.report.search_tables import build_search, is_two_objective
 from kraby_study.report.study_report import ReportIndex, StudyReport
-from kraby_study.report.sweep_tables import build_sweep, option
-from kraby_study.stats import BAND_NAME, BOOTSTRAP_REPETITIONS, HOLM_NAME, interval_name
+from kraby_study.report.style import check_format
 from kraby_study.store.store import opened_for_reading
 from kraby_study.store.url import shown_url, sqlite_path
 

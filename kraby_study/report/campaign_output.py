@@ -12,13 +12,15 @@ from typing import Any
 
 import pandas as pd
 
-from kraby_study.comparison import answers_name
-from kraby_study.race import Drop
-from kraby_study.records import Outcome, value_key, value_label
+from kraby_study.answers.sweep_evidence import Sweep
+from kraby_study.decision.comparison import answers_name
+from kraby_study.decision.race import Drop
+from kraby_study.decision.selection import RULE_TEXT
+from kraby_study.decision.summary import note_part
+from kraby_study.decision.verdict import PROCEDURE_NAME
+from kraby_study.records.stored import Outcome
+from kraby_study.records.values import value_key, value_label
 from kraby_study.report.document import Block, Heading, Links, Table, Text, write_csvs
-from kraby_study.report.sweep_tables import Sweep, note_part
-from kraby_study.selection import RULE_TEXT
-from kraby_study.stats import PROCEDURE_NAME
 
 COLUMNS = ["stage", "study", "parameter", "rule", "selected", "documented", "agree", "status",
            "notes"]

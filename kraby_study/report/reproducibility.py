@@ -14,25 +14,18 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from kraby_study.records import (
+from kraby_study.answers.study_data import StudyData
+from kraby_study.records.attributes import RAY_NODE, Placement, StudyKind, TrialAttrs
+from kraby_study.records.definition import (
     LEGACY_SEEDING,
-    RAY_NODE,
     SEEDING_TEXT,
-    Outcome,
-    Placement,
-    StoredTrial,
-    StudyKind,
-    TrialAttrs,
-    offset_leg_seeds,
-    outcome,
     scored_by_evaluation,
     seed_text,
     stored_eval_set,
     stored_seeding,
-    trial_seeds,
 )
+from kraby_study.records.stored import Outcome, StoredTrial, offset_leg_seeds, outcome, trial_seeds
 from kraby_study.report.document import Block, Heading, Items, Table, Text, to_markdown
-from kraby_study.report.load import StudyData
 from kraby_study.run.provenance import ENV_FIELDS, PACKAGES
 
 FILE = "reproducibility.md"

@@ -8,11 +8,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kraby_study.records import Outcome, StudyKind, score
+from kraby_study.answers.search_evidence import Search, front_table, top_trials
+from kraby_study.records.attributes import StudyKind
+from kraby_study.records.stored import Outcome
+from kraby_study.records.values import score
 from kraby_study.report import search_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
-from kraby_study.report.search_tables import Search, format_param, front_table, top_trials
+from kraby_study.report.search_format import format_param
 from kraby_study.report.study_report import StudyReport
 from kraby_study.report.style import number, styled
 

@@ -18,8 +18,10 @@ from matplotlib.colors import Normalize
 from matplotlib.lines import Line2D
 from optuna.distributions import BaseDistribution, CategoricalDistribution
 
-from kraby_study.records import Outcome, StudyKind
-from kraby_study.report.search_tables import Search, is_log, numeric_array
+from kraby_study.answers.search_evidence import Search
+from kraby_study.records.attributes import StudyKind
+from kraby_study.records.stored import Outcome
+from kraby_study.report.search_format import is_log, numeric_array
 from kraby_study.report.style import (
     BEST_COLOUR,
     FAILED_COLOUR,

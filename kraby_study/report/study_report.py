@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from kraby_study.records import StudyKind
+from kraby_study.records.attributes import StudyKind
 from kraby_study.report.document import Block
 
 
@@ -23,7 +23,7 @@ class StudyReport:
         files: Every file written, in the order the index lists them.
         blocks: The study's section of the index.
         notes: Things a reader should know (skipped figures, missing models, ...).
-        sweep: The tables of a sweep-like study (a ``report.sweep_tables.Sweep``), else None.
+        sweep: The tables of a sweep-like study (a ``answers.sweep_evidence.Sweep``), else None.
     """
 
     name: str

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 import numpy as np
@@ -17,7 +17,12 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
-from kraby_study.records import is_numeric
+from kraby_study.errors import ConfigError
+from kraby_study.records.attributes import StudyKind
+from kraby_study.records.values import is_numeric
+
+if TYPE_CHECKING:
+    from kraby_study.answers.sweep_evidence import Sweep
 
 DPI = 150
 WIDE = (10.0, 4.2)
@@ -87,6 +92,12 @@ def value_colours(values: Sequence[Any]) -> list[tuple[float, float, float, floa
     return [tuple(cmap(i % cmap.N)) for i in range(count)]
 
 
+def sweep_colours(sweep: Sweep) -> list[tuple[float, float, float, float]]:
+    """The colours of a sweep's values (a confirm study's by their labels), the same in every
+    figure of the study."""
+    return value_colours(sweep.labels if sweep.data.kind == StudyKind.CONFIRM else sweep.values)
+
+
 def steps_label(value: float, _pos: Any = None) -> str:
     """Environment steps the way a reader counts them: 0, 500, 50k, 1.5M."""
     magnitude = abs(value)
@@ -105,3 +116,12 @@ def number(value: float | None, digits: int = 4) -> str:
     if value is None or not np.isfinite(value):
         return "-"
     return f"{value:.{digits}g}"
+
+
+def check_format(fmt: str) -> str:
+    """The figure format, lower case; ConfigError unless png or svg."""
+    value = str(fmt).lower().lstrip(".")
+    if value not in ("png", "svg"):
+        raise ConfigError(f"report format must be png or svg, got {fmt!r}")
+    return value
+

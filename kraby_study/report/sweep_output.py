@@ -13,28 +13,29 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kraby_study.comparison import answers_name
-from kraby_study.coverage import coverage_note
-from kraby_study.failed_seeds import definition_text
-from kraby_study.records import Outcome, StudyKind, stored_eval_set, value_label
+from kraby_study.answers.sweep_evidence import Sweep, arms_frame
+from kraby_study.decision.comparison import answers_name
+from kraby_study.decision.coverage import coverage_note
+from kraby_study.decision.failed_seeds import definition_text
+from kraby_study.decision.intervals import (
+    BAND_NAME,
+    SHORT_INTERVAL_NAME,
+    interval_name,
+    iqm_interval_name,
+)
+from kraby_study.decision.measures import AUC_NAME, p_improvement_name
+from kraby_study.decision.selection import RULE_TEXT
+from kraby_study.decision.summary import note_part
+from kraby_study.decision.verdict import HOLM_NAME, PROCEDURE_NAME, TEST_NAME
+from kraby_study.records.attributes import StudyKind
+from kraby_study.records.definition import stored_eval_set
+from kraby_study.records.stored import Outcome
+from kraby_study.records.values import value_label
 from kraby_study.report import sweep_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
 from kraby_study.report.document import to_markdown as blocks_to_markdown
 from kraby_study.report.study_report import StudyReport
 from kraby_study.report.style import number, styled
-from kraby_study.report.sweep_tables import Sweep, arms_frame, note_part
-from kraby_study.selection import RULE_TEXT
-from kraby_study.stats import (
-    AUC_NAME,
-    BAND_NAME,
-    HOLM_NAME,
-    PROCEDURE_NAME,
-    SHORT_INTERVAL_NAME,
-    TEST_NAME,
-    interval_name,
-    iqm_interval_name,
-    p_improvement_name,
-)
 
 MARK_TEXT = {"best": "best", "tie": "\u2248 best", "": ""}
 TRAINING_SCORE = "mean episode reward over the last 10 % of training"
@@ -229,7 +230,7 @@ def metric_notes(bootstrap: int, min_seeds: int = 2, raced: bool = False) -> str
 def few_seeds_note(sweep: Sweep) -> str | None:
     """The measured coverage of the intervals drawn from fewer than 5 seeds in this sweep, and
     of those from more where skewed data were covered less than 93 % of the time
-    (:func:`kraby_study.coverage.coverage_note`); None when neither is drawn here."""
+    (:func:`kraby_study.decision.coverage.coverage_note`); None when neither is drawn here."""
     return coverage_note(int(n) for n in sweep.summary["complete"] if int(n) >= 2)
 
 
@@ -315,9 +316,10 @@ def _reach_text(row: pd.Series) -> str:
 
 
 def verdict(sweep: Sweep) -> str:
-    """The study's verdict (:attr:`Sweep.verdict`, from :func:`kraby_study.stats.verdict`) in
-    words: the best value and its ties, the most sample-efficient, the fastest to the threshold
-    and the most repeatable, each with its n and interval."""
+    """The study's verdict (:attr:`Sweep.verdict`, from
+    :func:`kraby_study.decision.verdict.verdict`) in words: the best value and its ties, the most
+    sample-efficient, the fastest to the threshold and the most repeatable, each with its n and
+    interval."""
     result = sweep.verdict
     summary = sweep.summary
     if result.best is None:

@@ -3,10 +3,10 @@ wall-clock time, training time, final score, sample efficiency and time to thres
 value, and the best value's probability of improvement over each other value.
 
 Lines are means over the complete seeds of a value. Error bars are the 95 % intervals of those
-means (:func:`kraby_study.stats.mean_interval`: the bootstrap-t interval from 5 seeds on, Hall's
-skewness-corrected t interval below), except the probability of improvement's, which are
+means (:func:`kraby_study.decision.intervals.mean_interval`: the bootstrap-t interval from 5 seeds
+on, Hall's skewness-corrected t interval below), except the probability of improvement's, which are
 Newcombe score-type intervals. The learning-curve bands, hundreds of points a value, are Hall's
-intervals at every n (see :mod:`kraby_study.stats`). In a
+intervals at every n (see :mod:`kraby_study.decision`). In a
 raced study, the curves of the values the race dropped are dashed.
 """
 
@@ -21,7 +21,9 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from kraby_study.records import Outcome
+from kraby_study.answers.sweep_evidence import Sweep
+from kraby_study.decision.intervals import SHORT_INTERVAL_NAME, mean_interval
+from kraby_study.records.stored import Outcome
 from kraby_study.report.style import (
     BEST_COLOUR,
     FAILED_COLOUR,
@@ -31,9 +33,8 @@ from kraby_study.report.style import (
     WIDE,
     new_figure,
     save,
+    sweep_colours,
 )
-from kraby_study.report.sweep_tables import Sweep, legend_label
-from kraby_study.stats import SHORT_INTERVAL_NAME, mean_interval
 
 LATE_FRACTION = 0.25
 """The zoomed panel shows the last quarter of training."""
@@ -53,7 +54,7 @@ def _title(sweep: Sweep, what: str) -> str:
 
 def _draw_bands(ax: Axes, sweep: Sweep, x: str) -> None:
     for vi, group in sweep.bands.groupby("vi", sort=True):
-        colour = sweep.colours[int(vi)]
+        colour = sweep_colours(sweep)[int(vi)]
         style = DROPPED_STYLE if int(vi) in sweep.dropped else "-"
         ax.plot(group[x], group["mean"], color=colour, linestyle=style,
                 label=legend_label(sweep, int(vi)))
@@ -145,7 +146,7 @@ def _seed_points(ax: Axes, sweep: Sweep, points: pd.DataFrame, column: str) -> N
     for vi, group in points.groupby("vi", sort=True):
         values = group[column].dropna()
         jitter = rng.uniform(-0.12, 0.12, len(values))
-        ax.scatter(int(vi) - 0.1 + jitter, values, s=16, color=sweep.colours[int(vi)],
+        ax.scatter(int(vi) - 0.1 + jitter, values, s=16, color=sweep_colours(sweep)[int(vi)],
                    alpha=0.55, linewidths=0, zorder=2)
 
 
@@ -155,7 +156,7 @@ def _mean_mark(ax: Axes, sweep: Sweep, vi: int, mean: float, low: float, high: f
     err = None
     if np.isfinite(low) and np.isfinite(high):
         err = [[mean - low], [high - mean]]
-    ax.errorbar(vi + 0.18, mean, yerr=err, fmt="o", color=sweep.colours[vi],
+    ax.errorbar(vi + 0.18, mean, yerr=err, fmt="o", color=sweep_colours(sweep)[vi],
                 markeredgecolor="black", markeredgewidth=0.6, markersize=7, capsize=4,
                 elinewidth=1.6, zorder=3)
 
@@ -328,8 +329,9 @@ def improvement(sweep: Sweep, path: Path) -> Path:
         err = None
         if np.isfinite(row["p_improvement_low"]) and np.isfinite(row["p_improvement_high"]):
             err = [[p - row["p_improvement_low"]], [row["p_improvement_high"] - p]]
-        ax.errorbar(vi, p, yerr=err, fmt="o", color=sweep.colours[vi], markeredgecolor="black",
-                    markeredgewidth=0.6, markersize=7, capsize=4, elinewidth=1.6, zorder=3)
+        ax.errorbar(vi, p, yerr=err, fmt="o", color=sweep_colours(sweep)[vi],
+                    markeredgecolor="black", markeredgewidth=0.6, markersize=7, capsize=4,
+                    elinewidth=1.6, zorder=3)
     _value_axis(ax, sweep)
     ax.set_ylim(-0.03, 1.03)
     best_label = sweep.labels[best] if best is not None else "?"
@@ -343,3 +345,18 @@ def improvement(sweep: Sweep, path: Path) -> Path:
     fig.legend(handles=handles, loc="outside lower center", ncols=1, frameon=False)
     fig.suptitle(_title(sweep, f"P(best > value), best = {best_label}"))
     return save(fig, path)
+
+
+def legend_label(sweep: Sweep, vi: int) -> str:
+    """A value as the legends write it: its label and the seeds behind its mean (and, for a
+    value the race dropped, the round after which it was)."""
+    row = sweep.summary.iloc[vi]
+    text = f"{row['value']}  (n={row['complete']}"
+    for name in (Outcome.FAILED, Outcome.PRUNED):
+        if row[name]:
+            text += f", {row[name]} {name}"
+    text += ")"
+    if vi in sweep.dropped:  # a second line: the legends sit beside the axes
+        text += f"\ndropped after round {sweep.dropped[vi].round}"
+    return text
+

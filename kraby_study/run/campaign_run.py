@@ -19,12 +19,14 @@ from omegaconf import DictConfig
 from kraby_study.answers.resumed import resumed_stage
 from kraby_study.answers.selected import sweep_selection
 from kraby_study.answers.winners import StoreWinners, Unfinished
-from kraby_study.comparison import CompareOptions
+from kraby_study.decision.comparison import CompareOptions
 from kraby_study.errors import StoreError
 from kraby_study.plan.campaign import Campaign, Stage
 from kraby_study.plan.spec import StudyPlan
 from kraby_study.plan.sweep import expand_study
-from kraby_study.records import StudyAttrs, Tally, param_name, value_label
+from kraby_study.records.attributes import StudyAttrs
+from kraby_study.records.stored import Tally
+from kraby_study.records.values import param_name, value_label
 from kraby_study.run.runner import CommandRun
 from kraby_study.store.store import check_same_definition, opened, study_exists
 from kraby_study.store.url import shown_url

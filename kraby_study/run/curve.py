@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from kraby_study.records import FINAL_FRACTION, CurvePoint
+from kraby_study.records.attributes import CurvePoint
+from kraby_study.records.definition import FINAL_FRACTION
 
 Episode = tuple[int, float, float]
 

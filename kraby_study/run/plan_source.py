@@ -6,14 +6,9 @@ from __future__ import annotations
 from optuna.trial import FrozenTrial
 
 from kraby_study.plan.spec import StudyPlan, TrialSpec
-from kraby_study.records import (
-    StudyAttrs,
-    StudyKind,
-    TrialAttrs,
-    is_interrupted,
-    latest_by_key,
-    param_name,
-)
+from kraby_study.records.attributes import StudyAttrs, StudyKind, TrialAttrs
+from kraby_study.records.stored import is_interrupted, latest_by_key
+from kraby_study.records.values import param_name
 from kraby_study.run.source import StudySource
 from kraby_study.store.ledger import StudyLedger
 

@@ -18,7 +18,8 @@ from typing import TextIO
 
 from tqdm import tqdm
 
-from kraby_study.records import Outcome, TrialResult
+from kraby_study.records.attributes import TrialResult
+from kraby_study.records.stored import Outcome
 
 REDRAW_SECONDS = 0.5
 """The live bar is redrawn at most this often on steps (starts and ends redraw it at once)."""

@@ -1,9 +1,9 @@
 """Run a raced plan: seeds in rounds, the values the race drops get no more.
 
 Nothing is queued up front. Each claim, under the study's plan lock, replays the race on the
-stored results (:func:`kraby_study.race.race`) and queues the one run it wants next: the lowest
-seed index any value still in the race lacks, the best-standing value first. So every value in
-the race gets its seed k before any value gets seed k + 1, and when a round's last runs are all
+stored results (:func:`kraby_study.decision.race.race`) and queues the one run it wants next: the
+lowest seed index any value still in the race lacks, the best-standing value first. So every value
+in the race gets its seed k before any value gets seed k + 1, and when a round's last runs are all
 taken, idle workers start the next round, best-standing values first (those least likely to be
 dropped). A value is judged on its first r seeds only; a seed it ran ahead of its round is kept
 and counted. After every recorded run the race is replayed and stored on the study
@@ -17,15 +17,10 @@ import math
 from optuna.trial import FrozenTrial
 
 from kraby_study.answers.raced import place, race_record, replay
+from kraby_study.decision.race import Race
 from kraby_study.plan.spec import RaceRules, StudyPlan, TrialSpec
-from kraby_study.race import Race
-from kraby_study.records import (
-    StudyAttrs,
-    TrialAttrs,
-    TrialResult,
-    is_interrupted,
-    latest_by_key,
-)
+from kraby_study.records.attributes import StudyAttrs, TrialAttrs, TrialResult
+from kraby_study.records.stored import is_interrupted, latest_by_key
 from kraby_study.run.plan_source import PlanSource
 from kraby_study.store.ledger import StudyLedger
 

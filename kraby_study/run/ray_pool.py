@@ -26,7 +26,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from kraby_study.errors import ClusterLost, ConfigError, first_line
 from kraby_study.plan.spec import TrialSpec
-from kraby_study.records import RAY_NODE, Failure, Outcome, TrialResult, failure
+from kraby_study.records.attributes import RAY_NODE, TrialResult
+from kraby_study.records.stored import Failure, Outcome, failure
 from kraby_study.run.pool import Event, as_event
 from kraby_study.run.provenance import trial_facts
 from kraby_study.run.worker import attempt

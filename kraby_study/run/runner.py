@@ -18,7 +18,8 @@ from typing import Any, Protocol, TextIO
 
 from kraby_study.errors import ClusterLost, DatabaseLost, first_line
 from kraby_study.plan.spec import TrialSpec
-from kraby_study.records import Failure, Outcome, Tally, TrialResult, failure, failure_kind
+from kraby_study.records.attributes import TrialResult
+from kraby_study.records.stored import Failure, Outcome, Tally, failure, failure_kind
 from kraby_study.run.executor import Executor
 from kraby_study.run.pool import Event, Pool
 from kraby_study.run.progress import Progress

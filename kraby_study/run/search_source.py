@@ -21,18 +21,10 @@ from kraby_study.plan.space import (
     wilcoxon_seeds,
 )
 from kraby_study.plan.spec import TrialSpec, evaluation_of, fingerprint, seeding_of
-from kraby_study.records import (
-    Failure,
-    Outcome,
-    SelectRule,
-    StudyAttrs,
-    TrialAttrs,
-    TrialResult,
-    failure,
-    floor_score,
-    search_key,
-    value_label,
-)
+from kraby_study.records.attributes import SelectRule, StudyAttrs, TrialAttrs, TrialResult
+from kraby_study.records.definition import floor_score
+from kraby_study.records.stored import Failure, Outcome, failure, search_key
+from kraby_study.records.values import value_label
 from kraby_study.run.executor import Executor
 from kraby_study.run.progress import Progress
 from kraby_study.run.runner import CommandRun, Retrying, run_trials

@@ -8,7 +8,8 @@ from typing import TextIO
 from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.plan.spec import TrialSpec
-from kraby_study.records import TrialResult, counted
+from kraby_study.records.attributes import TrialResult
+from kraby_study.records.stored import counted
 from kraby_study.run.provenance import command_facts
 from kraby_study.store.ledger import StudyLedger
 

@@ -6,15 +6,8 @@ from __future__ import annotations
 from typing import TextIO
 
 from kraby_study.plan.spec import StudyPlan
-from kraby_study.records import (
-    Outcome,
-    StudyAttrs,
-    Tally,
-    TrialAttrs,
-    latest_by_key,
-    outcome,
-    tally,
-)
+from kraby_study.records.attributes import StudyAttrs, TrialAttrs
+from kraby_study.records.stored import Outcome, Tally, latest_by_key, outcome, tally
 from kraby_study.run.executor import Executor
 from kraby_study.run.plan_source import PlanSource
 from kraby_study.run.progress import Progress

@@ -18,7 +18,8 @@ import numpy as np
 from kraby_study.env import adapter_for, normalizer_path
 from kraby_study.errors import first_line
 from kraby_study.plan.spec import TrialSpec, ppo_setting
-from kraby_study.records import Failure, Outcome, TrialResult, failure
+from kraby_study.records.attributes import TrialResult
+from kraby_study.records.stored import Failure, Outcome, failure
 from kraby_study.run.curve import Episode, bin_curve, final_score, mean_curve
 
 if TYPE_CHECKING:

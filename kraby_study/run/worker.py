@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from kraby_study.plan.spec import TrialSpec
-    from kraby_study.records import TrialResult
+    from kraby_study.records.attributes import TrialResult
     from kraby_study.run.callback import CheckpointHook, ProgressHook
 
 
@@ -26,7 +26,8 @@ def attempt(spec: TrialSpec, shards: int, checkpoint: CheckpointHook | None,
             progress: ProgressHook) -> TrialResult:
     """Run one trial; an exception (a bug, a bad environment) comes back as a failed result,
     so it never kills the worker or the study."""
-    from kraby_study.records import Failure, Outcome, TrialResult, failure
+    from kraby_study.records.attributes import TrialResult
+    from kraby_study.records.stored import Failure, Outcome, failure
     from kraby_study.run.trial import run_trial
 
     try:

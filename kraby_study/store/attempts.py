@@ -5,7 +5,7 @@ from __future__ import annotations
 import optuna
 from optuna.trial import FrozenTrial
 
-from kraby_study.records import TrialAttrs
+from kraby_study.records.attributes import TrialAttrs
 
 
 def requeue_stale(study: optuna.Study, trial: FrozenTrial) -> None:

@@ -15,17 +15,15 @@ from optuna.distributions import BaseDistribution
 from optuna.storages import RDBStorage
 from optuna.trial import FrozenTrial, TrialState
 
-from kraby_study.records import (
+from kraby_study.records.attributes import (
     PROVENANCE_PREFIX,
     CurvePoint,
-    Failure,
-    Outcome,
     StudyAttrs,
     TrialAttrs,
     TrialResult,
-    failure,
     provenance_key,
 )
+from kraby_study.records.stored import Failure, Outcome, failure
 from kraby_study.store.attempts import requeue_stale
 from kraby_study.store.backend import LOCK_BASE, Backend
 from kraby_study.store.tables import curve_points, read_curves

@@ -28,7 +28,8 @@ from typing import TYPE_CHECKING, Any
 import sqlalchemy as sa
 
 from kraby_study.errors import StoreError, first_line
-from kraby_study.records import PROVENANCE_PREFIX, StudyAttrs, StudyKind, param_name
+from kraby_study.records.attributes import PROVENANCE_PREFIX, StudyAttrs, StudyKind
+from kraby_study.records.values import param_name
 from kraby_study.store.tables import read_curves
 from kraby_study.store.url import check_url, reading_url, sqlite_path
 

@@ -20,7 +20,7 @@ import sqlalchemy as sa
 from optuna.storages import RDBStorage
 
 from kraby_study.errors import StoreError, first_line
-from kraby_study.records import StudyAttrs
+from kraby_study.records.attributes import StudyAttrs
 from kraby_study.store.backend import LOCK_BASE, Backend, backend_for, check_store_file
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.rows import read_only

@@ -5,8 +5,8 @@ is on the front when no other complete trial is at least as good on both and bet
 Two choices are made from it:
 
 - :func:`front_choice`, the search's selection (``best``, ``list``, the report): the front's
-  trials are compared on their seed scores (:func:`kraby_study.comparison.compare`), and the
-  search's rule picks the cheapest of the best score and the trials it admits:
+  trials are compared on their seed scores (:func:`kraby_study.decision.comparison.compare`), and
+  the search's rule picks the cheapest of the best score and the trials it admits:
   ``fastest_equivalent`` (a new two-objective search's rule) those shown within the margin of
   the best, ``fastest_tied`` (the rule of earlier releases, kept for searches stored before)
   those not shown worse at margin 0. The family is the front, not every trial: the best score
@@ -22,9 +22,9 @@ from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
-from kraby_study.comparison import CompareOptions, Comparison, compare
-from kraby_study.records import SelectRule
-from kraby_study.selection import RULES
+from kraby_study.decision.comparison import CompareOptions, Comparison, compare
+from kraby_study.decision.selection import RULES
+from kraby_study.records.attributes import SelectRule
 
 K = TypeVar("K", bound=Hashable)
 

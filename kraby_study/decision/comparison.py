@@ -68,7 +68,7 @@ from typing import Generic, TypeVar
 import numpy as np
 import scipy  # submodules load on first use: `list` loads none for a rule that needs no test
 
-from kraby_study.records import best_group
+from kraby_study.records.values import best_group
 
 ALPHA = 0.05
 MIN_SEEDS = 2

@@ -1,13 +1,13 @@
 """Which value of a finished sweep is selected: the rules a campaign carries forward.
 
 "Best" is the highest mean final score only; "selected" is what a rule picks. Every rule is a
-named :class:`Rule` that reads one :class:`kraby_study.comparison.Comparison` (the report's
+named :class:`Rule` that reads one :class:`kraby_study.decision.comparison.Comparison` (the report's
 answers, the same object its table column shows) and the values' mean AUC and training time:
 
 - ``final_score``: the best value.
 - ``auc``: the highest mean AUC over the seeds with a curve (the most sample-efficient).
 - ``fastest_equivalent``: among the best and the values shown equivalent to it (within the
-  margin, :func:`kraby_study.comparison.compare`), the lowest mean training time: a slower
+  margin, :func:`kraby_study.decision.comparison.compare`), the lowest mean training time: a slower
   value is not worth its time when a faster one is shown as good within the margin, and a
   value needs evidence to be selected, so spread cannot buy a place.
 - ``fastest_tied``: among the best and the values not shown worse at margin 0 (the closed
@@ -19,8 +19,8 @@ Every rule considers only the comparison's family: values with at least ``min_se
 complete seeds (``report.min_seeds``, default 2), so one lucky seed is never selected. Ties
 inside a rule go to the first value in order; NaN never wins.
 
-In a raced study (:mod:`kraby_study.race`) every rule considers only the values the race did
-not drop as worse: the caller passes them (``dropped``), and the others are compared by the
+In a raced study (:mod:`kraby_study.decision.race`) every rule considers only the values the race
+did not drop as worse: the caller passes them (``dropped``), and the others are compared by the
 same procedure on all their seeds.
 """
 
@@ -31,7 +31,7 @@ from collections.abc import Callable, Collection, Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from kraby_study.comparison import (
+from kraby_study.decision.comparison import (
     ALPHA,
     MARGIN,
     MIN_SEEDS,
@@ -39,23 +39,13 @@ from kraby_study.comparison import (
     compare,
     procedure_name,
 )
-from kraby_study.records import (
-    Outcome,
-    SelectRule,
-    StoredTrial,
-    StudyKind,
-    TrialAttrs,
+from kraby_study.records.attributes import SelectRule
+from kraby_study.records.values import (
     best_group,
-    ordered_values,
-    outcome,
-    param_name,
-    swept_value,
-    value_key,
 )
-from kraby_study.stats import auc
 
 if TYPE_CHECKING:
-    import pandas as pd
+    pass
 
 K = TypeVar("K", bound=Hashable)
 
@@ -157,76 +147,3 @@ def select(rule: str, final: Mapping[K, Sequence[float]], aucs: Mapping[K, Seque
     comparison = compare({g: vs for g, vs in final.items() if g not in dropped}, margin,
                          min_seeds=min_seeds, tests=chosen.tests)
     return chosen.select(comparison, mean_by_value(aucs), mean_by_value(seconds))
-
-
-@dataclass(frozen=True)
-class Samples:
-    """Per-seed numbers of a sweep's complete runs, grouped by value (in the study's order)."""
-
-    values: list[Any]
-    final: dict[int, list[float]]
-    aucs: dict[int, list[float]]
-    seconds: dict[int, list[float]]
-
-
-def time_measure(kind: str | None) -> str:
-    """The training time fastest_tied compares, as a trial attribute: CPU seconds on a confirm
-    study (a two-objective search's cost is CPU seconds per seed, and other work on the
-    machine moves it little), wall-clock seconds on a sweep (as the documented studies
-    compared them)."""
-    return "cpu_time" if kind == StudyKind.CONFIRM else "wall_time"
-
-
-def samples(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: str,
-            values: Sequence[Any], time_attr: str = "wall_time") -> Samples:
-    """The samples of a sweep's counted trials; ``curves`` holds their curve points (columns
-    number, step, mean_reward), None when no AUC is needed. A trial whose value is not in
-    ``values`` is left out. ``time_attr``: the trial attribute read as its training time
-    (:func:`time_measure`)."""
-    index = {value_key(v): i for i, v in enumerate(values)}
-    final: dict[int, list[float]] = {}
-    aucs: dict[int, list[float]] = {}
-    seconds: dict[int, list[float]] = {}
-    rewards = {}
-    if curves is not None:
-        ordered = curves.sort_values(["number", "step"], kind="stable")
-        rewards = {int(n): g["mean_reward"].to_numpy(dtype=float)
-                   for n, g in ordered.groupby("number", sort=False)}
-    for trial in trials:
-        if outcome(trial) != Outcome.COMPLETE or trial.value is None:
-            continue
-        vi = index.get(value_key(swept_value(trial, name, values)))
-        if vi is None:
-            continue
-        final.setdefault(vi, []).append(float(trial.value))
-        if trial.number in rewards:
-            aucs.setdefault(vi, []).append(auc(rewards[trial.number]))
-        spent = getattr(TrialAttrs.of(trial), time_attr)
-        if spent is not None:
-            seconds.setdefault(vi, []).append(float(spent))
-    order = sorted(final)
-    return Samples(values=list(values), final={vi: final[vi] for vi in order},
-                   aucs={vi: aucs.get(vi, []) for vi in order},
-                   seconds={vi: seconds.get(vi, []) for vi in order})
-
-
-def swept_values(kind: str, definition: Mapping[str, Any],
-                 trials: Sequence[StoredTrial]) -> tuple[str, list[Any]]:
-    """A swept study's parameter name and its values in the order reports list them: the
-    planned values and any other found, numbers ascending (a confirm study keeps its order)."""
-    name = param_name(str(definition["parameter"]))
-    planned = list(definition.get("values", []))
-    found = [swept_value(t, name, planned) for t in trials]
-    return name, ordered_values(planned, found, sort=kind != "confirm")
-
-
-def selected_index(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: str,
-                   values: Sequence[Any], rule: str, min_seeds: int = MIN_SEEDS,
-                   dropped: Collection[int] = (), time_attr: str = "wall_time",
-                   margin: float = MARGIN) -> int | None:
-    """Index in ``values`` of the value ``rule`` selects among the complete runs; None when
-    no value has ``min_seeds`` complete seeds. ``dropped``: indices in ``values`` of the values
-    a race dropped as worse (:func:`kraby_study.answers.raced.dropped_indices`), never
-    selected."""
-    found = samples(trials, curves, name, values, time_attr)
-    return select(rule, found.final, found.aucs, found.seconds, min_seeds, dropped, margin)

@@ -2,7 +2,7 @@
 
 Round r gives every value still in the race its r-th seed. From round ``min_seeds`` on, after
 each round the values' first r seeds are compared by the report's procedure
-(:func:`kraby_study.comparison.compare` at the race's margin): a value shown worse than the
+(:func:`kraby_study.decision.comparison.compare` at the race's margin): a value shown worse than the
 look's best by more than the margin is dropped, and a value other than the look's best shown
 equivalent to it (within the margin) is settled. Either way it gets no more seeds. The race
 ends when one value is left racing, or every value left has ``seeds`` seeds. A settled value
@@ -42,7 +42,7 @@ from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
-from kraby_study.comparison import Answer, compare
+from kraby_study.decision.comparison import Answer, compare
 from kraby_study.plan.spec import RaceRules
 
 K = TypeVar("K", bound=Hashable)

@@ -12,17 +12,10 @@ from typing import Any
 import pandas as pd
 from optuna.trial import FrozenTrial
 
-from kraby_study.errors import ConfigError, StoreError
-from kraby_study.records import (
-    LEGACY_SEEDING,
-    StudyKind,
-    Tally,
-    counted,
-    offset_leg_seeds,
-    stored_seeding,
-    tally,
-    trial_seeds,
-)
+from kraby_study.errors import StoreError
+from kraby_study.records.attributes import StudyKind
+from kraby_study.records.definition import LEGACY_SEEDING, stored_seeding
+from kraby_study.records.stored import Tally, counted, offset_leg_seeds, tally, trial_seeds
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
 
@@ -115,11 +108,3 @@ def _source(store: Store, kind: StudyKind, definition: dict[str, Any]) -> dict[s
             if stored_seeding(attrs.definition) == LEGACY_SEEDING else None)
     return {"source_seeds": sorted({seed for t in trials for seed in trial_seeds(t, per_trial)}),
             "source_legs": legs}
-
-
-def check_format(fmt: str) -> str:
-    """The figure format, lower case; ConfigError unless png or svg."""
-    value = str(fmt).lower().lstrip(".")
-    if value not in ("png", "svg"):
-        raise ConfigError(f"report format must be png or svg, got {fmt!r}")
-    return value

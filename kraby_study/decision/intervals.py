@@ -1,56 +1,21 @@
-"""The statistics behind every band, error bar, "best" mark and verdict of a report.
+"""The interval of a mean over seeds behind every band and error bar of a report.
 
-Every statistic is over seeds: one value per complete seed (its final score, its AUC, ...).
-See docs/statistics.md for what each one means and why it was chosen.
-
-- Interval of a mean over seeds (final score, AUC, training time, time to threshold):
-  :func:`mean_interval`. From 5 seeds on, the 95 % equal-tailed studentised bootstrap
-  (bootstrap-t) interval (:func:`bootstrap_t_interval`; Efron 1982, Hall 1988), seeded, so a
-  report is reproducible. With 2 to 4 seeds, the 95 % Hall skewness-corrected t interval
-  (:func:`hall_interval`; Hall 1992), the Student-t interval moved and stretched by the
-  sample's skewness. It needs at least two seeds; with one it is left empty. The
-  learning-curve bands, hundreds of intervals a value, are Hall's intervals at every n
-  (:func:`describe` without ``bootstrap``).
-- Robust summary: the interquartile mean (IQM) over seeds with its 95 % Tukey-McLaughlin
-  trimmed-t interval, and the probability of improvement of the best value over another, after
-  Agarwal et al., "Deep Reinforcement Learning at the Edge of the Statistical Precipice"
-  (NeurIPS 2021), with Newcombe's (2006) 95 % score-type interval.
-- Best value: the highest mean final score among the values with at least ``min_seeds``
-  complete seeds (:func:`kraby_study.comparison.compare`).
-- Every other value's answer at the margin, equivalent, worse or undecided:
-  :func:`kraby_study.comparison.compare`, one comparison the verdict (:func:`verdict`), the
-  table and the selection rules read; "worse" is a closed Holm step-down over one-sided Welch
-  t-tests whose family-wise error holds although the best is chosen from the same data.
-  :func:`compare_to_best` gives the raw two-sided Welch p-values against the best, for
-  information only.
-"""
+From 5 seeds on, the 95 % equal-tailed studentised bootstrap (bootstrap-t) interval
+(:func:`bootstrap_t_interval`; Efron 1982, Hall 1988), seeded so that a report is reproducible.
+With 2 to 4 seeds, the 95 % Hall skewness-corrected t interval (:func:`hall_interval`; Hall
+1992). The learning-curve bands, hundreds of intervals a value, are Hall's intervals at every n
+(:func:`describe`). The interquartile mean (IQM) has the Tukey-McLaughlin trimmed-t interval.
+See docs/statistics.md for why each was chosen."""
 
 from __future__ import annotations
 
-import dataclasses
-import functools
 import hashlib
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from statistics import NormalDist
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy
-
-from kraby_study.comparison import (
-    ALPHA,
-    MIN_SEEDS,
-    PROCEDURE,
-    Comparison,
-    best_with_evidence,
-    compare,
-    compare_with_best,
-    procedure_name,
-    welch_two_sided_p,
-)
-from kraby_study.records import best_group
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -63,13 +28,6 @@ BOOTSTRAP_SEED = 20240522
 the same interval."""
 BAND_NAME = ("95 % Hall skewness-corrected t interval of the mean over seeds (Hall 1992; the "
              "Student-t interval when the seeds' skewness is 0)")
-TEST_NAME = ("two-sided Welch's t-test against the best value, uncorrected (for information: "
-             "the ties do not use it)")
-HOLM_NAME = (f"{PROCEDURE}, alpha = {ALPHA}: the adjusted p of 'this value is a best'; "
-             f"< {ALPHA} means worse than the best")
-PROCEDURE_NAME = procedure_name(ALPHA)
-AUC_NAME = ("sample efficiency (AUC): the mean of a seed's binned mean episode rewards over the"
-            " whole run, the normalised area under its learning curve")
 
 BOOTSTRAP_REPETITIONS = 2000
 """Default of the report option ``report.bootstrap``: the resamples of the bootstrap-t interval of
@@ -96,15 +54,7 @@ def iqm_interval_name(level: float = LEVEL) -> str:
             "over seeds (winsorised sd; the plain t-interval below 4 seeds)")
 
 
-def p_improvement_name(level: float = LEVEL) -> str:
-    """The caption of :func:`p_improvement` and its interval at a level."""
-    return ("probability of improvement P(best > this value) over all pairs of seeds, ties"
-            f" counted half, with its {level * 100:g} % Newcombe score-type interval"
-            " (Newcombe 2006, method 5)")
-
-
 IQM_INTERVAL_NAME = iqm_interval_name()
-P_IMPROVEMENT_NAME = p_improvement_name()
 
 
 def t_interval(mean: np.ndarray | pd.Series | float, sd: np.ndarray | pd.Series | float,
@@ -132,16 +82,6 @@ def t_interval(mean: np.ndarray | pd.Series | float, sd: np.ndarray | pd.Series 
         half = scipy.stats.t.ppf(0.5 + level / 2, dof) * sd_a / np.sqrt(n_a)
     half = np.where(n_a >= 2, half, np.nan)
     return mean_a - half, mean_a + half
-
-
-def welch_p(a: Sequence[float], b: Sequence[float]) -> float:
-    """Two-sided Welch's t-test p-value of two samples; NaN when either has fewer than 2.
-
-    Two samples without spread, relative to the scale of the scores
-    (:data:`kraby_study.comparison.CONSTANT_RTOL`), are identical (p = 1) when their means
-    agree within that tolerance, else certainly different (p = 0).
-    """
-    return welch_two_sided_p(a, b)
 
 
 def hall_interval(mean: np.ndarray | pd.Series | float, sd: np.ndarray | pd.Series | float,
@@ -249,27 +189,6 @@ def describe(samples: pd.DataFrame, group: str | list[str], column: str,
                 _, grouped.loc[key, "low"], grouped.loc[key, "high"] = mean_interval(
                     x, resamples=bootstrap)
     return grouped
-
-
-def compare_to_best(scores: dict[int, list[float]],
-                    min_seeds: int = MIN_SEEDS) -> tuple[int | None, dict[int, float]]:
-    """The best group (:func:`kraby_study.comparison.compare_with_best`), and every group's raw
-    two-sided Welch p-value against it, uncorrected: for information, never for a tie.
-
-    Args:
-        scores: Final scores by group (groups without scores are ignored).
-        min_seeds: Fewest complete seeds a group needs to be best.
-
-    Returns:
-        The best group (None if none has enough seeds) and p-values by group (NaN for the best
-        itself or when a test is impossible).
-    """
-    best = best_with_evidence(scores, min_seeds)
-    if best is None:
-        return None, {}
-    pvalues = {g: (math.nan if g == best else welch_p(scores[best], v))
-               for g, v in scores.items() if len(v)}
-    return best, pvalues
 
 
 # Robust and multiple-comparison statistics ------------------------------------------------------
@@ -478,258 +397,3 @@ def iqm_interval(values: Sequence[float], level: float = LEVEL) -> tuple[float, 
     half = float(scipy.stats.t.ppf(0.5 + level / 2, n - 2 * g - 1)) * se
     centre = iqm(x)
     return centre - half, centre + half
-
-
-def auc(rewards: Sequence[float]) -> float:
-    """Sample efficiency of one seed: the mean of its binned mean episode rewards over the run.
-
-    With bins of equal width this is the area under the learning curve divided by its length.
-
-    Returns:
-        The mean reward of the curve's points; NaN for an empty curve.
-    """
-    x = _array(rewards)
-    return float(np.mean(x)) if len(x) else math.nan
-
-
-def first_reach(steps: Sequence[float], rewards: Sequence[float], wall_times: Sequence[float],
-                threshold: float) -> tuple[float, float]:
-    """When a learning curve first reaches a reward.
-
-    Args:
-        steps: Env steps of each curve point, in order.
-        rewards: Mean episode reward of each point.
-        wall_times: Seconds since training started of each point.
-        threshold: The reward to reach.
-
-    Returns:
-        (env steps, seconds) of the first point whose reward >= threshold; (NaN, NaN) if none.
-    """
-    for step, reward, seconds in zip(steps, rewards, wall_times, strict=True):
-        if reward >= threshold:
-            return float(step), float(seconds)
-    return math.nan, math.nan
-
-
-def default_threshold(untrained: float, best_final: float, fraction: float = 0.9) -> float:
-    """The reward a curve must reach by default: ``fraction`` of the way from the untrained
-    policy's reward to the best value's final score."""
-    return untrained + fraction * (best_final - untrained)
-
-
-def holm_vs_best(scores: Mapping[int, Sequence[float]],
-                 min_seeds: int = MIN_SEEDS) -> tuple[int | None, dict[int, float]]:
-    """The best group and every group's adjusted p of "this group is a best"
-    (:func:`kraby_study.comparison.compare_with_best`: closed Holm step-down over one-sided
-    Welch tests); NaN for the best itself and for groups with fewer than ``min_seeds`` seeds.
-    A group tied with the best has p >= ALPHA."""
-    result = compare_with_best(scores, min_seeds=min_seeds)
-    return result.best, {g: result.p_adjusted.get(g, math.nan)
-                         for g, v in scores.items() if len(v)}
-
-
-def p_improvement(x: Sequence[float], y: Sequence[float]) -> float:
-    """Probability of improvement of X over Y (Agarwal et al. 2021), over all pairs of seeds.
-
-    P(X > Y) + 0.5 P(X = Y): the Mann-Whitney U statistic of x against y over len(x) len(y),
-    counted pair by pair (seeds are few, and SciPy's ``mannwhitneyu`` costs more than the pairs
-    inside the simulations of ``benchmarks/bench_error_rates.py``).
-
-    Returns:
-        A probability in [0, 1]; NaN if either sample is empty.
-    """
-    a, b = _array(x), _array(y)
-    if len(a) == 0 or len(b) == 0:
-        return math.nan
-    wins = np.greater.outer(a, b) + 0.5 * np.equal.outer(a, b)
-    return float(np.mean(wins))
-
-
-def _newcombe_variance(theta: float, m: int, n: int) -> float:
-    """Newcombe's (2006, Part 2, method 5) variance of U / (m n) at a true value ``theta``."""
-    half = (m + n) / 2  # N*, the mean sample size
-    return (theta * (1 - theta) / (m * n)
-            * (1 + (half - 1) * (1 - theta) / (2 - theta) + (half - 1) * theta / (1 + theta)))
-
-
-def _newcombe_upper(estimate: float, m: int, n: int, z: float) -> float:
-    """The root above ``estimate`` of theta - estimate = z sqrt(V(theta)), or 1 at 1."""
-    if estimate >= 1.0:
-        return 1.0
-
-    def distance(theta: float) -> float:
-        return theta - estimate - z * math.sqrt(_newcombe_variance(theta, m, n))
-
-    # Negative at the estimate (V > 0 inside (0, 1)) and 1 - estimate > 0 at 1. At an estimate
-    # of 0 both terms vanish, so the bracket starts just above it, where sqrt(V) dominates.
-    start = estimate if estimate > 0.0 else 1e-12
-    return float(scipy.optimize.brentq(distance, start, 1.0, xtol=1e-12))
-
-
-def p_improvement_interval(x: Sequence[float], y: Sequence[float],
-                           level: float = LEVEL) -> tuple[float, float]:
-    """Newcombe's score-type confidence interval of :func:`p_improvement` (Newcombe, "Confidence
-    intervals for an effect size measure based on the Mann-Whitney statistic. Part 2:
-    asymptotic methods and evaluation", Statistics in Medicine 25(4), 2006, method 5).
-
-    With theta_hat = :func:`p_improvement` of m values against n, the bounds are the two
-    solutions in [0, 1] of |theta_hat - theta| = z sqrt(V(theta)), z = Phi^-1(0.5 + level / 2),
-
-        V(theta) = theta (1 - theta) / (m n)
-                   * [1 + (N* - 1) (1 - theta) / (2 - theta) + (N* - 1) theta / (1 + theta)],
-
-    N* = (m + n) / 2: Hanley and McNeil's variance of U / (m n) for exponential scores, with
-    both sample sizes replaced by their mean, evaluated at the candidate theta as in Wilson's
-    interval for a proportion. Like Wilson's, it stays inside [0, 1] and is never one point:
-    the BCa bootstrap it replaced covered 0.64-0.74 at n = 3 and 0.88-0.92 at n = 5 a side,
-    and printed [0, 1] or one-point intervals at n = 2 and 3; this one's coverage is measured
-    in ``benchmarks/bench_error_rates.py``. Ties count half in theta_hat; V assumes none.
-    V(theta) = V(1 - theta), so the lower bound is 1 minus the upper bound of 1 - theta_hat.
-
-    Args:
-        x: One value per seed of the first sample (m of them).
-        y: One value per seed of the second (n of them).
-        level: Confidence level.
-
-    Returns:
-        (low, high); (NaN, NaN) if either sample has fewer than 2 values.
-    """
-    a, b = _array(x), _array(y)
-    m, n = len(a), len(b)
-    if m < 2 or n < 2:
-        return math.nan, math.nan
-    estimate = p_improvement(a, b)
-    z = float(scipy.stats.norm.ppf(0.5 + level / 2))
-    return (1.0 - _newcombe_upper(1.0 - estimate, m, n, z),
-            _newcombe_upper(estimate, m, n, z))
-
-
-def iqr(values: Sequence[float]) -> float:
-    """Interquartile range of a sample (``scipy.stats.iqr``), its repeatability; NaN if empty."""
-    x = _array(values)
-    return float(scipy.stats.iqr(x)) if len(x) else math.nan
-
-
-@functools.lru_cache(maxsize=256)
-def expected_normal_iqr(n: int) -> float:
-    """Expected sample IQR (:func:`iqr`, linear quartiles) of n standard normal values.
-
-    The quartiles interpolate between order statistics, so their expectation is the same mix of
-    the expected normal order statistics, each integrated numerically. 0.564 at n = 2 (true IQR
-    1.349): a sample's IQR shrinks with n, which is why :func:`iqr_unbiased` divides by this.
-    """
-    if n < 2:
-        return math.nan
-
-    def order_mean(r: int) -> float:  # E[X_(r:n)], r from 1
-        log_c = math.lgamma(n + 1) - math.lgamma(r) - math.lgamma(n - r + 1)
-        def density(z: float) -> float:
-            norm = scipy.stats.norm
-            return z * math.exp(log_c + (r - 1) * norm.logcdf(z) + (n - r) * norm.logsf(z)
-                                + norm.logpdf(z))
-        return float(scipy.integrate.quad(density, -12, 12, limit=200)[0])
-
-    def quantile(p: float) -> float:
-        h = (n - 1) * p
-        lo = math.floor(h)
-        frac = h - lo
-        value = order_mean(lo + 1)
-        return value + frac * (order_mean(lo + 2) - value) if frac else value
-
-    return quantile(0.75) - quantile(0.25)
-
-
-NORMAL_IQR = NormalDist().inv_cdf(0.75) - NormalDist().inv_cdf(0.25)
-"""The interquartile range of the standard normal distribution."""
-
-
-def iqr_unbiased(values: Sequence[float]) -> float:
-    """The sample IQR rescaled so that its expectation, for normal data, is the true IQR at
-    every n: IQR * 1.349 / E[IQR of n standard normals] (:func:`expected_normal_iqr`).
-
-    The raw sample IQR averages 0.42, 0.63 and 0.87 of the truth at n = 2, 3, 10, so the value
-    that lost seeds looked the most repeatable; rescaled, the comparison across unequal n is
-    fair in expectation. NaN with fewer than 2 values.
-    """
-    x = _array(values)
-    if len(x) < 2:
-        return math.nan
-    return iqr(x) * NORMAL_IQR / expected_normal_iqr(len(x))
-
-
-# The verdict --------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """What a sweep's report concludes, group by group (a group is a swept value's index).
-
-    Only groups with at least ``min_seeds`` complete seeds can be an answer.
-    """
-
-    best: int | None
-    """The group with the best mean final score among the groups with enough seeds."""
-    tied: list[int]
-    """The other groups not significantly worse than the best: adjusted p >= ALPHA
-    (:func:`kraby_study.comparison.compare_with_best`)."""
-    most_sample_efficient: int | None
-    """The group with the highest mean AUC."""
-    fastest: int | None
-    """The group with the lowest restricted mean seconds to the threshold (a seed that never
-    reached it counts at its run's end), among groups where a seed reached it."""
-    most_repeatable: int | None
-    """The group with the lowest :func:`iqr_unbiased` of its final scores."""
-    min_seeds: int = MIN_SEEDS
-    """Fewest complete seeds a group needed to be any of the above."""
-    comparison: Comparison[int] | None = dataclasses.field(default=None, compare=False)
-    """The comparison the best and the answers come from (None: the verdict compared at
-    margin 0 itself)."""
-
-
-def _highest(values: Mapping[int, float]) -> int | None:
-    """The group with the highest value (first in order on ties), ignoring NaN."""
-    return best_group({g: [float(v)] for g, v in values.items() if not math.isnan(v)})
-
-
-def verdict(final: Mapping[int, Sequence[float]], auc_means: Mapping[int, float],
-            seconds: Mapping[int, float], iqrs: Mapping[int, float],
-            p_holm: Mapping[int, float] | None = None, min_seeds: int = MIN_SEEDS,
-            comparison: Comparison[int] | None = None) -> Verdict:
-    """The verdict of a sweep; NaN values never win, ties go to the first group in order.
-
-    Args:
-        final: Final scores of the complete seeds, by group (NaN scores are ignored).
-        auc_means: Mean AUC by group.
-        seconds: Restricted mean seconds to the threshold by group (a seed that never reached
-            it at its run's end), NaN where no seed reached it.
-        iqrs: Final-score IQR by group, comparable across n (:func:`iqr_unbiased`).
-        p_holm: Unused when ``comparison`` is given; else the adjusted p against the best by
-            group (:func:`holm_vs_best`; NaN for the best itself or a group outside the
-            family: such a group is not tied).
-        min_seeds: Fewest complete seeds a group needs to be any answer (at least 2).
-        comparison: The study's one comparison (:func:`kraby_study.comparison.compare`): the
-            best, the ties and the four answers are read from it, and its family is the
-            groups that may be any answer.
-
-    Returns:
-        The :class:`Verdict`.
-    """
-    if comparison is None:
-        comparison = compare(final, 0.0, min_seeds=min_seeds)
-        if p_holm is not None:  # the caller's adjusted p (NaN is not tied: no test)
-            comparison = dataclasses.replace(comparison, tied=[
-                g for g in comparison.family if g != comparison.best
-                and float(p_holm.get(g, math.nan)) >= ALPHA])
-    need = comparison.min_seeds
-    enough = set(comparison.family)
-    best = comparison.best
-    tied = list(comparison.tied)
-
-    def among(values: Mapping[int, float], sign: float = 1.0) -> dict[int, float]:
-        return {g: sign * float(v) for g, v in values.items() if g in enough}
-
-    return Verdict(best=best, tied=tied,
-                   most_sample_efficient=_highest(among(auc_means)),
-                   fastest=_highest(among(seconds, -1.0)),
-                   most_repeatable=_highest(among(iqrs, -1.0)), min_seeds=need,
-                   comparison=comparison)

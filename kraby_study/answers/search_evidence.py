@@ -13,33 +13,22 @@ import warnings
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 import optuna
 import pandas as pd
 from optuna.distributions import (
     BaseDistribution,
-    CategoricalDistribution,
-    FloatDistribution,
-    IntDistribution,
 )
 from optuna.trial import FrozenTrial
 
 from kraby_study.answers.search_front import SearchFront, front_rule, search_front
-from kraby_study.comparison import MARGIN, MIN_SEEDS, CompareOptions
-from kraby_study.front import FrontChoice
-from kraby_study.records import (
-    Outcome,
-    StudyKind,
-    TrialAttrs,
-    best_trial,
-    cost,
-    outcome,
-    score,
-    stored_floor,
-    two_objectives,
-)
-from kraby_study.report.load import StudyData
-from kraby_study.report.sweep_tables import option
+from kraby_study.answers.study_data import StudyData
+from kraby_study.answers.sweep_evidence import option
+from kraby_study.decision.comparison import MARGIN, MIN_SEEDS, CompareOptions
+from kraby_study.decision.front import FrontChoice
+from kraby_study.records.attributes import StudyKind, TrialAttrs
+from kraby_study.records.definition import stored_floor, two_objectives
+from kraby_study.records.stored import Outcome, outcome
+from kraby_study.records.values import best_trial, cost, score
 
 TOP = 10
 """Rows of the top-trials table."""
@@ -237,26 +226,3 @@ def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:
     return done.drop(columns=["outcome", "pruned_at", "failure"]).assign(
         rank=range(1, len(done) + 1))[["rank", "number", "value", *search.params, "env_steps",
                                        "wall_time"]]
-
-
-def format_param(value: Any, distribution: BaseDistribution | None) -> str:
-    """A parameter value for a table cell."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "-"
-    if isinstance(distribution, CategoricalDistribution) or isinstance(value, str):
-        return str(value)
-    if isinstance(distribution, IntDistribution):
-        return str(int(value))
-    if isinstance(distribution, FloatDistribution) and distribution.log:
-        return f"{float(value):.3g}"
-    return f"{float(value):.4g}" if isinstance(value, float) else str(value)
-
-
-def is_log(distribution: BaseDistribution | None) -> bool:
-    """Whether a parameter is searched on a log scale."""
-    return isinstance(distribution, FloatDistribution | IntDistribution) and distribution.log
-
-
-def numeric_array(values: pd.Series) -> np.ndarray:
-    """A column as floats (NaN for missing)."""
-    return pd.to_numeric(values, errors="coerce").to_numpy(dtype=float)

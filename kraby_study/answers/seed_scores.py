@@ -1,0 +1,100 @@
+"""The seed scores of a stored sweep, read once from its trials: each value's final scores, AUCs
+and training times (:class:`Samples`), the numbers every decision reads, and the value a
+study's rule selects from them (:func:`selected_index`)."""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from kraby_study.decision.comparison import (
+    MARGIN,
+    MIN_SEEDS,
+)
+from kraby_study.decision.measures import auc
+from kraby_study.decision.selection import select
+from kraby_study.records.attributes import StudyKind, TrialAttrs
+from kraby_study.records.stored import Outcome, StoredTrial, outcome
+from kraby_study.records.values import (
+    ordered_values,
+    param_name,
+    swept_value,
+    value_key,
+)
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+
+@dataclass(frozen=True)
+class Samples:
+    """Per-seed numbers of a sweep's complete runs, grouped by value (in the study's order)."""
+
+    values: list[Any]
+    final: dict[int, list[float]]
+    aucs: dict[int, list[float]]
+    seconds: dict[int, list[float]]
+
+
+def time_measure(kind: str | None) -> str:
+    """The training time fastest_tied compares, as a trial attribute: CPU seconds on a confirm
+    study (a two-objective search's cost is CPU seconds per seed, and other work on the
+    machine moves it little), wall-clock seconds on a sweep (as the documented studies
+    compared them)."""
+    return "cpu_time" if kind == StudyKind.CONFIRM else "wall_time"
+
+
+def samples(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: str,
+            values: Sequence[Any], time_attr: str = "wall_time") -> Samples:
+    """The samples of a sweep's counted trials; ``curves`` holds their curve points (columns
+    number, step, mean_reward), None when no AUC is needed. A trial whose value is not in
+    ``values`` is left out. ``time_attr``: the trial attribute read as its training time
+    (:func:`time_measure`)."""
+    index = {value_key(v): i for i, v in enumerate(values)}
+    final: dict[int, list[float]] = {}
+    aucs: dict[int, list[float]] = {}
+    seconds: dict[int, list[float]] = {}
+    rewards = {}
+    if curves is not None:
+        ordered = curves.sort_values(["number", "step"], kind="stable")
+        rewards = {int(n): g["mean_reward"].to_numpy(dtype=float)
+                   for n, g in ordered.groupby("number", sort=False)}
+    for trial in trials:
+        if outcome(trial) != Outcome.COMPLETE or trial.value is None:
+            continue
+        vi = index.get(value_key(swept_value(trial, name, values)))
+        if vi is None:
+            continue
+        final.setdefault(vi, []).append(float(trial.value))
+        if trial.number in rewards:
+            aucs.setdefault(vi, []).append(auc(rewards[trial.number]))
+        spent = getattr(TrialAttrs.of(trial), time_attr)
+        if spent is not None:
+            seconds.setdefault(vi, []).append(float(spent))
+    order = sorted(final)
+    return Samples(values=list(values), final={vi: final[vi] for vi in order},
+                   aucs={vi: aucs.get(vi, []) for vi in order},
+                   seconds={vi: seconds.get(vi, []) for vi in order})
+
+
+def swept_values(kind: str, definition: Mapping[str, Any],
+                 trials: Sequence[StoredTrial]) -> tuple[str, list[Any]]:
+    """A swept study's parameter name and its values in the order reports list them: the
+    planned values and any other found, numbers ascending (a confirm study keeps its order)."""
+    name = param_name(str(definition["parameter"]))
+    planned = list(definition.get("values", []))
+    found = [swept_value(t, name, planned) for t in trials]
+    return name, ordered_values(planned, found, sort=kind != "confirm")
+
+
+def selected_index(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: str,
+                   values: Sequence[Any], rule: str, min_seeds: int = MIN_SEEDS,
+                   dropped: Collection[int] = (), time_attr: str = "wall_time",
+                   margin: float = MARGIN) -> int | None:
+    """Index in ``values`` of the value ``rule`` selects among the complete runs; None when
+    no value has ``min_seeds`` complete seeds. ``dropped``: indices in ``values`` of the values
+    a race dropped as worse (:func:`kraby_study.answers.raced.dropped_indices`), never
+    selected."""
+    found = samples(trials, curves, name, values, time_attr)
+    return select(rule, found.final, found.aucs, found.seconds, min_seeds, dropped, margin)

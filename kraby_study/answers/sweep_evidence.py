@@ -1,0 +1,302 @@
+"""A sweep (or a single-run or confirm study) read once from the store into its evidence and
+its answers: one row per run, the seed scores every decision reads, the race's state, and the
+summary, verdict and selection :mod:`kraby_study.decision.summary` decides from them. The
+report draws what :func:`build_sweep` hands it.
+
+Figures and metrics draw from the complete runs only; failed runs are counted and listed, runs
+still to come are counted as pending, and nothing is dropped without a trace. A confirm study
+is a sweep whose values are the labels of the configurations it retrains (in the order given).
+
+Every decision (the summary's answers and marks, the verdict, the ``selected`` column) reads
+one :class:`kraby_study.decision.comparison.Comparison`, made once per study from the seed
+scores :func:`kraby_study.decision.selection.samples` extracts, the same pass ``best``,
+``${winner:...}`` and campaigns read."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from kraby_study.answers.raced import StudyRace, race_of
+from kraby_study.answers.seed_scores import samples, swept_values, time_measure
+from kraby_study.answers.selected import study_rule
+from kraby_study.answers.study_data import StudyData
+from kraby_study.decision.comparison import MARGIN, MIN_SEEDS, CompareOptions, Comparison
+from kraby_study.decision.intervals import (
+    BOOTSTRAP_REPETITIONS,
+)
+from kraby_study.decision.race import Drop
+from kraby_study.decision.summary import SEED_COLUMNS, decide_sweep
+from kraby_study.decision.verdict import Verdict
+from kraby_study.records.attributes import SelectRule, StudyKind
+from kraby_study.records.definition import scored_by_evaluation
+from kraby_study.records.stored import Outcome, outcome
+from kraby_study.records.values import swept_value, value_key, value_label
+
+SINGLE_LABEL = "all seeds"
+TRIAL_COLUMNS = ["number", "key", "seed", "vi", "value", "outcome", "final_score",
+                 "train_reward", "eval_error", "wall_time", "cpu_time", "env_steps", "failure",
+                 "model_path"]
+
+
+@dataclass
+class Sweep:
+    """Everything the figures and tables of one sweep need.
+
+    Attributes:
+        data: The stored study.
+        parameter: Dotted name of the swept setting ("" for a single-run study).
+        name: The setting's short name (the Optuna parameter), or "all seeds".
+        values: The swept values in figure order (by value when all are numbers).
+        labels: How each value is written.
+        trials: One row per counted run (columns ``TRIAL_COLUMNS``); ``vi`` indexes values.
+        curves: Curve points of the complete runs, with their ``vi`` and ``seed``.
+        bands: Per value and step: n, mean, sd, low, high of the reward; mean wall time.
+        summary: One row per value (see :func:`summarise` and :func:`add_curve_metrics`).
+        seeds: One row per complete run (columns ``SEED_COLUMNS``): its final score, its
+            first curve point's reward, its AUC, when it first reached the threshold and its
+            curve's last point (env steps and seconds).
+        threshold: The reward a curve must reach (NaN when there is no curve to set it).
+        threshold_default: True when the threshold is the default (see
+            :func:`study_threshold`), False when the report's options set it.
+        untrained: The untrained policy's reward: the mean first-bin reward of every complete
+            seed of the study (NaN without curves).
+        bootstrap: The report option ``report.bootstrap``: resamples of the bootstrap-t
+            interval of a mean (:func:`kraby_study.decision.intervals.mean_interval`).
+        verdict: The study's verdict (:func:`kraby_study.decision.verdict.verdict`).
+        race: A raced study's race, its dropped values by index in ``values``; None for a
+            study that did not race.
+    """
+
+    data: StudyData
+    parameter: str
+    name: str
+    values: list[Any]
+    labels: list[str]
+    trials: pd.DataFrame
+    curves: pd.DataFrame
+    bands: pd.DataFrame
+    summary: pd.DataFrame
+    seeds: pd.DataFrame = field(default_factory=lambda: pd.DataFrame(columns=SEED_COLUMNS))
+    threshold: float = math.nan
+    threshold_default: bool = True
+    untrained: float = math.nan
+    bootstrap: int = BOOTSTRAP_REPETITIONS
+    verdict: Verdict = field(default_factory=lambda: Verdict(None, [], None, None, None))
+    min_seeds: int = MIN_SEEDS
+    """Fewest complete seeds a value needs to be best, tied or any answer of the verdict."""
+    rule: str = SelectRule.FINAL_SCORE
+    """The study's selection rule (its stored one, or ``compare.select``); the summary's
+    ``selected`` column marks the value it selects once no run is pending."""
+    race: StudyRace | None = None
+    comparison: Comparison[int] | None = None
+    """The study's one comparison: the summary's answers, the verdict and the selection."""
+    failure_line: float = math.nan
+    """The final score below which a seed failed (:mod:`kraby_study.decision.failed_seeds`); NaN
+    when not defined."""
+
+    @property
+    def dropped(self) -> dict[int, Drop]:
+        """The values the race dropped, by index in ``values`` (empty without a race)."""
+        return self.race.dropped if self.race is not None else {}
+
+    @property
+    def kind(self) -> StudyKind:
+        """The study's kind: sweep, confirm or train."""
+        return self.data.kind
+
+    @property
+    def by_evaluation(self) -> bool:
+        """Its runs are scored by the evaluation objective (a confirm of an evaluation
+        search): the final score is the deterministic policy's mean evaluation return, and
+        the summary holds the training reward beside it."""
+        return scored_by_evaluation(self.data.definition)
+
+    @property
+    def time_attr(self) -> str:
+        """The trial column the summary's training time describes: the one fastest_tied
+        compares (:func:`kraby_study.decision.selection.time_measure`)."""
+        return time_measure(self.kind)
+
+    @property
+    def time_unit(self) -> str:
+        """How the training time is written: ``CPU s`` on a confirm study, ``wall s`` else."""
+        return "CPU s" if self.time_attr == "cpu_time" else "wall s"
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Runs complete, failed, pruned and pending (planned runs without a trial are
+        pending)."""
+        return self.data.tally.counts()
+
+    @property
+    def finished(self) -> bool:
+        """No run is still to come."""
+        return self.counts["pending"] == 0
+
+    def status(self) -> str:
+        """'10/10 complete', or e.g. '7/10 complete, 1 failed, 2 pending'."""
+        c = self.counts
+        parts = [f"{c['complete']}/{c['planned']} complete"]
+        parts += [f"{c[name]} {name}" for name in (Outcome.FAILED, Outcome.PRUNED, Outcome.PENDING)
+                  if c[name]]
+        return ", ".join(parts)
+
+    @property
+    def best(self) -> int | None:
+        """Index of the best value (highest mean final score), if any run is complete."""
+        marked = self.summary.index[self.summary["mark"] == "best"]
+        return int(marked[0]) if len(marked) else None
+
+
+def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.DataFrame:
+    """One row per counted run; ``vi`` is the index of its value in ``values``."""
+    index = {value_key(v): i for i, v in enumerate(values)}
+    rows = []
+    for trial in data.trials:
+        attrs = trial.user_attrs
+        value = swept_value(trial, name, values) if name else None
+        vi = index.get(value_key(value), -1) if name else 0
+        state = outcome(trial)
+        rows.append({
+            "number": trial.number, "key": attrs.get("key"),
+            "seed": attrs.get("seed"), "vi": vi,
+            "value": value_label(values[vi]) if vi >= 0 and name else
+            (SINGLE_LABEL if not name else "?"),
+            "outcome": state.value,
+            "final_score": float(trial.value)
+            if state == Outcome.COMPLETE and trial.value is not None else np.nan,
+            # Stored beside the score since the evaluation objective; NaN on older runs.
+            "train_reward": attrs.get("train_reward", np.nan)
+            if state == Outcome.COMPLETE else np.nan,
+            # A run scored by evaluation: its score's standard error from its episodes.
+            "eval_error": (attrs.get("eval_errors") or [np.nan])[0]
+            if state == Outcome.COMPLETE else np.nan,
+            "wall_time": attrs.get("wall_time", np.nan) if state != Outcome.PENDING else np.nan,
+            "cpu_time": attrs.get("cpu_time", np.nan) if state != Outcome.PENDING else np.nan,
+            "env_steps": attrs.get("env_steps", np.nan) if state != Outcome.PENDING else np.nan,
+            # A sweep's pruned run is a raced value's retry, withdrawn: its reason says so.
+            "failure": (attrs.get("failure", "")
+                        if state in (Outcome.FAILED, Outcome.PRUNED) else ""),
+            "model_path": attrs.get("model_path"),
+        })
+    frame = pd.DataFrame(rows, columns=TRIAL_COLUMNS)
+    for column in ("final_score", "train_reward", "eval_error", "wall_time", "cpu_time",
+                   "env_steps"):
+        frame[column] = pd.to_numeric(frame[column], errors="coerce").astype(float)
+    return frame
+
+
+
+
+def arms_frame(sweep: Sweep) -> pd.DataFrame:
+    """A confirm study's configurations: label, origin, the source's own score, and the
+    confirmed final score (mean and its interval, IQM, trimmed-t interval, n)."""
+    arms = {str(arm.get("label")): arm for arm in sweep.data.definition.get("arms") or []
+            if isinstance(arm, dict)}
+    rows = []
+    for vi, label in enumerate(sweep.labels):
+        arm = arms.get(label, {})
+        source = arm.get("source_score")
+        row = sweep.summary.iloc[vi]
+        rows.append({"label": label, "origin": str(arm.get("origin") or "-"),
+                     "source_score": float(source) if source is not None else math.nan,
+                     "mean": row["final_mean"], "low": row["final_low"],
+                     "high": row["final_high"], "iqm": row["iqm"], "iqm_low": row["iqm_low"],
+                     "iqm_high": row["iqm_high"], "n": int(row["complete"]),
+                     "mark": row["mark"]})
+    return pd.DataFrame(rows)
+
+
+def option(options: Any, name: str, default: Any) -> Any:
+    """A report option (an attribute of ``options``), or ``default`` when it or ``options`` is
+    None."""
+    value = getattr(options, name, None) if options is not None else None
+    return default if value is None else value
+
+
+@dataclass(frozen=True)
+class SweepEvidence:
+    """What a stored sweep's runs say, read once: its values, one row per run, the complete
+    runs' curves, the race's state and the seed scores every decision reads."""
+
+    parameter: str
+    name: str | None
+    values: list[Any]
+    labels: list[str]
+    trials: pd.DataFrame
+    curves: pd.DataFrame
+    race: StudyRace | None
+    time_attr: str
+    final: dict[int, list[float]]
+    aucs: dict[int, list[float]] | None
+    seconds: dict[int, list[float]] | None
+
+
+def sweep_evidence(data: StudyData) -> SweepEvidence:
+    """A sweep's evidence from its stored trials and curves (a single-run study: one value)."""
+    definition = data.definition
+    if data.kind.swept:
+        parameter = str(definition["parameter"])
+        name, values = swept_values(data.kind, definition, data.trials)
+        labels = [value_label(v) for v in values]
+    else:
+        parameter, name, values, labels = "", None, [SINGLE_LABEL], [SINGLE_LABEL]
+    trials = trial_frame(data, name, values)
+    if (trials["vi"] < 0).any():  # a run whose value cannot be read: show it, do not drop it
+        values, labels = values + ["?"], labels + ["?"]
+        trials.loc[trials["vi"] < 0, "vi"] = len(values) - 1
+    # The race's dropped values by their index here (the report's order), matched by value.
+    race = race_of(definition, data.trials, values) if data.kind.swept else None
+    complete = trials[trials["outcome"] == Outcome.COMPLETE]
+    curves = data.curves.merge(complete[["vi", "seed", "number"]], on="number", how="inner")
+    time_attr = time_measure(data.kind)  # the training time the summary shows and the rule reads
+    # The one pass over the seed scores every decision reads.
+    found = samples(data.trials, data.curves, name, values, time_attr) if name else None
+    final = found.final if found is not None else {
+        int(vi): group["final_score"].tolist() for vi, group in complete.groupby("vi")}
+    return SweepEvidence(parameter=parameter, name=name, values=values, labels=labels,
+                         trials=trials, curves=curves, race=race, time_attr=time_attr,
+                         final=final, aucs=found.aucs if found is not None else None,
+                         seconds=found.seconds if found is not None else None)
+
+
+def build_sweep(data: StudyData, options: Any = None) -> Sweep:
+    """The evidence and answers of a sweep or confirm study, or of a single-run study (one
+    value, several seeds), as the report draws them.
+
+    Args:
+        data: The stored study.
+        options: The report's options (``bootstrap``: resamples of the bootstrap-t interval
+            of a mean, ``threshold``: reward to reach or None for the default,
+            ``min_seeds``: fewest complete seeds of a value in any comparison, ``margin``:
+            ``compare.margin``, ``select``: ``compare.select``); None for the defaults.
+    """
+    judged = CompareOptions(margin=float(option(options, "margin", MARGIN)),
+                            min_seeds=int(option(options, "min_seeds", MIN_SEEDS)),
+                            select=option(options, "select", None))
+    rule = study_rule(data.ledger.attrs.select, judged)
+    evidence = sweep_evidence(data)
+    race = evidence.race
+    decided = decide_sweep(
+        evidence.trials, evidence.curves, evidence.labels, evidence.final, judged,
+        bootstrap=int(option(options, "bootstrap", BOOTSTRAP_REPETITIONS)),
+        threshold=option(options, "threshold", None),
+        dropped=race.dropped if race is not None else {},
+        settled=race.settled if race is not None else {},
+        look_alpha=race.rules.look_alpha if race is not None else math.nan,
+        time_attr=evidence.time_attr, train_reward=scored_by_evaluation(data.definition),
+        rule=rule if evidence.aucs is not None and data.tally.counts()["pending"] == 0
+        else None, aucs=evidence.aucs or {}, seconds=evidence.seconds or {})
+    return Sweep(data=data, parameter=evidence.parameter, name=evidence.name or SINGLE_LABEL,
+                 values=evidence.values, rule=rule, labels=evidence.labels,
+                 trials=evidence.trials, curves=evidence.curves, bands=decided.bands,
+                 summary=decided.summary, seeds=decided.seeds, threshold=decided.threshold,
+                 threshold_default=decided.threshold_default, untrained=decided.untrained,
+                 bootstrap=decided.bootstrap, verdict=decided.verdict,
+                 min_seeds=decided.comparison.min_seeds, race=race,
+                 comparison=decided.comparison, failure_line=decided.failure_line)

@@ -1,0 +1,114 @@
+"""A trial's swept value, score and cost, read the same way by every command."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Hashable, Iterable, Mapping, Sequence
+from typing import Any, TypeVar
+
+from kraby_study.records.stored import Outcome, StoredTrial, T, outcome, parse_sweep_key
+
+# Values and the best one --------------------------------------------------------------------------
+
+
+def value_key(value: Any) -> Hashable:
+    """The equality rule for swept values: numbers by value (1 == 1.0), also inside lists and
+    dicts ([64, 64] == [64.0, 64.0]); the rest by JSON."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return ("number", float(value))
+    return ("other", json.dumps(_numbers_as_floats(value), sort_keys=True, default=str))
+
+
+def _numbers_as_floats(value: Any) -> Any:
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(value, list | tuple):
+        return [_numbers_as_floats(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _numbers_as_floats(v) for k, v in value.items()}
+    return value
+
+
+def value_label(value: Any) -> str:
+    """How a swept value is written in tables, legends and messages."""
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def param_name(parameter: str) -> str:
+    """The Optuna parameter name of a swept setting: its last part (ppo.gamma -> gamma)."""
+    return parameter.split(".")[-1]
+
+
+def is_numeric(values: Sequence[Any]) -> bool:
+    """True when every value is a real number (bools are not)."""
+    return bool(values) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in values)
+
+
+def ordered_values(planned: list[Any], found: list[Any], sort: bool = True) -> list[Any]:
+    """Planned values plus any other value found, sorted when all are numbers (and ``sort``)."""
+    values = list(planned)
+    known = {value_key(v) for v in values}
+    for value in found:
+        if value is not None and value_key(value) not in known:
+            known.add(value_key(value))
+            values.append(value)
+    if sort and is_numeric(values):
+        values.sort(key=float)
+    return values
+
+
+K = TypeVar("K", bound=Hashable)
+
+
+def best_group(scores: Mapping[K, Sequence[float]]) -> K | None:
+    """The group with the highest mean score (the first such in order); None if none has one."""
+    best: K | None = None
+    best_mean = -math.inf
+    for group, values in scores.items():
+        if len(values) and (mean := math.fsum(values) / len(values)) > best_mean:
+            best, best_mean = group, mean
+    return best
+
+
+def swept_value(trial: StoredTrial, name: str, planned: Sequence[Any]) -> Any:
+    """A sweep trial's value: its parameter, its queued parameter, or its key's value index."""
+    if name in trial.params:
+        return trial.params[name]
+    fixed = trial.system_attrs.get("fixed_params") or {}
+    if name in fixed:
+        return fixed[name]
+    parsed = parse_sweep_key(trial.user_attrs.get("key"))
+    if parsed is not None and parsed[0] < len(planned):
+        return planned[parsed[0]]
+    return None
+
+
+def score(trial: StoredTrial) -> float | None:
+    """A trial's score: its value, or its first objective's (a two-objective search's reward);
+    None without one. (Optuna's ``FrozenTrial.value`` raises on a trial of two objectives.)"""
+    values = trial.values
+    return float(values[0]) if values else None
+
+
+def cost(trial: StoredTrial) -> float | None:
+    """A two-objective search trial's cost (its second objective); None for one objective."""
+    values = trial.values
+    return float(values[1]) if values and len(values) > 1 else None
+
+
+
+def best_trial(trials: Iterable[T], maximize: bool = True, objectives: int = 1) -> T | None:
+    """The complete trial with the best score (a search's best); None when none is complete.
+
+    kraby-study maximises; ``maximize=False`` serves foreign studies that minimise. Trials
+    count when they have ``objectives`` values, by the first: 2 for a two-objective search's
+    best score; a foreign study of several objectives has no single best.
+    """
+    done = [t for t in trials if outcome(t) == Outcome.COMPLETE and t.values
+            and len(t.values) == objectives]
+    pick = max if maximize else min
+    return pick(done, key=lambda t: float(score(t)), default=None)  # type: ignore[arg-type]
