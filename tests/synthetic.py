@@ -17,11 +17,18 @@ import optuna
 from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
 from optuna.trial import TrialState, create_trial
 
-from kraby_study.answers.raced import ended_runs, race_record
+from kraby_study.answers.raced import race_record
 from kraby_study.decision.race import race
 from kraby_study.plan.spec import RaceRules, fingerprint
 from kraby_study.records.attributes import CurvePoint, StudyAttrs, TrialAttrs
-from kraby_study.records.stored import Failure, Outcome, failure, latest_by_key, sweep_key
+from kraby_study.records.stored import (
+    Failure,
+    Outcome,
+    ended_runs,
+    failure,
+    latest_by_key,
+    sweep_key,
+)
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
 

@@ -34,7 +34,7 @@ from optuna.distributions import CategoricalDistribution
 from optuna.trial import TrialState, create_trial
 from synthetic import add_trials
 
-from kraby_study.answers.raced import ended_runs, race_record
+from kraby_study.answers.raced import race_record
 from kraby_study.answers.selected import sweep_selection
 from kraby_study.config.compose import compose_config
 from kraby_study.decision.race import race
@@ -42,7 +42,14 @@ from kraby_study.plan.campaign import campaign_of
 from kraby_study.plan.spec import StudyPlan
 from kraby_study.plan.sweep import expand_study
 from kraby_study.records.attributes import StudyAttrs, TrialAttrs
-from kraby_study.records.stored import Tally, counted, latest_by_key, parse_sweep_key, tally
+from kraby_study.records.stored import (
+    Tally,
+    counted,
+    ended_runs,
+    latest_by_key,
+    parse_sweep_key,
+    tally,
+)
 from kraby_study.records.values import param_name
 from kraby_study.report import write_report
 from kraby_study.run.campaign_run import run_campaign

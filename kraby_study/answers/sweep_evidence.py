@@ -21,20 +21,20 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kraby_study.answers.raced import StudyRace, race_of
-from kraby_study.answers.seed_scores import samples, swept_values, time_measure
+from kraby_study.answers.seed_scores import swept_values, time_measure
 from kraby_study.answers.selected import study_rule
 from kraby_study.answers.study_data import StudyData
 from kraby_study.decision.comparison import MARGIN, MIN_SEEDS, CompareOptions, Comparison
 from kraby_study.decision.intervals import (
     BOOTSTRAP_REPETITIONS,
 )
-from kraby_study.decision.race import Drop
+from kraby_study.decision.race import Drop, RaceRuns, StudyRace
 from kraby_study.decision.summary import SEED_COLUMNS, decide_sweep
 from kraby_study.decision.verdict import Verdict
+from kraby_study.plan.spec import RaceRules
 from kraby_study.records.attributes import SelectRule, StudyKind
 from kraby_study.records.definition import scored_by_evaluation
-from kraby_study.records.stored import Outcome, outcome
+from kraby_study.records.stored import Outcome, ended_runs, latest_by_key, outcome, tally
 from kraby_study.records.values import swept_value, value_key, value_label
 
 SINGLE_LABEL = "all seeds"
@@ -153,46 +153,6 @@ class Sweep:
         return int(marked[0]) if len(marked) else None
 
 
-def trial_frame(data: StudyData, name: str | None, values: list[Any]) -> pd.DataFrame:
-    """One row per counted run; ``vi`` is the index of its value in ``values``."""
-    index = {value_key(v): i for i, v in enumerate(values)}
-    rows = []
-    for trial in data.trials:
-        attrs = trial.user_attrs
-        value = swept_value(trial, name, values) if name else None
-        vi = index.get(value_key(value), -1) if name else 0
-        state = outcome(trial)
-        rows.append({
-            "number": trial.number, "key": attrs.get("key"),
-            "seed": attrs.get("seed"), "vi": vi,
-            "value": value_label(values[vi]) if vi >= 0 and name else
-            (SINGLE_LABEL if not name else "?"),
-            "outcome": state.value,
-            "final_score": float(trial.value)
-            if state == Outcome.COMPLETE and trial.value is not None else np.nan,
-            # Stored beside the score since the evaluation objective; NaN on older runs.
-            "train_reward": attrs.get("train_reward", np.nan)
-            if state == Outcome.COMPLETE else np.nan,
-            # A run scored by evaluation: its score's standard error from its episodes.
-            "eval_error": (attrs.get("eval_errors") or [np.nan])[0]
-            if state == Outcome.COMPLETE else np.nan,
-            "wall_time": attrs.get("wall_time", np.nan) if state != Outcome.PENDING else np.nan,
-            "cpu_time": attrs.get("cpu_time", np.nan) if state != Outcome.PENDING else np.nan,
-            "env_steps": attrs.get("env_steps", np.nan) if state != Outcome.PENDING else np.nan,
-            # A sweep's pruned run is a raced value's retry, withdrawn: its reason says so.
-            "failure": (attrs.get("failure", "")
-                        if state in (Outcome.FAILED, Outcome.PRUNED) else ""),
-            "model_path": attrs.get("model_path"),
-        })
-    frame = pd.DataFrame(rows, columns=TRIAL_COLUMNS)
-    for column in ("final_score", "train_reward", "eval_error", "wall_time", "cpu_time",
-                   "env_steps"):
-        frame[column] = pd.to_numeric(frame[column], errors="coerce").astype(float)
-    return frame
-
-
-
-
 def arms_frame(sweep: Sweep) -> pd.DataFrame:
     """A confirm study's configurations: label, origin, the source's own score, and the
     confirmed final score (mean and its interval, IQM, trimmed-t interval, n)."""
@@ -222,52 +182,91 @@ def option(options: Any, name: str, default: Any) -> Any:
 @dataclass(frozen=True)
 class SweepEvidence:
     """What a stored sweep's runs say, read once: its values, one row per run, the complete
-    runs' curves, the race's state and the seed scores every decision reads."""
+    runs' curves and, in a raced study, the race's ended runs. Nothing here is decided yet."""
 
     parameter: str
     name: str | None
     values: list[Any]
     labels: list[str]
+    known: int
+    """How many of ``values`` the study lists (a last "?" holds runs whose value is unread)."""
     trials: pd.DataFrame
     curves: pd.DataFrame
-    race: StudyRace | None
     time_attr: str
-    final: dict[int, list[float]]
-    aucs: dict[int, list[float]] | None
-    seconds: dict[int, list[float]] | None
+    finished: bool
+    race: RaceRuns | None
 
 
 def sweep_evidence(data: StudyData) -> SweepEvidence:
-    """A sweep's evidence from its stored trials and curves (a single-run study: one value)."""
+    """A sweep's evidence from its stored trials and curves (a single-run study: one value):
+    one pass over the trials, through the record schema alone."""
     definition = data.definition
+    time_attr = time_measure(data.kind)  # the training time the summary shows and the rule reads
+    rules = RaceRules.of(dict(definition)) if data.kind.swept else None
     if data.kind.swept:
         parameter = str(definition["parameter"])
         name, values = swept_values(data.kind, definition, data.trials)
         labels = [value_label(v) for v in values]
     else:
         parameter, name, values, labels = "", None, [SINGLE_LABEL], [SINGLE_LABEL]
-    trials = trial_frame(data, name, values)
+    index = {value_key(v): i for i, v in enumerate(values)}
+    rows = []
+    for trial in data.trials:
+        attrs = trial.user_attrs
+        value = swept_value(trial, name, values) if name else None
+        vi = index.get(value_key(value), -1) if name else 0
+        state = outcome(trial)
+        ended = state != Outcome.PENDING
+        rows.append({
+            "number": trial.number, "key": attrs.get("key"), "seed": attrs.get("seed"), "vi": vi,
+            "value": value_label(values[vi]) if vi >= 0 and name else
+            (SINGLE_LABEL if not name else "?"),
+            "outcome": state.value,
+            "final_score": float(trial.value)
+            if state == Outcome.COMPLETE and trial.value is not None else np.nan,
+            # Stored beside the score since the evaluation objective; NaN on older runs.
+            "train_reward": attrs.get("train_reward", np.nan)
+            if state == Outcome.COMPLETE else np.nan,
+            # A run scored by evaluation: its score's standard error from its episodes.
+            "eval_error": (attrs.get("eval_errors") or [np.nan])[0]
+            if state == Outcome.COMPLETE else np.nan,
+            "wall_time": attrs.get("wall_time", np.nan) if ended else np.nan,
+            "cpu_time": attrs.get("cpu_time", np.nan) if ended else np.nan,
+            "env_steps": attrs.get("env_steps", np.nan) if ended else np.nan,
+            # A sweep's pruned run is a raced value's retry, withdrawn: its reason says so.
+            "failure": (attrs.get("failure", "")
+                        if state in (Outcome.FAILED, Outcome.PRUNED) else ""),
+            "model_path": attrs.get("model_path")})
+    trials = pd.DataFrame(rows, columns=TRIAL_COLUMNS)
+    for column in ("final_score", "train_reward", "eval_error", "wall_time", "cpu_time",
+                   "env_steps"):
+        trials[column] = pd.to_numeric(trials[column], errors="coerce").astype(float)
+    known = len(values)
     if (trials["vi"] < 0).any():  # a run whose value cannot be read: show it, do not drop it
         values, labels = values + ["?"], labels + ["?"]
         trials.loc[trials["vi"] < 0, "vi"] = len(values) - 1
-    # The race's dropped values by their index here (the report's order), matched by value.
-    race = race_of(definition, data.trials, values) if data.kind.swept else None
-    complete = trials[trials["outcome"] == Outcome.COMPLETE]
-    curves = data.curves.merge(complete[["vi", "seed", "number"]], on="number", how="inner")
-    time_attr = time_measure(data.kind)  # the training time the summary shows and the rule reads
-    # The one pass over the seed scores every decision reads.
-    found = samples(data.trials, data.curves, name, values, time_attr) if name else None
-    final = found.final if found is not None else {
-        int(vi): group["final_score"].tolist() for vi, group in complete.groupby("vi")}
+    # A race's ended runs by the study file's value index, and where each value stands here
+    # (the report's order), matched by value.
+    race = None
+    if rules is not None:
+        planned = list(definition["values"])
+        race = RaceRuns(
+            rules=rules, planned=len(planned),
+            runs=ended_runs(latest_by_key(data.trials), list(rules.round_seeds)),
+            index=[index.get(value_key(v)) for v in planned])
+    complete = trials[trials["outcome"] == Outcome.COMPLETE][["vi", "seed", "number"]]
     return SweepEvidence(parameter=parameter, name=name, values=values, labels=labels,
-                         trials=trials, curves=curves, race=race, time_attr=time_attr,
-                         final=final, aucs=found.aucs if found is not None else None,
-                         seconds=found.seconds if found is not None else None)
+                         known=known, trials=trials,
+                         curves=data.curves.merge(complete, on="number", how="inner"),
+                         time_attr=time_attr,
+                         finished=tally(data.trials, data.planned).counts()["pending"] == 0,
+                         race=race)
 
 
 def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     """The evidence and answers of a sweep or confirm study, or of a single-run study (one
-    value, several seeds), as the report draws them.
+    value, several seeds), as the report draws them: read once (:func:`sweep_evidence`),
+    decided once (:func:`kraby_study.decision.summary.decide_sweep`).
 
     Args:
         data: The stored study.
@@ -281,22 +280,18 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
                             select=option(options, "select", None))
     rule = study_rule(data.ledger.attrs.select, judged)
     evidence = sweep_evidence(data)
-    race = evidence.race
     decided = decide_sweep(
-        evidence.trials, evidence.curves, evidence.labels, evidence.final, judged,
+        evidence.trials, evidence.curves, evidence.labels, judged,
         bootstrap=int(option(options, "bootstrap", BOOTSTRAP_REPETITIONS)),
-        threshold=option(options, "threshold", None),
-        dropped=race.dropped if race is not None else {},
-        settled=race.settled if race is not None else {},
-        look_alpha=race.rules.look_alpha if race is not None else math.nan,
-        time_attr=evidence.time_attr, train_reward=scored_by_evaluation(data.definition),
-        rule=rule if evidence.aucs is not None and data.tally.counts()["pending"] == 0
-        else None, aucs=evidence.aucs or {}, seconds=evidence.seconds or {})
+        threshold=option(options, "threshold", None), race=evidence.race,
+        swept=evidence.name is not None, known=evidence.known, time_attr=evidence.time_attr,
+        train_reward=scored_by_evaluation(data.definition),
+        rule=rule if evidence.name is not None and evidence.finished else None)
     return Sweep(data=data, parameter=evidence.parameter, name=evidence.name or SINGLE_LABEL,
                  values=evidence.values, rule=rule, labels=evidence.labels,
                  trials=evidence.trials, curves=evidence.curves, bands=decided.bands,
                  summary=decided.summary, seeds=decided.seeds, threshold=decided.threshold,
                  threshold_default=decided.threshold_default, untrained=decided.untrained,
                  bootstrap=decided.bootstrap, verdict=decided.verdict,
-                 min_seeds=decided.comparison.min_seeds, race=race,
+                 min_seeds=decided.comparison.min_seeds, race=decided.race,
                  comparison=decided.comparison, failure_line=decided.failure_line)

@@ -38,6 +38,7 @@ computes it, so a race resumes after a crash and is shared by commands on one da
 
 from __future__ import annotations
 
+import math
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
@@ -134,3 +135,68 @@ def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: Race
             settled[v] = Drop(round=r, p=look.p_equivalent[v], answer=Answer.EQUIVALENT)
     return Race(values=list(values), rules=rules, rounds=rounds, dropped=dropped,
                 settled=settled)
+
+
+@dataclass(frozen=True)
+class StudyRace:
+    """A stored study's race as its answers and report read it, its values by their index in
+    a list the caller gives (the report's order may differ from the study file's)."""
+
+    rules: RaceRules
+    dropped: dict[int, Drop]
+    """The values dropped as worse by their index in the caller's list, each with its round
+    and p."""
+    runs: int
+    """Runs the race made: ended complete or failed (a withdrawn retry is not a run)."""
+    fixed_runs: int
+    """Runs of the fixed design: every value with every seed."""
+    rounds: int
+    """Rounds decided so far."""
+    over: bool
+    """The race is over: one value is left racing, or every value left has all its seeds."""
+    settled: dict[int, Drop] = field(default_factory=dict)
+    """The values settled as equivalent, by their index in the caller's list: no more seeds,
+    still candidates."""
+
+    @property
+    def share(self) -> float:
+        """Runs made over the fixed design's runs."""
+        return self.runs / self.fixed_runs if self.fixed_runs else math.nan
+
+    def saved_text(self) -> str:
+        """``raced: 31 of 60 runs (52 %)``."""
+        return f"raced: {self.runs} of {self.fixed_runs} runs ({100 * self.share:.0f} %)"
+
+
+def mapped_race(rules: RaceRules, runs: Mapping[int, Mapping[int, float]], planned: int,
+                index: Sequence[int | None]) -> StudyRace:
+    """The race of a study's ``planned`` values (by their index in its study file) replayed on
+    their ended runs, its dropped and settled values mapped to the caller's indices:
+    ``index[v]`` for planned value v, None for one the caller does not list (left out)."""
+    state = race(list(range(planned)), runs, rules)
+
+    def mapped(left: Mapping[int, Drop]) -> dict[int, Drop]:
+        return {at: drop for v, drop in left.items() if (at := index[v]) is not None}
+
+    return StudyRace(rules=rules, dropped=mapped(state.dropped),
+                     runs=sum(len(r) for r in runs.values()), fixed_runs=planned * rules.seeds,
+                     rounds=state.rounds, over=state.over, settled=mapped(state.settled))
+
+
+@dataclass(frozen=True)
+class RaceRuns:
+    """A raced study's ended runs as its evidence holds them, to be replayed
+    (:func:`mapped_race`)."""
+
+    rules: RaceRules
+    planned: int
+    """Values in the study file."""
+    runs: Mapping[int, Mapping[int, float]]
+    """Per planned value, its ended runs' final scores by seed index (NaN: failed)."""
+    index: Sequence[int | None]
+    """The caller's index of each planned value, None where the caller does not list it."""
+
+    def replayed(self) -> StudyRace:
+        """The race these runs make (:func:`mapped_race`)."""
+        return mapped_race(self.rules, self.runs, self.planned, self.index)
+

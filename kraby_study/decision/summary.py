@@ -34,7 +34,7 @@ from kraby_study.decision.measures import (
     p_improvement,
     p_improvement_interval,
 )
-from kraby_study.decision.race import Drop
+from kraby_study.decision.race import Drop, RaceRuns, StudyRace
 from kraby_study.decision.selection import RULES, mean_by_value
 from kraby_study.decision.verdict import Verdict, compare_to_best, verdict, welch_p
 from kraby_study.records.attributes import SelectRule
@@ -369,7 +369,8 @@ def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
 @dataclass(frozen=True)
 class SweepAnswers:
     """What a sweep's evidence decides: the one comparison, the per-value summary (answers,
-    marks, the selected value), the per-seed metrics, the curves' bands and the verdict."""
+    marks, the selected value), the per-seed metrics, the curves' bands, the race (None
+    without one) and the verdict."""
 
     comparison: Comparison[int]
     summary: pd.DataFrame
@@ -381,36 +382,69 @@ class SweepAnswers:
     failure_line: float
     bootstrap: int
     verdict: Verdict
+    race: StudyRace | None
+
+
+def seed_scores(trials: pd.DataFrame, curves: pd.DataFrame, known: int, time_attr: str
+                ) -> tuple[dict[int, list[float]], dict[int, list[float]], dict[int, list[float]]]:
+    """Per value with a complete run (among the first ``known``), in value order: the complete
+    runs' final scores, their curves' AUCs and their training times (column ``time_attr``),
+    each in run order: the numbers every decision reads."""
+    done = trials[(trials["outcome"] == Outcome.COMPLETE) & trials["final_score"].notna()
+                  & (trials["vi"] < known)]
+    ordered = curves.sort_values(["number", "step"], kind="stable")
+    rewards = {int(n): g["mean_reward"].to_numpy(dtype=float)
+               for n, g in ordered.groupby("number", sort=False)}
+    final: dict[int, list[float]] = {}
+    aucs: dict[int, list[float]] = {}
+    seconds: dict[int, list[float]] = {}
+    for row in done.itertuples(index=False):
+        vi = int(row.vi)
+        final.setdefault(vi, []).append(float(row.final_score))
+        if int(row.number) in rewards:
+            aucs.setdefault(vi, []).append(auc(rewards[int(row.number)]))
+        spent = float(getattr(row, time_attr))
+        if not math.isnan(spent):
+            seconds.setdefault(vi, []).append(spent)
+    order = sorted(final)
+    return ({vi: final[vi] for vi in order}, {vi: aucs.get(vi, []) for vi in order},
+            {vi: seconds.get(vi, []) for vi in order})
 
 
 def decide_sweep(trials: pd.DataFrame, curves: pd.DataFrame, labels: list[str],
-                 final: Mapping[int, list[float]], judged: CompareOptions, *, bootstrap: int,
-                 threshold: float | None, dropped: Mapping[int, Drop],
-                 settled: Mapping[int, Drop], look_alpha: float, time_attr: str,
-                 train_reward: bool, rule: str | None, aucs: Mapping[int, list[float]],
-                 seconds: Mapping[int, list[float]]) -> SweepAnswers:
+                 judged: CompareOptions, *, bootstrap: int, threshold: float | None,
+                 race: RaceRuns | None, swept: bool, known: int, time_attr: str,
+                 train_reward: bool, rule: str | None) -> SweepAnswers:
     """The answers of a sweep from its evidence, in one pass.
 
     Args:
         trials: One row per counted run (``vi`` indexes ``labels``).
         curves: Curve points of the complete runs, with their ``vi`` and ``seed``.
         labels: How each value is written.
-        final: The complete seeds' final scores by value index.
         judged: The comparison's margin, alpha, fewest seeds and rule.
         bootstrap: Resamples of the bootstrap-t interval of a mean.
         threshold: The reward a curve must reach, None for the default.
-        dropped: Values a race dropped as worse, by index; ``settled``: those it settled as
-            equivalent; ``look_alpha``: the race's level per look (NaN without a race).
+        race: A raced study's ended runs (None: it did not race): its dropped values are
+            never best, equivalent or selected.
+        swept: The study sweeps a setting; False for a single-run study (one value).
+        known: How many of the values the study lists (a last "?" is not compared).
         time_attr: The trial column read as training time.
         train_reward: The runs are scored by evaluation: add the training reward and the
             evaluation's standard error beside the final score.
-        rule: The rule that selects a value (None while runs are pending, or without seed
-            scores by value); ``aucs`` and ``seconds``: the seed AUCs and times it reads.
+        rule: The rule that selects a value (None while runs are pending, or in a single-run
+            study).
     """
+    state = race.replayed() if race is not None else None
+    dropped = state.dropped if state is not None else {}
+    settled = state.settled if state is not None else {}
+    look_alpha = state.rules.look_alpha if state is not None else math.nan
+    final, aucs, seconds = seed_scores(trials, curves, known, time_attr)
+    if not swept:  # one value: every complete run's score
+        final = _finals(trials[trials["outcome"] == Outcome.COMPLETE])
     comparison = compare({vi: v for vi, v in final.items() if vi not in dropped},
                          judged.margin, judged.alpha, judged.min_seeds)
     summary = summarise(trials, labels, bootstrap, comparison.min_seeds, dropped, look_alpha,
-                        time_attr, comparison, settled, dict(final))
+                        time_attr, comparison, settled, final)
     level, is_default, untrained = study_threshold(curves, summary, threshold)
     seeds = seed_metrics(trials, curves, level)
     summary = add_curve_metrics(summary, seeds, bootstrap)
@@ -427,4 +461,4 @@ def decide_sweep(trials: pd.DataFrame, curves: pd.DataFrame, labels: list[str],
                         threshold_default=is_default, untrained=untrained,
                         failure_line=failure, bootstrap=bootstrap,
                         verdict=study_verdict(summary, seeds, comparison.min_seeds,
-                                              list(dropped), comparison))
+                                              list(dropped), comparison), race=state)

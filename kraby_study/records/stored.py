@@ -3,8 +3,9 @@ which attempts count."""
 
 from __future__ import annotations
 
+import math
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol, TypeVar
@@ -234,3 +235,31 @@ def offset_leg_seeds(trial: StoredTrial, per_trial: int = 1) -> set[int]:
     each of its seeds s and legs i < n_envs (two runs share a leg's stream where these meet)."""
     n_envs = int(trial.user_attrs.get("settings", {}).get("ppo", {}).get("n_envs", 1))
     return {seed + leg for seed in trial_seeds(trial, per_trial) for leg in range(n_envs)}
+
+
+# The ended runs of a race ---------------------------------------------------------------------
+
+
+def place(key: str, seeds: list[int]) -> tuple[int, int] | None:
+    """(value index, seed index) of a run's key; None for a key of no round."""
+    parsed = parse_sweep_key(key)
+    if parsed is None or parsed[1] not in seeds:
+        return None
+    return parsed[0], seeds.index(parsed[1])
+
+
+def ended_runs(latest: Mapping[str, StoredTrial], seeds: list[int]
+               ) -> dict[int, dict[int, float]]:
+    """Per value, its ended runs by seed index: the final score of a complete run, NaN for one
+    that ended without a score (failed)."""
+    runs: dict[int, dict[int, float]] = {}
+    for key, trial in latest.items():
+        where = place(key, seeds)
+        if where is None:
+            continue
+        ended = outcome(trial)
+        if ended == Outcome.COMPLETE and trial.value is not None:
+            runs.setdefault(where[0], {})[where[1]] = float(trial.value)
+        elif ended == Outcome.FAILED:
+            runs.setdefault(where[0], {})[where[1]] = math.nan
+    return runs

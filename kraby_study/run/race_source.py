@@ -16,11 +16,11 @@ import math
 
 from optuna.trial import FrozenTrial
 
-from kraby_study.answers.raced import place, race_record, replay
+from kraby_study.answers.raced import race_record, replay
 from kraby_study.decision.race import Race
 from kraby_study.plan.spec import RaceRules, StudyPlan, TrialSpec
 from kraby_study.records.attributes import StudyAttrs, TrialAttrs, TrialResult
-from kraby_study.records.stored import is_interrupted, latest_by_key
+from kraby_study.records.stored import is_interrupted, latest_by_key, place
 from kraby_study.run.plan_source import PlanSource
 from kraby_study.store.ledger import StudyLedger
 
