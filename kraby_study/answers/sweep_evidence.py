@@ -9,8 +9,9 @@ is a sweep whose values are the labels of the configurations it retrains (in the
 
 Every decision (the summary's answers and marks, the verdict, the ``selected`` column) reads
 one :class:`kraby_study.decision.comparison.Comparison`, made once per study from the seed
-scores :func:`kraby_study.decision.selection.samples` extracts, the same pass ``best``,
-``${winner:...}`` and campaigns read."""
+scores of the runs' table (:func:`kraby_study.decision.summary.seed_scores`): the numbers
+``best``, ``${winner:...}`` and campaigns read from the trials
+(:func:`kraby_study.answers.seed_scores.samples`)."""
 
 from __future__ import annotations
 
@@ -25,9 +26,7 @@ from kraby_study.answers.seed_scores import swept_values, time_measure
 from kraby_study.answers.selected import study_rule
 from kraby_study.answers.study_data import StudyData
 from kraby_study.decision.comparison import MARGIN, MIN_SEEDS, CompareOptions, Comparison
-from kraby_study.decision.intervals import (
-    BOOTSTRAP_REPETITIONS,
-)
+from kraby_study.decision.intervals import BOOTSTRAP_REPETITIONS
 from kraby_study.decision.race import Drop, RaceRuns, StudyRace
 from kraby_study.decision.summary import SEED_COLUMNS, decide_sweep
 from kraby_study.decision.verdict import Verdict
@@ -56,13 +55,15 @@ class Sweep:
         trials: One row per counted run (columns ``TRIAL_COLUMNS``); ``vi`` indexes values.
         curves: Curve points of the complete runs, with their ``vi`` and ``seed``.
         bands: Per value and step: n, mean, sd, low, high of the reward; mean wall time.
-        summary: One row per value (see :func:`summarise` and :func:`add_curve_metrics`).
+        summary: One row per value (:func:`kraby_study.decision.summary.summarise` and
+            ``add_curve_metrics``).
         seeds: One row per complete run (columns ``SEED_COLUMNS``): its final score, its
             first curve point's reward, its AUC, when it first reached the threshold and its
             curve's last point (env steps and seconds).
         threshold: The reward a curve must reach (NaN when there is no curve to set it).
         threshold_default: True when the threshold is the default (see
-            :func:`study_threshold`), False when the report's options set it.
+            :func:`kraby_study.decision.summary.study_threshold`), False when the report's options
+            set it.
         untrained: The untrained policy's reward: the mean first-bin reward of every complete
             seed of the study (NaN without curves).
         bootstrap: The report option ``report.bootstrap``: resamples of the bootstrap-t
