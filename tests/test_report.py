@@ -164,7 +164,8 @@ def test_sweep_report_writes_every_file(sweep_report: ReportIndex) -> None:
     # No model was saved, and the index says so instead of showing an animation.
     assert "no policy animation" in markdown and not list(out.rglob("*.gif"))
     # The summary table is inline in both pages.
-    assert "| ent_coef | complete | failed |" in markdown and "<table>" in html
+    assert "| ent_coef | seeds | mean final score [95 % CI] | answer |" in markdown
+    assert "<table>" in html
 
 
 def test_summary_numbers_equal_a_hand_computation(sweep_report: ReportIndex) -> None:
@@ -199,7 +200,7 @@ def test_summary_numbers_equal_a_hand_computation(sweep_report: ReportIndex) -> 
     assert low["p_vs_best"] == pytest.approx(p, rel=1e-4)
     assert (high["mark"], low["mark"]) == ("best", "tie")  # p = 0.28: not told apart
     text = (out / "ent_coef" / "summary.md").read_text()
-    assert "ent_coef: 0.1 best final score (mean 5" in text
+    assert "- Best: 0.1, mean final score 5 (95 % CI [" in text
     assert "Welch's t-test" in text and "95 % Hall skewness-corrected t interval" in text
     assert "studentised bootstrap (bootstrap-t) interval (2,000 resamples" in text
 
@@ -432,26 +433,26 @@ def test_a_raced_verdict_says_what_the_race_saved(raced_report: ReportIndex) -> 
     verdict = text.split("\n\n")[1]
     # 6 + 6 seeds of the survivors, 0.3's 3 complete and 1 failed; the withdrawn retry did
     # not run. The fixed design: 3 values x 6 seeds.
-    assert "raced: 16 of 18 runs (89 %)" in verdict
+    assert "raced: 16 of 18 runs (89 %)" in text
     rule = RACE_RULES.describe()
     assert rule == ("racing from round 3 of 6: closed Holm-Welch step-down at each look, alpha "
                     "0.05 spent equally over 4 looks (0.0125 each)")
-    assert verdict.count(rule) == 1 and text.count(rule) == 1
-    assert "dropped 0.3 after round 3 (adjusted p 0.00" in verdict
-    assert verdict.startswith("clip_range: 0.1 best final score (")
+    assert text.count(rule) == 1
+    assert "dropped 0.3 after round 3 (adjusted p 0.00" in text
+    assert verdict.startswith("- Best: 0.1, mean final score ")
     # At the default margin (0.2 x |mean 1.0| = 0.2) the survivors' wide spread leaves 0.2
     # undecided, and the dropped value counts as worse.
-    assert ("margin 0.2 in score units (0.2 x the best's |mean| 1): equivalent (shown within "
-            "the margin of the best): none; undecided: 0.2; worse (shown below the best by "
-            "more than the margin): 0.3 (every value answered by") in verdict
-    assert "warning: the margin 0.2 is below what these seeds resolve" in verdict
-    # The table says where the race dropped it, and the notes what a dropped row shows.
+    assert verdict.splitlines()[1:4] == [
+        "- Equivalent (within the margin of the best, 0.2 in score units): none.",
+        "- Worse (below the best by more than the margin): 0.3.",
+        "- Undecided (neither shown equivalent nor worse): 0.2."]
+    assert "Warning: the margin 0.2 is below what these seeds resolve" in text
+    # The table says where the race dropped it, and the methods what a dropped row shows.
     header = next(line for line in text.splitlines() if line.startswith("| clip_range |"))
-    assert "| pending | dropped after round | final score |" in header
+    assert header.startswith("| clip_range | seeds | mean final score [95 % CI] | answer |")
     row = next(line for line in text.splitlines() if line.startswith("| 0.3 |"))
-    assert "| 3 | 1 | 1 | 0 | 3 |" in row and "(race, round 3) |" in row
-    assert "| dropped | worse | dropped by the race after round 3" in row
-    assert "a value the race dropped is never best, tied, selected" in text
+    assert "| worse (dropped by the race after round 3) |" in row
+    assert "a value the race dropped is never best, selected" in text
 
 
 def test_dropped_values_are_dashed_in_the_curve_figures(
@@ -553,8 +554,10 @@ def test_a_report_at_margin_zero_reads_as_before(raced_store: str, tmp_path: Pat
                          options=SimpleNamespace(margin=0.0))
     text = (index.out / "clip_range" / "summary.md").read_text()
     verdict = text.split("\n\n")[1]
-    assert "tied (not significantly worse, closed Holm-Welch step-down, alpha 0.05): 0.2)" \
-        in verdict and "equivalent (shown within" not in verdict
+    assert verdict.splitlines()[1:4] == [
+        "- Equivalent: none (margin 0: no value can be shown equivalent).",
+        "- Worse (below the best): 0.3.",
+        "- Undecided (neither shown equivalent nor worse): 0.2."]
     summary = _read_summary(index.out, "clip_range")
     assert list(summary["answer"]) == ["best", "undecided", "worse"]
     assert (summary["margin"] == 0).all() and summary["p_equivalent"].dropna().eq(1.0).all()
