@@ -493,8 +493,9 @@ def describe_sweep(sweep: Sweep) -> str:
                      "every run shares (one fixed set, as stored before runs drew their own)")
             scored = (f" Scored by evaluation: a run's final score is its deterministic "
                       f"policy's mean return over {episodes} evaluation episodes {drawn}; the "
-                      f"training reward ({TRAINING_SCORE}) is shown beside it, and no answer "
-                      f"reads it.")
+                      f"training reward ({TRAINING_SCORE}; train_mean, train_sd, train_low, "
+                      "train_high) and the evaluation se (eval_se) are in summary.csv beside "
+                      "it, and no answer reads them.")
         return (f"Confirmation of {len(sweep.values)} configurations{origin} on {fresh}"
                 f"{budget}. Status: {sweep.status()}.{scored}")
     if not sweep.parameter:
