@@ -108,6 +108,8 @@ def _steps(value: float) -> str:
 SUMMARY_COLUMNS = ["seeds", "mean final score [95 % CI]", "answer", "p_worse", "p_equivalent",
                    "failed seeds [95 % CI of the rate]"]
 """The compact table's columns after the value's (summary.csv holds every other number)."""
+ANSWER_COLUMNS = ("answer", "p_worse", "p_equivalent")
+"""The columns a single-run study's table leaves out: its one value is trivially the best."""
 
 
 def _answer_cell(sweep: Sweep, vi: int, row: pd.Series) -> str:
@@ -130,18 +132,25 @@ def _mean_cell(row: pd.Series) -> str:
     return text
 
 
+def _p_cell(p: float) -> str:
+    return _p_text(p) if np.isfinite(p) else "-"
+
+
 def summary_table(sweep: Sweep) -> Table:
     """The compact summary: per value its complete seeds, mean final score with its interval,
-    answer, p_worse, p_equivalent and failed seeds; every other number is in summary.csv."""
+    answer, p_worse, p_equivalent and failed seeds (a single-run study, one value, has no
+    answer to show); every other number is in summary.csv."""
+    compared = bool(sweep.parameter)
     rows = []
     for vi, row in sweep.summary.iterrows():
-        best = row.get("answer") == "best"
-        rows.append([str(row["value"]), str(row["complete"]),
-                     _mean_cell(row), _answer_cell(sweep, int(vi), row),
-                     "-" if best else _p_text(row["p_worse"]),
-                     "-" if best else _p_text(row["p_equivalent"]), _failed_seeds(row)])
-    return Table([sweep.name, *SUMMARY_COLUMNS], rows,
-                 marks=[row_mark(str(a)) for a in sweep.summary["answer"]])
+        answers = [_answer_cell(sweep, int(vi), row), _p_cell(row["p_worse"]),
+                   _p_cell(row["p_equivalent"])]
+        rows.append([str(row["value"]), str(row["complete"]), _mean_cell(row),
+                     *(answers if compared else []), _failed_seeds(row)])
+    header = SUMMARY_COLUMNS if compared else [c for c in SUMMARY_COLUMNS
+                                               if c not in ANSWER_COLUMNS]
+    return Table([sweep.name, *header], rows,
+                 marks=[row_mark(str(a)) for a in sweep.summary["answer"]] if compared else [])
 
 
 def _failed_seeds(row: pd.Series) -> str:
@@ -340,7 +349,8 @@ def _single_lines(sweep: Sweep, row: pd.Series) -> list[str]:
     """A single-run study's verdict: its final score, AUC and time to threshold."""
     reached = (f"Threshold reached in {_reach_text(row)}." if row["reached"] else
                "No seed reached the threshold.")
-    return [f"Final score: {_mean_text(row)}.", f"Sample efficiency: {_auc_text(row)}.",
+    text = _mean_text(row)
+    return [f"{text[0].upper()}{text[1:]}.", f"Sample efficiency: {_auc_text(row)}.",
             reached]
 
 
@@ -564,7 +574,7 @@ def result_text(sweep: Sweep) -> str:
     if best is None:
         return "no complete run"
     if not sweep.parameter:
-        return f"final score {_mean_text(sweep.summary.iloc[best])}"
+        return _mean_text(sweep.summary.iloc[best])
     chosen = sweep.summary.index[sweep.summary["selected"].astype(bool)]
     picked = _label(sweep, int(chosen[0])) if len(chosen) else "none yet"
     return f"best {_label(sweep, best)}; selected {picked}"
