@@ -257,3 +257,27 @@ def race_example_runs(steps: int = 4000, points: int = 40) -> list[Run]:
                                 curve=learning_curve(final, steps, points, wall, rng)))
     runs.append(Run(value=0.3, seed=4, outcome=Outcome.PRUNED, wall_time=0.0))
     return runs
+
+
+VERDICT_VALUES = [0.01, 0.02, 0.05, 0.1]
+VERDICT_FINALS: dict[float, list[float]] = {
+    0.01: [1.00, 1.02, 0.98, 1.01, 0.99, 1.00, 1.0, 1.01],
+    0.02: [0.99, 1.00, 0.98, 1.01, 0.97, 0.99, 0.99, 1.0],
+    0.05: [-1.0, -0.98, -1.02, -1.01, -0.99, -1.0, -1.0, -3.5],
+    0.1: [1.1, 0.6, 0.9, 1.2, 0.5, 0.8, 0.9, 0.8],
+}
+"""A sweep with every answer at the default margin (0.2 x |best mean| 1.0 = 0.2): 0.01 best,
+0.02 equivalent (tight and 0.01 below it), 0.05 worse (2.3 below), 0.1 undecided (0.15 below
+with a wide spread: neither shown within the margin nor below it). 0.05's seed at -3.5 is a
+failed seed (below the line halfway from the untrained -4 to the best's 1.0); 0.1 has, besides,
+a failed run (seed 8)."""
+
+
+def verdict_runs(steps: int = 4000, points: int = 40) -> list[Run]:
+    """The runs of :data:`VERDICT_FINALS`, with curves, and 0.1's failed run."""
+    rng = np.random.default_rng(3)
+    runs = [Run(value=value, seed=seed, final_score=final, wall_time=10.0 + seed,
+                curve=learning_curve(final, steps, points, 10.0 + seed, rng))
+            for value, finals in VERDICT_FINALS.items() for seed, final in enumerate(finals)]
+    runs.append(Run(value=0.1, seed=8, outcome=Outcome.FAILED, wall_time=3.0))
+    return runs

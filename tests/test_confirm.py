@@ -232,8 +232,8 @@ def test_a_confirm_of_an_evaluation_search_scores_on_a_test_set_the_search_never
     assert summary["train_mean"].mean() == csv_approx(sum(rewards) / len(rewards))
     assert summary["final_mean"].tolist() != summary["train_mean"].tolist()
     page = (folder / "summary.md").read_text()
-    assert "training reward [95 % CI]" in page and "Scored by evaluation" in page
-    assert "evaluation se" in page and "own seed's evaluation stream" in page
+    assert "Scored by evaluation" in page and "the training reward (" in page
+    assert "evaluation se (eval_se)" in page and "own seed's evaluation stream" in page
     assert summary["eval_se"].notna().all()
     provenance = (folder / "reproducibility.md").read_text()
     assert "no test episode is one the source study scored a run on" in provenance

@@ -363,8 +363,8 @@ def test_a_gym_sweep_search_confirm_and_report_end_to_end(
     top = (workdir / "out" / "ppo_search" / "top_trials.md").read_text()
     first = next(line for line in top.splitlines() if line.startswith("| 1 |"))
     assert ".0 |" not in first
-    # The confirm of the evaluation search shows the training reward beside its score.
-    assert "training reward [95 % CI]" in (
+    # The confirm of the evaluation search holds the training reward beside its score.
+    assert "train_mean, train_sd, train_low, train_high" in (
         workdir / "out" / "ppo_search-confirm" / "summary.md").read_text()
 
 

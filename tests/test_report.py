@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import sqlite3
 import sys
 from pathlib import Path
@@ -21,12 +22,15 @@ from synthetic import (
     RACE_RULES,
     RACE_VALUES,
     RACE_WALL,
+    VERDICT_VALUES,
     Run,
     add_raced_sweep,
+    add_search,
     add_sweep,
     add_trials,
     learning_curve,
     race_example_runs,
+    verdict_runs,
     write_curves,
 )
 
@@ -166,7 +170,8 @@ def test_sweep_report_writes_every_file(sweep_report: ReportIndex) -> None:
     # No model was saved, and the index says so instead of showing an animation.
     assert "no policy animation" in markdown and not list(out.rglob("*.gif"))
     # The summary table is inline in both pages.
-    assert "| ent_coef | complete | failed |" in markdown and "<table>" in html
+    assert "| ent_coef | seeds | mean final score [95 % CI] | answer |" in markdown
+    assert "<table>" in html
 
 
 def test_summary_numbers_equal_a_hand_computation(sweep_report: ReportIndex) -> None:
@@ -201,7 +206,7 @@ def test_summary_numbers_equal_a_hand_computation(sweep_report: ReportIndex) -> 
     assert low["p_vs_best"] == pytest.approx(p, rel=1e-4)
     assert (high["mark"], low["mark"]) == ("best", "tie")  # p = 0.28: not told apart
     text = (out / "ent_coef" / "summary.md").read_text()
-    assert "ent_coef: 0.1 best final score (mean 5" in text
+    assert "- Best: 0.1, mean final score 5 (95 % CI [" in text
     assert "Welch's t-test" in text and "95 % Hall skewness-corrected t interval" in text
     assert "studentised bootstrap (bootstrap-t) interval (2,000 resamples" in text
 
@@ -434,26 +439,26 @@ def test_a_raced_verdict_says_what_the_race_saved(raced_report: ReportIndex) -> 
     verdict = text.split("\n\n")[1]
     # 6 + 6 seeds of the survivors, 0.3's 3 complete and 1 failed; the withdrawn retry did
     # not run. The fixed design: 3 values x 6 seeds.
-    assert "raced: 16 of 18 runs (89 %)" in verdict
+    assert "raced: 16 of 18 runs (89 %)" in text
     rule = RACE_RULES.describe()
     assert rule == ("racing from round 3 of 6: closed Holm-Welch step-down at each look, alpha "
                     "0.05 spent equally over 4 looks (0.0125 each)")
-    assert verdict.count(rule) == 1 and text.count(rule) == 1
-    assert "dropped 0.3 after round 3 (adjusted p 0.00" in verdict
-    assert verdict.startswith("clip_range: 0.1 best final score (")
+    assert text.count(rule) == 1
+    assert "dropped 0.3 after round 3 (adjusted p 0.00" in text
+    assert verdict.startswith("- Best: 0.1, mean final score ")
     # At the default margin (0.2 x |mean 1.0| = 0.2) the survivors' wide spread leaves 0.2
     # undecided, and the dropped value counts as worse.
-    assert ("margin 0.2 in score units (0.2 x the best's |mean| 1): equivalent (shown within "
-            "the margin of the best): none; undecided: 0.2; worse (shown below the best by "
-            "more than the margin): 0.3 (every value answered by") in verdict
-    assert "warning: the margin 0.2 is below what these seeds resolve" in verdict
-    # The table says where the race dropped it, and the notes what a dropped row shows.
+    assert verdict.splitlines()[1:4] == [
+        "- Equivalent (within the margin of the best, 0.2 in score units): none.",
+        "- Worse (below the best by more than the margin): 0.3.",
+        "- Undecided (neither shown equivalent nor worse): 0.2."]
+    assert "Warning: the margin 0.2 is below what these seeds resolve" in text
+    # The table says where the race dropped it, and the methods what a dropped row shows.
     header = next(line for line in text.splitlines() if line.startswith("| clip_range |"))
-    assert "| pending | dropped after round | final score |" in header
+    assert header.startswith("| clip_range | seeds | mean final score [95 % CI] | answer |")
     row = next(line for line in text.splitlines() if line.startswith("| 0.3 |"))
-    assert "| 3 | 1 | 1 | 0 | 3 |" in row and "(race, round 3) |" in row
-    assert "| dropped | worse | dropped by the race after round 3" in row
-    assert "a value the race dropped is never best, tied, selected" in text
+    assert "| worse (dropped by the race after round 3) |" in row
+    assert "a value the race dropped is never best, selected" in text
 
 
 def test_dropped_values_are_dashed_in_the_curve_figures(
@@ -555,8 +560,141 @@ def test_a_report_at_margin_zero_reads_as_before(raced_store: str, tmp_path: Pat
                          options=SimpleNamespace(margin=0.0))
     text = (index.out / "clip_range" / "summary.md").read_text()
     verdict = text.split("\n\n")[1]
-    assert "tied (not significantly worse, closed Holm-Welch step-down, alpha 0.05): 0.2)" \
-        in verdict and "equivalent (shown within" not in verdict
+    assert verdict.splitlines()[1:4] == [
+        "- Equivalent: none (margin 0: no value can be shown equivalent).",
+        "- Worse (below the best): 0.3.",
+        "- Undecided (neither shown equivalent nor worse): 0.2."]
     summary = _read_summary(index.out, "clip_range")
     assert list(summary["answer"]) == ["best", "undecided", "worse"]
     assert (summary["margin"] == 0).all() and summary["p_equivalent"].dropna().eq(1.0).all()
+
+
+# The summary for a reader in a hurry ------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def layout_report(tmp_path_factory: pytest.TempPathFactory) -> ReportIndex:
+    """A store of every kind the report draws: the sweep of every answer (a one-stage
+    campaign's stage), a confirm study and a search."""
+    url = sqlite_url(tmp_path_factory.mktemp("layout") / "k.db")
+    store = Store(url)
+    try:
+        ledger = add_sweep(store, "lr", "ppo.learning_rate", VERDICT_VALUES, verdict_runs(),
+                           steps=4000, curve_every=100)
+        ledger.update(StudyAttrs(campaign={
+            "name": "chain", "stage": 1, "description": "", "start": {"ppo.gamma": 0.9},
+            "stages": [{"study": "lr", "name": "lr", "parameter": "ppo.learning_rate",
+                        "select": "final_score", "documented": 0.01}]}))
+        _add_confirm(store)
+        add_search(store, "tpe", 12, np.random.default_rng(0), steps=4000, checkpoints=4,
+                   points=20)
+    finally:
+        store.close()
+    return write_report(url, tmp_path_factory.mktemp("layout_out"), policy=False)
+
+
+def _add_confirm(store: Store) -> None:
+    labels = ["tuned", "t7"]
+    definition = {"kind": "confirm", "parameter": "config", "values": labels,
+                  "source": "tpe", "source_winner": "t7",
+                  "arms": [{"label": label, "origin": "-", "source_score": None}
+                           for label in labels], "steps": 400, "curve_every": 100}
+    ledger = store.define("tpe-confirm", StudyAttrs(kind="confirm", definition=definition,
+                                                    fingerprint="y", planned=6))
+    distribution = optuna.distributions.CategoricalDistribution(labels)
+    finals = {"tuned": [-0.012, -0.010, -0.013], "t7": [-0.010, -0.012, -0.011]}
+    for vi, label in enumerate(labels):
+        for seed, final in enumerate(finals[label]):
+            attrs = TrialAttrs(key=f"v{vi}-s{seed}", seed=seed, final_score=final,
+                               wall_time=4.0, env_steps=400)
+            add_trials(store, ledger.name, [create_trial(
+                state=TrialState.COMPLETE, value=final, params={"config": label},
+                distributions={"config": distribution}, user_attrs=attrs.stored())])
+
+
+def test_the_verdict_block_says_each_answer_in_one_short_line(
+        layout_report: ReportIndex) -> None:
+    text = (layout_report.out / "lr" / "summary.md").read_text()
+    block = text.split("\n\n")[1].splitlines()  # right under the title
+    assert len(block) <= 6
+    assert block[0].startswith("- Best: 0.01, mean final score 1.001 (95 % CI [")
+    assert block[0].endswith(", n=8).")
+    assert block[1:] == [
+        "- Equivalent (within the margin of the best, 0.2 in score units): 0.02.",
+        "- Worse (below the best by more than the margin): 0.05.",
+        "- Undecided (neither shown equivalent nor worse): 0.1.",
+        "- Failed seeds (final score below " + block[4].split("below ")[1].split(")")[0]
+        + "): 0.05: 1 of 8.",
+        "- Selected (rule final_score: highest mean final score (the best)): 0.01."]
+    assert all(len(line) <= 100 for line in block)
+    # The margin is given once in score units; the methods name each procedure once, at the
+    # end.
+    assert text.count("0.2 in score units") == 1
+    methods = text.split("## Methods")[1]
+    assert "## Methods" not in text.split("\n\n")[2] and "Edwards and Hsu 1983" in methods
+    assert text.count("Edwards and Hsu 1983") == 1 and text.count("Newcombe 2006") == 1
+    assert "\u2248 best" not in text
+    # The same block opens the study's section of the index, after the overview.
+    index = layout_report.markdown.read_text()
+    section = index.split("\n## lr\n\n")[1]
+    assert section.split("\n\n")[0].splitlines() == block
+    assert index.index("## lr") < index.index("## Methods")
+    assert "| lr | sweep | 32/33 complete, 1 failed | best 0.01; selected 0.01 |" in index
+
+
+def test_the_compact_table_reads_the_answer_column(layout_report: ReportIndex) -> None:
+    text = (layout_report.out / "lr" / "summary.md").read_text()
+    rows = [line for line in text.splitlines() if line.startswith("| 0.")]
+    assert [row.split(" | ")[3] for row in rows] == ["best", "equivalent", "worse", "undecided"]
+    header = next(line for line in text.splitlines() if line.startswith("| learning_rate |"))
+    assert header == ("| learning_rate | seeds | mean final score [95 % CI] | answer | p_worse "
+                      "| p_equivalent | failed seeds [95 % CI of the rate] |")
+    summary = _read_summary(layout_report.out, "lr")
+    assert list(summary["answer"]) == ["best", "equivalent", "worse", "undecided"]
+    assert list(summary["failed_seeds"]) == [0, 0, 1, 0]
+
+
+def test_the_final_score_figure_shades_the_four_answers(
+        layout_report: ReportIndex, monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    shaded: list[list[str]] = []
+    draw = sweep_plots._shade_answers
+    monkeypatch.setattr(sweep_plots, "_shade_answers",
+                        lambda ax, answers: shaded.append(list(answers)) or draw(ax, answers))
+    sweep = layout_report.studies[0].sweep
+    sweep_plots.final_score(sweep, tmp_path / "final_score.png")
+    assert shaded == [["best", "equivalent", "worse", "undecided"]]
+    assert set(sweep_plots.ANSWER_SHADES) == {"best", "equivalent", "undecided"}  # worse: none
+
+
+def _markdown_headers(text: str) -> list[list[str]]:
+    """The header cells of every Markdown table of a page (a header is the line above a
+    |---| separator)."""
+    lines = text.splitlines()
+    headers = []
+    for above, line in zip(lines, lines[1:], strict=False):
+        if line.startswith("|") and set(line) <= set("|-: "):
+            cells = re.split(r"(?<!\\)\|", above.strip())[1:-1]
+            headers.append([cell.strip() for cell in cells])
+    return headers
+
+
+def test_no_table_the_report_writes_has_an_empty_column_header(
+        layout_report: ReportIndex) -> None:
+    out = layout_report.out
+    kinds = {path.parent.name for path in out.rglob("*.csv")}
+    assert {"lr", "tpe-confirm", "tpe", "chain"} <= kinds  # sweep, confirm, search, campaign
+    csvs = sorted(out.rglob("*.csv"))
+    for path in csvs:
+        header = pd.read_csv(path, nrows=0).columns
+        assert not [c for c in header if not str(c).strip() or str(c).startswith("Unnamed")], \
+            path
+    pages = sorted(out.rglob("*.md"))
+    assert len(pages) >= 4
+    counted = 0
+    for path in pages:
+        for header in _markdown_headers(path.read_text()):
+            counted += 1
+            assert all(header), (path, header)
+    assert counted >= 8
+    html = layout_report.html.read_text()
+    assert "<th></th>" not in html and html.count("<th>") > 20

@@ -195,7 +195,7 @@ def test_default_threshold_reached_and_never_reached(report: ReportIndex) -> Non
             assert math.isnan(row["seconds_to_threshold"])
     text = (report.out / "learning_rate" / "summary.md").read_text()
     assert "mean episode reward >= 4.95, the default" in text
-    assert "| 0/1 |" in text and "| 3/4 |" in text
+    assert "- Fastest to threshold: " in text and "reached it, lowest restricted mean" in text
 
 
 def test_a_single_seed_has_no_intervals(report: ReportIndex) -> None:
@@ -261,23 +261,22 @@ def test_holm_ties_and_probability_of_improvement(report: ReportIndex) -> None:
 
 
 def test_verdict_sentence(report: ReportIndex) -> None:
-    expected = ("learning_rate: 0.01 best final score (mean 5.5, 95 % CI [",
-                "n=4; IQM 5.5, 95 % trimmed-t CI [",
-                "margin 1.1 in score units (0.2 x the best's |mean| 5.5): equivalent (shown "
-                "within the margin of the best): none; undecided: 0.001, 0.3; worse (shown below "
-                "the best by more than the margin): none (every value answered by worse: closed "
-                "Holm-Welch step-down, alpha 0.05 against the margin;",
-                "warning: the margin 1.1 is below what these seeds resolve",
-                "; 0.3 most sample-efficient (AUC 3.75, 95 % CI [",
-                "fastest to threshold (",
-                "; 0.3 most repeatable (rescaled final IQR ",
-                " Left out of the best, the ties and the verdict: 0.1 (1 complete seed, fewer "
-                "than report.min_seeds = 2).")
+    expected = ("- Best: 0.01, mean final score 5.5 (95 % CI [",
+                "n=4).\n- Equivalent (within the margin of the best, 1.1 in score units): none."
+                "\n- Worse (below the best by more than the margin): none.\n- Undecided "
+                "(neither shown equivalent nor worse): 0.001, 0.3.\n",
+                "Warning: the margin 1.1 is below what these seeds resolve",
+                "- Most sample-efficient: 0.3 (AUC 3.75, 95 % CI [",
+                "- Fastest to threshold: ",
+                "- Most repeatable: 0.3 (rescaled final IQR ",
+                "- Left out of the best and every answer: 0.1 (1 complete seed, fewer than "
+                "report.min_seeds = 2).")
     summary_md = (report.out / "learning_rate" / "summary.md").read_text()
-    verdict = summary_md.split("\n\n")[1]  # the first paragraph under the title
     index = report.markdown.read_text()
     for part in expected:
-        assert part in verdict and part in index, part
+        assert part in summary_md and part in index, part
+    verdict = summary_md.split("\n\n")[1]  # the block under the title: six lines at most
+    assert verdict.startswith("- Best: 0.01") and len(verdict.splitlines()) <= 6
     waiting = (report.out / "waiting" / "summary.md").read_text()
     assert "No run is complete yet" in waiting
 
@@ -300,20 +299,21 @@ def test_confirm_study(report: ReportIndex) -> None:
     text = (report.out / "confirm_ppo_search" / "summary.md").read_text()
     index = report.markdown.read_text()
     assert winner in text and winner in index
-    assert "Confirmed verdict: t7 best final score (mean -0.011" in text
+    assert "- Best: t7, mean final score -0.011" in text
     mean, low, high = hall_bounds([-0.010, -0.012, -0.011])
-    row = next(line for line in text.splitlines() if line.startswith("| t12 |"))
+    arms = text.split("| configuration | origin |")[1]  # the configurations' table
+    row = next(line for line in arms.splitlines() if line.startswith("| t12 |"))
     assert "trial 12 of search 'ppo_search'" in row and "-0.0123" in row
-    row = next(line for line in text.splitlines() if line.startswith("| t7 |"))
+    row = next(line for line in arms.splitlines() if line.startswith("| t7 |"))
     assert f"| -0.0201 | {mean:.4g} | [{low:.4g}, {high:.4g}] |" in row
     assert row.endswith("| 3 |")
     assert "| configuration | origin | source's score |" in index
     # A confirm's training time is the CPU seconds its fastest_tied compares, and says so; a
     # sweep's is wall-clock seconds.
     assert summary["time_mean"].tolist() == csv_approx([3.0, 7.0, 4.0])
-    assert "| reached | training time (CPU s) |" in text
+    assert "time_high): CPU seconds per run." in text
     sweep_text = (report.out / "learning_rate" / "summary.md").read_text()
-    assert "| reached | training time (wall s) |" in sweep_text
+    assert "time_high): wall-clock seconds per run." in sweep_text
 
 
 def test_threshold_option_changes_reach(store_url: str, report: ReportIndex,

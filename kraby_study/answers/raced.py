@@ -22,7 +22,7 @@ def replay(rules: RaceRules, values: int, latest: Mapping[str, StoredTrial]
 def race_of(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
             values: Sequence[Any]) -> StudyRace | None:
     """The race of a stored study with its dropped values mapped onto ``values`` (matched by
-    :func:`kraby_study.records.value_key`, not by position); None for a study that did not
+    :func:`kraby_study.records.values.value_key`, not by position); None for a study that did not
     race. A dropped value not in ``values`` is left out."""
     rules = RaceRules.of(dict(definition))
     if rules is None:

@@ -2,7 +2,7 @@
 
 ``list`` reads every study as light rows (:mod:`kraby_study.store.rows`), without Optuna; a
 command that holds a study's ledger reads it through Optuna. Both count and select with the
-same rules (:func:`kraby_study.records.counted`, :func:`kraby_study.records.tally`,
+same rules (:func:`kraby_study.records.stored.counted`, :func:`kraby_study.records.stored.tally`,
 :func:`kraby_study.answers.selected.selected_short`).
 """
 

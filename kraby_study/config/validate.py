@@ -139,7 +139,7 @@ def validate_run_length(env: Any, ppo: Any, steps: int, objective: str = REWARDS
         env: The run's env settings.
         ppo: Its PPO settings (n_envs, and n_steps and batch_size for another n_envs).
         steps: Its budget in env steps.
-        objective: How it is scored (:data:`kraby_study.records.REWARDS`).
+        objective: How it is scored (:data:`kraby_study.records.definition.REWARDS`).
         where: What the message names first (a study's value, a confirm's configuration).
         fixed_steps: The steps are not the command's budget.steps (a confirm retrains at the
             confirmed study's): only another n_envs is offered.

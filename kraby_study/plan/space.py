@@ -79,7 +79,7 @@ def validate_search(cfg: DictConfig) -> None:
 
 def objectives(cfg: DictConfig) -> list[str]:
     """The search's objective names, its reward first, then any cost
-    (:func:`kraby_study.records.check_objective`); ConfigError for a bad one."""
+    (:func:`kraby_study.records.definition.check_objective`); ConfigError for a bad one."""
     objective = cfg.search.objective
     return check_objective(objective if isinstance(objective, str) else to_container(objective))
 

@@ -70,8 +70,8 @@ class TrialSpec:
     """Evaluation episodes of the evaluation objective (the leg's targets, a gym env's seeded
     resets)."""
     eval_set: str = EVAL_SET
-    """Where the evaluation episodes come from (:data:`kraby_study.records.EVAL_SETS`): run,
-    each seed's own (drawn from its evaluation stream), or fixed, one set shared by every
+    """Where the evaluation episodes come from (:data:`kraby_study.records.definition.EVAL_SETS`):
+    run, each seed's own (drawn from its evaluation stream), or fixed, one set shared by every
     run (studies stored before)."""
     label: str = ""
     """How progress lines name the run, e.g. 'clip_range=0.2 seed 1'."""

@@ -15,8 +15,7 @@ from kraby_study.answers.search_evidence import build_search, is_two_objective
 from kraby_study.answers.study_data import StudyData, load_study, select_studies
 from kraby_study.answers.sweep_evidence import build_sweep, option
 from kraby_study.decision.comparison import seeds_needed
-from kraby_study.decision.intervals import BAND_NAME, BOOTSTRAP_REPETITIONS, interval_name
-from kraby_study.decision.verdict import HOLM_NAME
+from kraby_study.decision.intervals import BOOTSTRAP_REPETITIONS, interval_name
 from kraby_study.errors import ConfigError, first_line
 from kraby_study.records.attributes import StudyKind
 from kraby_study.report import search_output, sweep_output
@@ -25,6 +24,7 @@ from kraby_study.report.document import (
     Block,
     Heading,
     Image,
+    Items,
     Links,
     Table,
     Text,
@@ -132,34 +132,44 @@ def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
 
 def _overview(reports: list[StudyReport]) -> Table:
     rows = [[r.name, r.kind, r.status if r.finished else f"partly finished: {r.status}",
-             f"{r.folder.name}/"] for r in reports]
-    return Table(["study", "kind", "status", "folder"], rows)
+             r.result or "-", f"{r.folder.name}/"] for r in reports]
+    return Table(["study", "kind", "status", "result", "folder"], rows)
+
+
+SCORE_TEXT = ("Final score: mean episode reward over the last 10 % of a run's training, in its "
+              "env's reward units (the leg's: minus the squared tip-target distance in m^2, "
+              "summed over the episode); in a study scored by evaluation, the deterministic "
+              "policy's mean return over the evaluation episodes. Figures use complete runs "
+              "only; failed runs are listed. Intervals other than those below are named where "
+              "they are shown.")
+
+
+def methods_blocks(reports: list[StudyReport], bootstrap: int, min_seeds: int) -> list[Block]:
+    """The index's methods, after every result: what a final score is and, when a study has
+    seeds, what each number of a sweep's summary is."""
+    blocks: list[Block] = [Heading("Methods", 2), Text(SCORE_TEXT)]
+    if any(report.kind.seeded for report in reports):
+        blocks.append(Items(sweep_output.methods(bootstrap, min_seeds)))
+    else:
+        blocks.append(Text(f"Intervals of a mean: {interval_name(bootstrap)}."))
+    return blocks
 
 
 def index_blocks(url: str, reports: list[StudyReport],
                  bootstrap: int = BOOTSTRAP_REPETITIONS,
                  campaigns: list[Block] | None = None, min_seeds: int = 2) -> list[Block]:
-    """The index page: what the numbers mean, an overview, then every study's section."""
+    """The index page: an overview with each study's result, the campaigns, every study's
+    section, then the methods."""
     blocks: list[Block] = [
         Heading(TITLE, 1),
         Text(f"Store: {shown_url(url)}. {len(reports)} stud{'y' if len(reports) == 1 else 'ies'}"
-             " reported."),
-        Text("Final score: mean episode reward over the last 10 % of a run's training, in "
-             "its env's reward units (the leg's: minus the squared tip-target distance in m^2, "
-             "summed over the episode); in a study scored by evaluation, the deterministic "
-             "policy's mean return over the evaluation episodes. "
-             f"Intervals of a mean: {interval_name(bootstrap)}. Learning-curve bands: "
-             f"{BAND_NAME}. Other intervals are named where they are shown. Values marked "
-             f"'\u2248 best': {HOLM_NAME}. Figures use "
-             "complete runs only; failed runs are listed."),
+             " reported; the methods are at the end."),
+        _overview(reports),
+        *(campaigns or []),
     ]
-    if any(report.kind.seeded for report in reports):
-        blocks.append(Text("Sweep tables. " + sweep_output.metric_notes(bootstrap, min_seeds)))
-    blocks.append(_overview(reports))
-    blocks += campaigns or []
     for report in reports:
         blocks += report.blocks
-    return blocks
+    return blocks + methods_blocks(reports, bootstrap, min_seeds)
 
 
 def check_folder(out: Path) -> None:

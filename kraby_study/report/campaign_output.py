@@ -13,11 +13,10 @@ from typing import Any
 import pandas as pd
 
 from kraby_study.answers.sweep_evidence import Sweep
-from kraby_study.decision.comparison import answers_name
+from kraby_study.decision.comparison import ALPHA, answers_name
 from kraby_study.decision.race import Drop
 from kraby_study.decision.selection import RULE_TEXT
 from kraby_study.decision.summary import note_part
-from kraby_study.decision.verdict import PROCEDURE_NAME
 from kraby_study.records.stored import Outcome
 from kraby_study.records.values import value_key, value_label
 from kraby_study.report.document import Block, Heading, Links, Table, Text, write_csvs
@@ -63,12 +62,10 @@ def stage_notes(sweep: Sweep | None) -> str:
     if sweep is None:
         return ""
     compared = sweep.comparison
-    if compared is not None and compared.fraction > 0:
-        text = (f"best and answers ({answers_name(compared.alpha)}): {compared.margin_text()}; "
-                f"only values with at least {sweep.min_seeds} complete seeds can be selected")
-    else:
-        text = (f"best and ties: {PROCEDURE_NAME}; only values with at least "
-                f"{sweep.min_seeds} complete seeds can be selected")
+    margin = compared.margin_text() if compared is not None else "margin 0"
+    alpha = compared.alpha if compared is not None else ALPHA
+    text = (f"best and answers ({answers_name(alpha)}): {margin}; only values with at least "
+            f"{sweep.min_seeds} complete seeds can be selected")
     race = sweep.race
     if race is not None:
         def when(left: dict[int, Drop]) -> str:
@@ -161,24 +158,25 @@ def write_campaign(name: str, record: dict[str, Any], sweeps: dict[str, Sweep], 
     budget = _budget(record, sweeps)
     rules = "; ".join(f"{rule}: {RULE_TEXT[rule]}" for rule in dict.fromkeys(table["rule"])
                       if rule in RULE_TEXT)
-    blocks: list[Block] = [
-        Heading(f"Campaign {name}", 2),
-        Text((str(record.get("description") or "") + " ").lstrip()
-             + f"Stages in order: {chain}. Each stage runs with the values the earlier stages "
-             f"selected; stage STUDY is stored as {name}-STUDY."
-             + (f" Budget: {budget}." if budget else "")),
-        Table(["stage", "study", "parameter", "rule", "selected", "documented", "agree",
-               "status"],
-              [[str(r.stage), r.study, r.parameter, r.rule, r.selected or "-",
-                r.documented or "-", {True: "yes", False: "no"}.get(r.agree, "-"), r.status]
-               for r in table.itertuples(index=False)]),
-        Text(f"Selection rules: {rules}. Best and ties: {PROCEDURE_NAME}."),
-    ]
+    blocks: list[Block] = [Heading(f"Campaign {name}", 2)]
     if last:
         blocks += [Text(f"Settings the campaign ends with (after stage {last}/{total}"
                         + ("" if last == total else ", not yet finished") + "):"),
                    settings_table(record, settings)]
     else:
         blocks.append(Text("No stage is finished yet."))
+    blocks += [
+        Table(["stage", "study", "parameter", "rule", "selected", "documented", "agree",
+               "status"],
+              [[str(r.stage), r.study, r.parameter, r.rule, r.selected or "-",
+                r.documented or "-", {True: "yes", False: "no"}.get(r.agree, "-"), r.status]
+               for r in table.itertuples(index=False)]),
+        Text((str(record.get("description") or "") + " ").lstrip()
+             + f"Stages in order: {chain}. Each stage runs with the values the earlier stages "
+             f"selected; stage STUDY is stored as {name}-STUDY."
+             + (f" Budget: {budget}." if budget else "")
+             + f" Selection rules: {rules}. Each stage's answers are in its own section; "
+             "campaign.csv's notes say how each stage decided."),
+    ]
     blocks.append(Links("Tables", [(p.name, f"{rel}/{p.name}") for p in files]))
     return blocks, files

@@ -41,7 +41,8 @@ class Image:
 
 @dataclass(frozen=True)
 class Table:
-    """A table of preformatted cells; ``marks`` ("best", "tie" or "") highlight rows in HTML."""
+    """A table of preformatted cells; ``marks`` highlight rows in HTML: "best", "equivalent"
+    (a sweep's answers), "tie" (a search front's trials admitted beside the best) or ""."""
 
     header: list[str]
     rows: list[list[str]]
@@ -128,7 +129,7 @@ th, td { border: 1px solid #ddd; padding: .3em .6em; }
 th { background: #f5f5f5; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; }
 tr.best td { background: #fbe3e0; font-weight: 600; }
-tr.tie td { background: #fdf3f2; }
+tr.tie td, tr.equivalent td { background: #fdf3f2; }
 """
 
 

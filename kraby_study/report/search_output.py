@@ -119,6 +119,17 @@ def verdict(search: Search) -> str:
             f"{chosen.key}, score {number(chosen.score)} at {chosen.cost:.3g} CPU s per seed.")
 
 
+def result_text(search: Search) -> str:
+    """The index overview's cell: the best trial, and of a two-objective search the selected
+    one."""
+    best = search.best
+    if best is None:
+        return "no complete trial"
+    text = f"best trial {best.number}, objective {number(float(score(best)))}"
+    choice = search.front.choice if search.front is not None else None
+    return text if choice is None else f"{text}; selected trial {choice.chosen.key}"
+
+
 def front_cells(search: Search) -> Table:
     """The front as formatted cells, best score first; the selected trial marked best."""
     frame = front_table(search)
@@ -140,7 +151,7 @@ def _front_files(search: Search, folder: Path, section: list[Block]) -> list[Pat
     """pareto.csv and summary.md of a two-objective search."""
     csv = write_csvs(folder, [("pareto.csv", front_table(search))])
     summary = folder / "summary.md"
-    # The verdict (section[2]) names the rule that selected.
+    # The verdict (section[1]) names the rule that selected; the description follows it.
     summary.write_text(blocks_to_markdown([
         Heading(f"{search.data.name}: the front", 1), *section[1:3],
         front_cells(search)]), encoding="utf-8")
@@ -181,9 +192,9 @@ def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyRepor
                   "two objectives: the score maximised, the cost (CPU s per seed) minimised")
     section: list[Block] = [
         Heading(search.data.name, 2),
+        Text(verdict(search)),
         Text(f"{kind} over {len(search.params)} parameter(s), {objectives}. "
-             f"Status: {search.status()}."),
-        Text(verdict(search))]
+             f"Status: {search.status()}.")]
     if search.front is not None and search.front.front:
         section += [Text(f"The front ({len(search.front.front)} trials), best score first:"),
                     front_cells(search)]
@@ -195,6 +206,7 @@ def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyRepor
     top_md.write_text(blocks_to_markdown([Heading(f"{search.data.name}: top trials", 1),
                                           *section[1:]]), encoding="utf-8")
     report.files += tables + [top_md]
+    report.result = result_text(search)
     front_files = (_front_files(search, folder, section)
                    if search.front is not None and search.front.front else [])
     report.files += front_files

@@ -24,6 +24,8 @@ class StudyReport:
         blocks: The study's section of the index.
         notes: Things a reader should know (skipped figures, missing models, ...).
         sweep: The tables of a sweep-like study (a ``answers.sweep_evidence.Sweep``), else None.
+        result: Its result in a few words, for the index's overview (e.g. the best value and
+            the selected one); empty when there is none.
     """
 
     name: str
@@ -35,6 +37,7 @@ class StudyReport:
     blocks: list[Block] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     sweep: Any = None
+    result: str = ""
 
 
 @dataclass

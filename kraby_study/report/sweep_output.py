@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from kraby_study.answers.sweep_evidence import Sweep, arms_frame
-from kraby_study.decision.comparison import answers_name
+from kraby_study.decision.comparison import ALPHA, answers_name
 from kraby_study.decision.coverage import coverage_note
 from kraby_study.decision.failed_seeds import definition_text
 from kraby_study.decision.intervals import (
@@ -26,7 +26,7 @@ from kraby_study.decision.intervals import (
 from kraby_study.decision.measures import AUC_NAME, p_improvement_name
 from kraby_study.decision.selection import RULE_TEXT
 from kraby_study.decision.summary import note_part
-from kraby_study.decision.verdict import HOLM_NAME, PROCEDURE_NAME, TEST_NAME
+from kraby_study.decision.verdict import HOLM_NAME, TEST_NAME
 from kraby_study.records.attributes import StudyKind
 from kraby_study.records.definition import stored_eval_set
 from kraby_study.records.stored import Outcome
@@ -37,7 +37,6 @@ from kraby_study.report.document import to_markdown as blocks_to_markdown
 from kraby_study.report.study_report import StudyReport
 from kraby_study.report.style import number, styled
 
-MARK_TEXT = {"best": "best", "tie": "\u2248 best", "": ""}
 TRAINING_SCORE = "mean episode reward over the last 10 % of training"
 """What a final score is, unless the study is scored by evaluation."""
 EVALUATION_SCORE = "the deterministic policy's mean return over the evaluation episodes"
@@ -49,8 +48,9 @@ CAPTIONS = {
                        "training.",
     "final_score": f"Final score ({TRAINING_SCORE}) of every "
                    f"seed; mean and {SHORT_INTERVAL_NAME} beside them. "
-                   "Shaded: the best mean, and the "
-                   f"values not significantly worse than it ({PROCEDURE_NAME}).",
+                   "Shaded, and written above each value: its answer against the best (best; "
+                   "equivalent; undecided; worse, unshaded), as in the summary's answer "
+                   "column.",
     "wallclock": "Mean episode reward against wall-clock time since the start of training.",
     "training_time": "Training time of every run (wall-clock seconds; on a confirm study CPU "
                      "seconds, which fastest_tied compares there), with mean and "
@@ -76,9 +76,7 @@ DASHED_CAPTION = " Dashed: values dropped by the race (their seeds up to the dro
 DASHED_FIGURES = ("learning_curves", "wallclock")
 
 
-def _p_text(p: float, mark: str) -> str:
-    if mark == "best":
-        return "-"
+def _p_text(p: float) -> str:
     if not np.isfinite(p):
         return "n/a"
     return "< 0.001" if p < 0.001 else f"{p:.3f}"
@@ -109,54 +107,52 @@ def _steps(value: float) -> str:
     return f"{value:,.0f}" if np.isfinite(value) else "-"
 
 
-def _race_p_text(sweep: Sweep, vi: int, row: pd.Series) -> str:
-    """The adjusted p cell: the survivors' step-down's, or the race's look that dropped it."""
+SUMMARY_COLUMNS = ["seeds", "mean final score [95 % CI]", "answer", "p_worse", "p_equivalent",
+                   "failed seeds [95 % CI of the rate]"]
+"""The compact table's columns after the value's (summary.csv holds every other number)."""
+ANSWER_COLUMNS = ("answer", "p_worse", "p_equivalent")
+"""The columns a single-run study's table leaves out: its one value is trivially the best."""
+
+
+def _answer_cell(sweep: Sweep, vi: int, row: pd.Series) -> str:
+    """A value's answer; a value the race dropped says after which round."""
+    answer = str(row.get("answer") or "-")
     drop = sweep.dropped.get(vi)
-    if drop is None:
-        return _p_text(row["p_holm"], row["mark"])
-    return f"{_p_text(drop.p, '')} (race, round {drop.round})"
+    return f"{answer} (dropped by the race after round {drop.round})" if drop else answer
+
+
+def row_mark(answer: str) -> str:
+    """The HTML row class of an answer: best and equivalent rows are shaded."""
+    return answer if answer in ("best", "equivalent") else ""
+
+
+def _mean_cell(row: pd.Series) -> str:
+    """'1.001 [0.9902, 1.011]': the mean final score and its interval, 4 digits each."""
+    text = number(row["final_mean"])
+    if np.isfinite(row["final_mean"]) and np.isfinite(row["final_low"]):
+        text += f" {_interval(row['final_low'], row['final_high'])}"
+    return text
+
+
+def _p_cell(p: float) -> str:
+    return _p_text(p) if np.isfinite(p) else "-"
 
 
 def summary_table(sweep: Sweep) -> Table:
-    """The summary as a table of formatted cells, best and tied rows marked; a raced study's
-    table says after which round the race dropped a value."""
-    raced = sweep.race is not None
-    trained = sweep.by_evaluation  # build_sweep gives its summary the training reward
-    header = [sweep.name, "complete", "failed", "pruned", "pending",
-              *(["dropped after round"] if raced else []),
-              "final score", "95 % CI", "sd", "failed seeds [95 % CI of the rate]",
-              *(["evaluation se", "training reward [95 % CI]", "training sd"]
-                if trained else []),
-              "IQM [95 % trimmed-t CI]", "final IQR", "final IQR (rescaled)", "AUC [95 % CI]",
-              "env steps to threshold", "seconds to threshold", "reached",
-              f"training time ({sweep.time_unit})",
-              "Welch p vs best", "adjusted p (step-down)", "P(best > value) [95 % Newcombe CI]", "",
-              "answer", "note"]
+    """The compact summary: per value its complete seeds, mean final score with its interval,
+    answer, p_worse, p_equivalent and failed seeds (a single-run study, one value, has no
+    answer to show); every other number is in summary.csv."""
+    compared = bool(sweep.parameter)
     rows = []
     for vi, row in sweep.summary.iterrows():
-        dropped = vi in sweep.dropped
-        rows.append([
-            str(row["value"]), str(row["complete"]), str(row["failed"]), str(row["pruned"]),
-            str(row["pending"]),
-            *([str(sweep.dropped[vi].round) if dropped else "-"] if raced else []),
-            number(row["final_mean"]), _interval(row["final_low"], row["final_high"]),
-            number(row["final_sd"], 3), _failed_seeds(row),
-            *([number(row["eval_se"], 3),
-               _with_interval(row["train_mean"], row["train_low"], row["train_high"]),
-               number(row["train_sd"], 3)] if trained else []),
-            _with_interval(row["iqm"], row["iqm_low"], row["iqm_high"]),
-            number(row["final_iqr"], 3), number(row["final_iqr_unbiased"], 3),
-            _with_interval(row["auc_mean"], row["auc_low"], row["auc_high"]),
-            _steps(row["steps_to_threshold"]), number(row["seconds_to_threshold"], 3),
-            _reached(row),
-            _with_interval(row["time_mean"], row["time_low"], row["time_high"]),
-            _p_text(row["p_vs_best"], row["mark"]), _race_p_text(sweep, int(vi), row),
-            "-" if row["mark"] == "best" else
-            _with_interval(row["p_improvement"], row["p_improvement_low"],
-                           row["p_improvement_high"]),
-            "dropped" if dropped else MARK_TEXT[row["mark"]], str(row.get("answer") or "-"),
-            str(row["note"] or "")])
-    return Table(header, rows, marks=list(sweep.summary["mark"]))
+        answers = [_answer_cell(sweep, int(vi), row), _p_cell(row["p_worse"]),
+                   _p_cell(row["p_equivalent"])]
+        rows.append([str(row["value"]), str(row["complete"]), _mean_cell(row),
+                     *(answers if compared else []), _failed_seeds(row)])
+    header = SUMMARY_COLUMNS if compared else [c for c in SUMMARY_COLUMNS
+                                               if c not in ANSWER_COLUMNS]
+    return Table([sweep.name, *header], rows,
+                 marks=[row_mark(str(a)) for a in sweep.summary["answer"]] if compared else [])
 
 
 def _failed_seeds(row: pd.Series) -> str:
@@ -165,24 +161,6 @@ def _failed_seeds(row: pd.Series) -> str:
         return "-"
     return (f"{int(row['failed_seeds'])}/{row['complete']} "
             f"{_interval(row['failed_seeds_low'], row['failed_seeds_high'])}")
-
-
-def failed_seeds_text(sweep: Sweep) -> str | None:
-    """The values with failed seeds, the selected one first named as such, and what a failed
-    seed is; None when no seed failed (or the line is not defined)."""
-    if not np.isfinite(sweep.failure_line):
-        return None
-    rows = sweep.summary[sweep.summary["failed_seeds"].fillna(0) > 0]
-    if rows.empty:
-        return None
-    parts = []
-    for vi, row in rows.iterrows():
-        selected = " (selected)" if bool(sweep.summary.loc[vi].get("selected", False)) else ""
-        rate = _interval(row["failed_seeds_low"], row["failed_seeds_high"])
-        parts.append(f"{row['value']}{selected} {int(row['failed_seeds'])} of "
-                     f"{row['complete']} (rate 95 % CI {rate})")
-    meaning = definition_text(sweep.failure_line, sweep.untrained)
-    return "Failed seeds: " + "; ".join(parts) + f" ({meaning})."
 
 
 def threshold_text(sweep: Sweep) -> str:
@@ -201,30 +179,53 @@ def threshold_text(sweep: Sweep) -> str:
             f"seeds) to the best value's mean final score ({number(final)}).")
 
 
-def metric_notes(bootstrap: int, min_seeds: int = 2, raced: bool = False) -> str:
-    """What every interval and test of a sweep's summary is, each named once, for values needing
-    ``min_seeds`` complete seeds (``bootstrap``: the report option's resamples of the bootstrap-t
-    interval of a mean); ``raced``: what a dropped value's row shows."""
-    race = (" Raced: a value the race dropped is never best, tied, selected or any answer of "
-            "the verdict; its adjusted p is that of the race's look that dropped it, at the "
-            "race's per-look alpha (the rule is in the verdict), and the survivors are "
-            "compared on all their seeds." if raced else "")
-    return (f"Final score, training time and AUC intervals: {interval_name(bootstrap)}. "
-            f"Learning-curve bands: {BAND_NAME}, at every n. IQM: "
-            f"{iqm_interval_name()}. {AUC_NAME[0].upper()}{AUC_NAME[1:]}. Steps and "
-            "seconds to threshold: restricted mean over the seeds with a curve, a seed that "
-            "never reached the threshold counted at its curve's last point (a lower bound of "
-            "the mean time when reached is below n); reached: seeds that reached it of the "
-            "complete seeds. Final IQR: interquartile range of the complete seeds' final scores "
-            "(needs 2 seeds); rescaled: the IQR divided by its expected share of the true IQR "
-            "at n for normal data, comparable across n, which decides the most repeatable. "
-            f"Welch p vs best: {TEST_NAME}. Adjusted p and the '\u2248 best' marks: "
-            f"{HOLM_NAME}. Best, ties, most sample-efficient, fastest and most repeatable count "
-            f"only values with at least report.min_seeds = {min_seeds} complete seeds. "
-            f"P(best > value): {p_improvement_name()}. Answer: best; equivalent (shown within "
-            "the margin of the best, compare.margin in score units); worse (shown below the "
-            "best by more than the margin, or dropped by a race); undecided (neither); left "
-            f"out (too few seeds); {answers_name()}.{race}")
+FAILED_SEED = ("a complete seed whose final score is below the line halfway from the untrained "
+               "policy's score to the best value's mean (it learned less than half the best's "
+               "gain); rate interval: Clopper-Pearson exact, 95 %")
+"""What a failed seed is, where no study's line is at hand (the index)."""
+
+
+def methods(bootstrap: int, min_seeds: int = 2, raced: bool = False,
+            failed_seed: str = FAILED_SEED) -> list[str]:
+    """What every number of a sweep's summary is, each interval and test named once, for
+    values needing ``min_seeds`` complete seeds (``bootstrap``: the report option's resamples
+    of the bootstrap-t interval of a mean); ``raced``: what a dropped value's row shows;
+    ``failed_seed``: what a failed seed is."""
+    items = [
+        f"Mean final score [95 % CI], and every interval of a mean (training time, AUC): "
+        f"{interval_name(bootstrap)}. n, seeds: a value's complete seeds.",
+        f"Best: the highest mean final score among the values with at least report.min_seeds "
+        f"= {min_seeds} complete seeds (a value with fewer is left out of every answer). "
+        "Answers against the best: equivalent, shown within the margin of the best "
+        "(compare.margin, a fraction of the best's |mean|; the verdict gives it in score "
+        "units); worse, shown below the best by more than the margin (or dropped by a race); "
+        f"undecided, neither. Tests: {answers_name(ALPHA)}.",
+        f"p_worse: the adjusted p of the step-down against the margin (< {ALPHA:g}: worse). "
+        f"p_equivalent: the Bonferroni p of the comparison with the best (< {ALPHA:g}: "
+        "equivalent; 1 at margin 0).",
+        f"Failed seeds: {failed_seed}.",
+        f"Most sample-efficient: the highest mean {AUC_NAME}. Fastest to threshold: the lowest "
+        "restricted mean seconds over the seeds with a curve, a seed that never reached the "
+        "threshold counted at its curve's last point (a lower bound of the mean time when "
+        "reached is below n). Most repeatable: the lowest rescaled final IQR (the "
+        "interquartile range of the final scores divided by its expected share of the true "
+        "IQR at n for normal data, comparable across n; needs 2 seeds). Each counts only "
+        "values with at least report.min_seeds complete seeds.",
+        f"Learning-curve bands: {BAND_NAME}, at every n.",
+        f"summary.csv also holds: the run counts; the IQM with its {iqm_interval_name()}; the "
+        "final IQR, raw and rescaled; AUC; steps and seconds to threshold and the seeds that "
+        f"reached it; training time; p_vs_best, the {TEST_NAME}; p_holm and mark (best, tie), "
+        f"the margin-0 question of earlier releases that the rule fastest_tied reads: "
+        f"{HOLM_NAME}; P(best > value): {p_improvement_name()}; the margin and the margin "
+        "its seeds resolve; notes.",
+    ]
+    if raced:
+        items.append("Raced: a value the race dropped is never best, selected or any other "
+                     "answer than worse; its note names the round and the adjusted p of the "
+                     "race's look that dropped it, at the race's per-look alpha (the rule is "
+                     "under Other measures), and the survivors are compared on all their "
+                     "seeds.")
+    return items
 
 
 def few_seeds_note(sweep: Sweep) -> str | None:
@@ -242,7 +243,7 @@ def left_out_text(sweep: Sweep) -> str | None:
     notes = [(value, note) for value, note in notes if note]
     if not notes:
         return None
-    return ("Left out of the best, the ties and the verdict: "
+    return ("Left out of the best and every answer: "
             + "; ".join(f"{value} ({note.removeprefix('left out: ')})" for value, note in notes)
             + ".")
 
@@ -254,7 +255,7 @@ def race_text(sweep: Sweep) -> str | None:
     if race is None:
         return None
     dropped = ", ".join(f"{_label(sweep, vi)} after round {drop.round} (adjusted p "
-                        f"{_p_text(drop.p, '')})" for vi, drop in sorted(
+                        f"{_p_text(drop.p)})" for vi, drop in sorted(
                             sweep.dropped.items(), key=lambda item: (item[1].round, item[0])))
     state = "the race is over" if race.over else f"{race.rounds} round(s) decided so far"
     return (f"Race ({race.rules.describe()}): "
@@ -263,43 +264,60 @@ def race_text(sweep: Sweep) -> str | None:
             "survivors.")
 
 
-def answers_text(sweep: Sweep) -> str:
-    """The four answers in words, with the margin in score units and, when it is below what
-    the seeds resolve, the warning."""
-    compared = sweep.verdict.comparison
-    assert compared is not None
-    noun = "configuration" if sweep.kind == StudyKind.CONFIRM else "value"
+def _named(sweep: Sweep, values: list[int]) -> str:
+    return ", ".join(_label(sweep, vi) for vi in values) or "none"
 
-    def named(values: list[int]) -> str:
-        return ", ".join(_label(sweep, vi) for vi in values) or "none"
 
-    worse = [*compared.worse, *sorted(sweep.dropped)]
-    text = (f"{compared.margin_text()}: equivalent (shown within the margin of the best): "
-            f"{named(compared.equivalent)}; undecided: {named(compared.undecided)}; worse "
-            f"(shown below the best by more than the margin): {named(worse)} (every {noun} "
-            f"answered by {answers_name(compared.alpha)})")
+def _answered(sweep: Sweep, answer: str) -> list[int]:
+    """The values whose summary answer is ``answer``, in the summary's order."""
+    return [int(vi) for vi in sweep.summary.index[sweep.summary["answer"] == answer]]
+
+
+def answer_lines(sweep: Sweep) -> list[str]:
+    """The answer of every value other than the best, one line per answer, the margin in score
+    units once; empty when no other value was compared."""
+    compared = sweep.comparison
+    others = [vi for a in ("equivalent", "worse", "undecided") for vi in _answered(sweep, a)]
+    if compared is None or not others:
+        return []
+    if compared.fraction > 0:
+        equivalent = (f"Equivalent (within the margin of the best, {compared.margin:.3g} in "
+                      f"score units): {_named(sweep, _answered(sweep, 'equivalent'))}.")
+        worse = "Worse (below the best by more than the margin)"
+    else:
+        equivalent = "Equivalent: none (margin 0: no value can be shown equivalent)."
+        worse = "Worse (below the best)"
+    return [equivalent, f"{worse}: {_named(sweep, _answered(sweep, 'worse'))}.",
+            f"Undecided (neither shown equivalent nor worse): "
+            f"{_named(sweep, _answered(sweep, 'undecided'))}."]
+
+
+def resolution_text(sweep: Sweep) -> str | None:
+    """The warning when the margin is below what the seeds resolve, or what they resolve;
+    None without a margin."""
+    compared = sweep.comparison
+    if compared is None or compared.fraction <= 0:
+        return None
     warning = compared.resolution_text()
     if warning:
-        return text + f"; warning: {warning}"
+        return f"Warning: {warning}."
     if math.isfinite(compared.resolution):
-        text += (f"; these seeds resolve a margin of about {compared.resolution:.3g} (median "
-                 "over the values of (t + t_0.8) x the standard error of the contrast with the "
-                 "best)")
-    return text
+        return (f"These seeds resolve a margin of about {compared.resolution:.3g} (median over "
+                "the values of (t + t_0.8) x the standard error of the contrast with the best).")
+    return None
 
 
 def _label(sweep: Sweep, vi: int) -> str:
     return str(sweep.labels[vi])
 
 
-def _final_text(row: pd.Series) -> str:
-    text = f"mean {number(row['final_mean'])}"
+def _mean_text(row: pd.Series) -> str:
+    """'mean final score 1.001 (95 % CI [0.9902, 1.011], n=8)'."""
+    text = f"mean final score {number(row['final_mean'])}"
     if np.isfinite(row["final_low"]):
-        text += f", 95 % CI {_interval(row['final_low'], row['final_high'])}"
-    text += f", n={row['complete']}; IQM {number(row['iqm'])}"
-    if np.isfinite(row["iqm_low"]):
-        text += f", 95 % trimmed-t CI {_interval(row['iqm_low'], row['iqm_high'])}"
-    return text
+        return text + f" (95 % CI {_interval(row['final_low'], row['final_high'])}, " \
+                      f"n={row['complete']})"
+    return text + f" (n={row['complete']})"
 
 
 def _auc_text(row: pd.Series) -> str:
@@ -315,57 +333,70 @@ def _reach_text(row: pd.Series) -> str:
             f"{row['reached']}/{row['complete']} reached it")
 
 
-def verdict(sweep: Sweep) -> str:
-    """The study's verdict (:attr:`Sweep.verdict`, from
-    :func:`kraby_study.decision.verdict.verdict`) in words: the best value and its ties, the most
-    sample-efficient, the fastest to the threshold and the most repeatable, each with its n and
-    interval."""
+def failed_seeds_line(sweep: Sweep) -> str | None:
+    """The values with failed seeds, e.g. 'Failed seeds: 0.05 1 of 8'; None when no seed
+    failed (or the line is not defined)."""
+    if not np.isfinite(sweep.failure_line):
+        return None
+    rows = sweep.summary[sweep.summary["failed_seeds"].fillna(0) > 0]
+    if rows.empty:
+        return None
+    parts = [f"{row['value']}{' (selected)' if bool(row.get('selected', False)) else ''}: "
+             f"{int(row['failed_seeds'])} of {row['complete']}" for _, row in rows.iterrows()]
+    return (f"Failed seeds (final score below {number(sweep.failure_line)}): "
+            + "; ".join(parts) + ".")
+
+
+def _single_lines(sweep: Sweep, row: pd.Series) -> list[str]:
+    """A single-run study's verdict: its final score, AUC and time to threshold."""
+    reached = (f"Threshold reached in {_reach_text(row)}." if row["reached"] else
+               "No seed reached the threshold.")
+    text = _mean_text(row)
+    return [f"{text[0].upper()}{text[1:]}.", f"Sample efficiency: {_auc_text(row)}.",
+            reached]
+
+
+def verdict_lines(sweep: Sweep) -> list[str]:
+    """The verdict block, at most six short lines: the best value's mean final score with its
+    interval, every other value's answer (the margin once), the failed seeds, and the value
+    the rule selects."""
+    best = sweep.verdict.best
+    if best is None:
+        return ["No run is complete yet, so no value can be compared."]
+    row = sweep.summary.iloc[best]
+    if not sweep.parameter:
+        return _single_lines(sweep, row)
+    lines = [f"Best: {_label(sweep, best)}, {_mean_text(row)}.", *answer_lines(sweep)]
+    failing = failed_seeds_line(sweep)
+    chosen = selection_text(sweep)
+    return lines + [text for text in (failing, chosen) if text]
+
+
+def other_measures(sweep: Sweep) -> list[str]:
+    """The verdict's other findings: the most sample-efficient, the fastest to the threshold,
+    the most repeatable, what a race did and the values left out; empty for a single run."""
     result = sweep.verdict
     summary = sweep.summary
-    if result.best is None:
-        return "No run is complete yet, so no value can be compared."
-    best = summary.iloc[result.best]
-    if not sweep.parameter:
-        text = f"Final score: {_final_text(best)}; {_auc_text(best)}"
-        if best["reached"]:
-            return text + f"; threshold reached in {_reach_text(best)}."
-        return text + "; no seed reached the threshold."
-    parts = []
-    first = f"{_label(sweep, result.best)} best final score ({_final_text(best)}"
-    compared = result.comparison
-    if compared is not None and compared.fraction > 0:
-        first += "; " + answers_text(sweep)
-    elif result.tied:
-        first += (f"; tied (not significantly worse, {PROCEDURE_NAME}): "
-                  f"{', '.join(_label(sweep, vi) for vi in result.tied)}")
-    elif len(sweep.values) > 1 and (summary["p_holm"].notna().any() or sweep.dropped):
-        noun = "configuration" if sweep.kind == StudyKind.CONFIRM else "value"
-        first += f"; every other {noun} tested is worse ({PROCEDURE_NAME})"
-    parts.append(first + ")")
+    if result.best is None or not sweep.parameter:
+        return []
+    items = []
     if result.most_sample_efficient is not None:
         row = summary.iloc[result.most_sample_efficient]
-        parts.append(f"{_label(sweep, result.most_sample_efficient)} most sample-efficient "
-                     f"({_auc_text(row)})")
+        items.append(f"Most sample-efficient: {_label(sweep, result.most_sample_efficient)} "
+                     f"({_auc_text(row)}).")
     if result.fastest is not None:
         row = summary.iloc[result.fastest]
-        parts.append(f"{_label(sweep, result.fastest)} fastest to threshold ({_reach_text(row)}, "
-                     "lowest restricted mean)")
+        items.append(f"Fastest to threshold: {_label(sweep, result.fastest)} "
+                     f"({_reach_text(row)}, lowest restricted mean).")
     elif np.isfinite(sweep.threshold):
-        parts.append(f"no value reached the threshold {number(sweep.threshold)}")
+        items.append(f"No value reached the threshold {number(sweep.threshold)}.")
     if result.most_repeatable is not None:
         row = summary.iloc[result.most_repeatable]
-        parts.append(f"{_label(sweep, result.most_repeatable)} most repeatable (rescaled final "
+        items.append(f"Most repeatable: {_label(sweep, result.most_repeatable)} (rescaled final "
                      f"IQR {number(row['final_iqr_unbiased'], 3)}, raw "
-                     f"{number(row['final_iqr'], 3)}, n={row['complete']})")
-    prefix = "Confirmed verdict" if sweep.kind == StudyKind.CONFIRM else sweep.name
-    text = f"{prefix}: " + "; ".join(parts) + "."
-    raced = race_text(sweep)
-    if raced:
-        text += f" {raced}"
-    left_out = left_out_text(sweep)
-    if left_out:
-        text += f" {left_out}"
-    return text
+                     f"{number(row['final_iqr'], 3)}, n={row['complete']}).")
+    found = [race_text(sweep), left_out_text(sweep)]
+    return items + [text for text in found if text]
 
 
 def arms_table(sweep: Sweep) -> Table:
@@ -377,7 +408,16 @@ def arms_table(sweep: Sweep) -> Table:
             for _, r in arms.iterrows()]
     return Table(["configuration", "origin", "source's score", "confirmed mean final score",
                   "95 % CI", "confirmed IQM", "95 % trimmed-t CI", "n"], rows,
-                 marks=list(arms["mark"]))
+                 marks=[row_mark(str(a)) for a in sweep.summary["answer"]])
+
+
+WINNER_ANSWER = {
+    "equivalent": " {winner} is equivalent to it: within the margin.",
+    "undecided": " {winner} is undecided against it: neither shown within the margin nor below "
+                 "it, so it may still be as good.",
+    "worse": " {winner} is worse: below it by more than the margin.",
+}
+"""What the sentence on the source's winner adds, by the winner's answer."""
 
 
 def winner_text(sweep: Sweep) -> str | None:
@@ -405,17 +445,8 @@ def winner_text(sweep: Sweep) -> str | None:
     if index in sweep.dropped:
         return text + (f" The race dropped {winner} after round "
                        f"{sweep.dropped[index].round}.")
-    mark = sweep.summary.iloc[index]["mark"]
     answer = str(sweep.summary.iloc[index].get("answer") or "")
-    compared = sweep.comparison
-    if compared is not None and compared.fraction > 0 and answer in ("equivalent", "undecided"):
-        text += (f" {winner} is {answer} against it ({compared.margin_text()})"
-                 + (": within the margin." if answer == "equivalent" else
-                    ": neither shown within the margin nor below it."))
-    elif mark == "tie":
-        text += (f" The two cannot be told apart ({PROCEDURE_NAME}), so {winner} "
-                 "may still be as good.")
-    return text
+    return text + WINNER_ANSWER.get(answer, "").format(winner=winner)
 
 
 def confirm_blocks(sweep: Sweep) -> tuple[list[Block], list[Block]]:
@@ -474,8 +505,9 @@ def describe_sweep(sweep: Sweep) -> str:
                      "every run shares (one fixed set, as stored before runs drew their own)")
             scored = (f" Scored by evaluation: a run's final score is its deterministic "
                       f"policy's mean return over {episodes} evaluation episodes {drawn}; the "
-                      f"training reward ({TRAINING_SCORE}) is shown beside it, and no answer "
-                      f"reads it.")
+                      f"training reward ({TRAINING_SCORE}; train_mean, train_sd, train_low, "
+                      "train_high) and the evaluation se (eval_se) are in summary.csv beside "
+                      "it, and no answer reads them.")
         return (f"Confirmation of {len(sweep.values)} configurations{origin} on {fresh}"
                 f"{budget}. Status: {sweep.status()}.{scored}")
     if not sweep.parameter:
@@ -499,6 +531,55 @@ def selection_text(sweep: Sweep) -> str | None:
     if not sweep.finished:
         return f"Selected ({rule}): none until the {sweep.counts['pending']} pending run(s) end."
     return f"Selected ({rule}): none, no run is complete."
+
+
+CSV_NOTE = "Every other number of each value is in summary.csv; the methods are at the end."
+
+
+def details_blocks(sweep: Sweep) -> list[Block]:
+    """What was run, a confirm study's configurations, the other measures, the threshold and
+    the failed or pruned runs: below the compact table."""
+    arms, _ = confirm_blocks(sweep)
+    blocks: list[Block] = [Text(describe_sweep(sweep)), *arms]
+    others = other_measures(sweep)
+    if others:
+        blocks += [Text("Other measures:"), Items(others)]
+    blocks.append(Text(threshold_text(sweep)))
+    failed = failed_items(sweep)
+    if failed:
+        blocks += [Text(f"Failed or pruned runs ({len(failed)}), not in the figures:"),
+                   Items(failed)]
+    if sweep.data.replaced:
+        blocks.append(Text(f"{sweep.data.replaced} interrupted attempt(s) were run again; "
+                           "only the later attempts count."))
+    return blocks
+
+
+def summary_methods(sweep: Sweep) -> list[str]:
+    """The methods section of a sweep's summary: what its final score is, each interval and
+    test named once, a failed seed's line in score units, and the measured coverage of its
+    few-seed intervals."""
+    score = EVALUATION_SCORE if sweep.by_evaluation else TRAINING_SCORE
+    failed = (definition_text(sweep.failure_line, sweep.untrained)
+              if np.isfinite(sweep.failure_line) else FAILED_SEED)
+    coverage = few_seeds_note(sweep)
+    clock = "CPU" if sweep.time_unit == "CPU s" else "wall-clock"
+    return [f"Final score: {score}. Training time (summary.csv's time_mean, time_low, "
+            f"time_high): {clock} seconds per run.",
+            *methods(sweep.bootstrap, sweep.min_seeds, sweep.race is not None, failed),
+            *([coverage] if coverage else [])]
+
+
+def result_text(sweep: Sweep) -> str:
+    """The index overview's cell: the best value and the selected one."""
+    best = sweep.verdict.best
+    if best is None:
+        return "no complete run"
+    if not sweep.parameter:
+        return _mean_text(sweep.summary.iloc[best])
+    chosen = sweep.summary.index[sweep.summary["selected"].astype(bool)]
+    picked = _label(sweep, int(chosen[0])) if len(chosen) else "none yet"
+    return f"best {_label(sweep, best)}; selected {picked}"
 
 
 def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
@@ -539,30 +620,19 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
     else:
         report.notes.append("no complete run yet: no figures")
     tables = _tables(sweep, folder)
-    failed = failed_items(sweep)
-    arms, winner = confirm_blocks(sweep)
-    chosen = selection_text(sweep)
-    failing = failed_seeds_text(sweep)
-    said = Text(verdict(sweep) + (f" {chosen}" if chosen else "")
-                + (f" {failing}" if failing else ""))
-    details: list[Block] = [summary_table(sweep), Text(threshold_text(sweep))]
-    if failed:
-        details += [Text(f"Failed or pruned runs ({len(failed)}), not in the figures:"),
-                    Items(failed)]
-    if sweep.data.replaced:
-        details.append(Text(f"{sweep.data.replaced} interrupted attempt(s) were run again; "
-                            "only the later attempts count."))
-    described = Text(describe_sweep(sweep))
-    section: list[Block] = [Heading(f"{sweep.data.name}", 2), described, *arms, said, *winner,
-                            *details]
+    said = Items(verdict_lines(sweep))
+    _, winner = confirm_blocks(sweep)
+    warning = resolution_text(sweep)
+    top: list[Block] = [said, *winner, summary_table(sweep), *([Text(warning)] if warning else [])]
+    details = details_blocks(sweep)
     summary_md = folder / "summary.md"
-    coverage = few_seeds_note(sweep)
     summary_md.write_text(blocks_to_markdown(
-        [Heading(f"{sweep.data.name}: summary", 1), said, *winner, described, *arms, *details,
-         Text(metric_notes(sweep.bootstrap, sweep.min_seeds, sweep.race is not None)),
-         *([Text(coverage)] if coverage else [])]), encoding="utf-8")
+        [Heading(f"{sweep.data.name}: summary", 1), *top, Text(CSV_NOTE),
+         Heading("Details", 2), *details, Heading("Methods", 2),
+         Items(summary_methods(sweep))]), encoding="utf-8")
     report.files += tables + [summary_md]
-    report.blocks = section + images
+    report.result = result_text(sweep)
+    report.blocks = [Heading(f"{sweep.data.name}", 2), *top, *details, *images]
     report.blocks.append(Links("Tables", [(p.name, f"{rel}/{p.name}") for p in
                                           [summary_md, *tables]]))
     return report

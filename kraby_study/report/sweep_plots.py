@@ -207,36 +207,49 @@ def training_time(sweep: Sweep, path: Path) -> Path:
     return save(fig, path)
 
 
+ANSWER_SHADES = {"best": (BEST_COLOUR, 0.18), "equivalent": (BEST_COLOUR, 0.07),
+                 "undecided": (MUTED, 0.12)}
+"""How the final-score figure shades a value's column by its answer (written above it, so the
+legend needs no entry for the shades); worse stays unshaded."""
+
+
+def _answers(sweep: Sweep) -> pd.Series:
+    """Each value's answer against the best, as the summary's answer column writes it; empty
+    for a study of one value, which is trivially the best."""
+    answers = sweep.summary["answer"].fillna("").astype(str)
+    return answers if len(sweep.values) > 1 else answers.map(lambda _: "")
+
+
+def _shade_answers(ax: Axes, answers: pd.Series) -> None:
+    """Shade each value's column by its answer and write the answer above it."""
+    for vi, answer in answers.items():
+        colour, alpha = ANSWER_SHADES.get(answer, (None, 0.0))
+        if colour is not None:
+            ax.axvspan(int(vi) - 0.45, int(vi) + 0.45, color=colour, alpha=alpha,
+                       linewidth=0, zorder=0)
+        if answer:
+            ax.annotate(answer, (int(vi), 0.98), xycoords=("data", "axes fraction"),
+                        ha="center", va="top", fontsize=9, color="#333333")
+    if answers.astype(bool).any():
+        ax.margins(y=0.15)
+
+
 def final_score(sweep: Sweep, path: Path) -> Path:
-    """Final score of each seed against the value; the best value and its ties shaded."""
+    """Final score of each seed against the value; each value's column shaded by its answer
+    against the best (best, equivalent, undecided; worse unshaded), the answer written above
+    it."""
     several = len(sweep.values) > 1
     fig, (ax,) = new_figure(SINGLE if several else (SINGLE[0] * 0.6, SINGLE[1]))
-    marks = sweep.summary["mark"].copy()
-    if not several:  # one value is trivially the best: nothing to mark
-        marks[:] = ""
-    for vi, mark in marks.items():
-        if mark:
-            ax.axvspan(int(vi) - 0.45, int(vi) + 0.45, color=BEST_COLOUR,
-                       alpha=0.18 if mark == "best" else 0.07, linewidth=0, zorder=0)
+    _shade_answers(ax, _answers(sweep))
     _seeds_and_means(ax, sweep, "final_score", "final_mean", "final_low", "final_high")
     _value_axis(ax, sweep)
     ax.set_ylabel("final score (mean evaluation return,\ndeterministic policy)"
                   if sweep.by_evaluation else
                   "final score (mean episode reward,\nlast 10 % of training)")
-    extra: list[Line2D | Patch] = []
-    if (marks == "best").any():
-        extra.append(Patch(color=BEST_COLOUR, alpha=0.3, label="best mean"))
-    if (marks == "tie").any():
-        extra.append(Patch(color=BEST_COLOUR, alpha=0.1,
-                           label="not worse than the best\n(step-down adjusted p >= 0.05)"))
     if _failed_marks(ax, sweep):
-        ax.margins(y=0.12)
-    one_seed, mean = _legend_entries([])
-    # Filled column by column: the short labels share the first, the two long ones the second,
-    # so both columns fit the figure's width.
-    handles = [one_seed, *extra[:1], mean, *extra[1:]]
-    fig.legend(handles=handles, loc="outside lower center", ncols=2 if several else 1,
-               frameon=False)
+        ax.margins(y=0.15)
+    fig.legend(handles=_legend_entries([]), loc="outside lower center",
+               ncols=2 if several else 1, frameon=False)
     fig.suptitle(_title(sweep, "final score"))
     return save(fig, path)
 

@@ -4,10 +4,11 @@ tables: what ``list`` needs, in a few queries and without Optuna.
 Optuna's RDBStorage costs a third of a second to import (its models, alembic's version check),
 and it builds a FrozenTrial per trial with every parameter, attribute and intermediate value:
 about 12 s for 5,000 trials. A row holds only what counting a study's trials
-(:func:`kraby_study.records.counted`, :func:`~kraby_study.records.tally`) and its selection so
-far read (:mod:`kraby_study.answers.selected`): number, state, value, the attributes of
+(:func:`kraby_study.records.stored.counted`, :func:`~kraby_study.records.stored.tally`) and its
+selection so far read (:mod:`kraby_study.answers.selected`): number, state, value, the attributes of
 :data:`ROW_ATTRS`, and a swept study's parameter (or its queued value). Rows satisfy
-:class:`kraby_study.records.StoredTrial`, so the same rules run on them as on Optuna's trials.
+:class:`kraby_study.records.stored.StoredTrial`, so the same rules run on them as on Optuna's
+trials.
 
 The columns are those of Optuna's models (``optuna/storages/_rdb/models.py``, the schema of
 Optuna 3 and later); values and parameters are decoded as Optuna decodes them. Reading writes
@@ -87,7 +88,7 @@ class RowState(Enum):
 
 @dataclass(frozen=True)
 class TrialRow:
-    """One trial as ``list`` reads it (a :class:`kraby_study.records.StoredTrial`)."""
+    """One trial as ``list`` reads it (a :class:`kraby_study.records.stored.StoredTrial`)."""
 
     number: int
     state: RowState
