@@ -96,6 +96,9 @@ class Sweep:
     race: StudyRace | None = None
     comparison: Comparison[int] | None = None
     """The study's one comparison: the summary's answers, the verdict and the selection."""
+    reach: pd.DataFrame = field(default_factory=pd.DataFrame)
+    """Per value, the mean env steps and seconds to the threshold over the seeds that reached
+    it, with their intervals (:func:`kraby_study.decision.summary.reach_means`)."""
     failure_line: float = math.nan
     """The final score below which a seed failed (:mod:`kraby_study.decision.failed_seeds`); NaN
     when not defined."""
@@ -295,4 +298,5 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
                  threshold_default=decided.threshold_default, untrained=decided.untrained,
                  bootstrap=decided.bootstrap, verdict=decided.verdict,
                  min_seeds=decided.comparison.min_seeds, race=decided.race,
-                 comparison=decided.comparison, failure_line=decided.failure_line)
+                 comparison=decided.comparison, failure_line=decided.failure_line,
+                 reach=decided.reach)

@@ -366,6 +366,26 @@ def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
                    comparison=comparison)
 
 
+REACH_COLUMNS = ("steps_to_threshold", "seconds_to_threshold")
+
+
+def reach_means(seeds: pd.DataFrame, values: int, bootstrap: int) -> pd.DataFrame:
+    """Per value (index 0 to ``values`` - 1): the mean env steps and seconds to the threshold
+    over the seeds that reached it, each with its interval
+    (:func:`kraby_study.decision.intervals.mean_interval`), columns ``<measure>_mean``,
+    ``_low`` and ``_high``: the marks of the time-to-threshold figure (the summary's columns are
+    restricted means over every seed instead)."""
+    rows = []
+    for vi in range(values):
+        row: dict[str, float] = {}
+        for column in REACH_COLUMNS:
+            found = seeds.loc[(seeds["vi"] == vi) & seeds[column].notna(), column].to_numpy()
+            mean, low, high = mean_interval(found, resamples=bootstrap)
+            row |= {f"{column}_mean": mean, f"{column}_low": low, f"{column}_high": high}
+        rows.append(row)
+    return pd.DataFrame(rows, index=pd.RangeIndex(values, name="vi"))
+
+
 @dataclass(frozen=True)
 class SweepAnswers:
     """What a sweep's evidence decides: the one comparison, the per-value summary (answers,
@@ -383,6 +403,9 @@ class SweepAnswers:
     bootstrap: int
     verdict: Verdict
     race: StudyRace | None
+    reach: pd.DataFrame
+    """Per value, the mean time to the threshold over the seeds that reached it
+    (:func:`reach_means`)."""
 
 
 def seed_scores(trials: pd.DataFrame, curves: pd.DataFrame, known: int, time_attr: str
@@ -461,4 +484,5 @@ def decide_sweep(trials: pd.DataFrame, curves: pd.DataFrame, labels: list[str],
                         threshold_default=is_default, untrained=untrained,
                         failure_line=failure, bootstrap=bootstrap,
                         verdict=study_verdict(summary, seeds, comparison.min_seeds,
-                                              list(dropped), comparison), race=state)
+                                              list(dropped), comparison), race=state,
+                        reach=reach_means(seeds, len(summary), bootstrap))

@@ -22,7 +22,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from kraby_study.answers.sweep_evidence import Sweep
-from kraby_study.decision.intervals import SHORT_INTERVAL_NAME, mean_interval
+from kraby_study.decision.intervals import SHORT_INTERVAL_NAME
 from kraby_study.records.stored import Outcome
 from kraby_study.report.style import (
     BEST_COLOUR,
@@ -289,8 +289,8 @@ def time_to_threshold(sweep: Sweep, path: Path) -> Path:
         reached = seeds[seeds[column].notna()]
         _seed_points(ax, sweep, reached, column)
         for vi, row in sweep.summary.iterrows():
-            values = reached.loc[reached["vi"] == vi, column].to_numpy()
-            mean, low, high = mean_interval(values, resamples=sweep.bootstrap)
+            mean, low, high = (sweep.reach.at[vi, f"{column}_{part}"]
+                               for part in ("mean", "low", "high"))
             _mean_mark(ax, sweep, int(vi), mean, low, high)
             if row["complete"] == 0:
                 continue
