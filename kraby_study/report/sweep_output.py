@@ -507,7 +507,9 @@ def describe_sweep(sweep: Sweep) -> str:
                       f"policy's mean return over {episodes} evaluation episodes {drawn}; the "
                       f"training reward ({TRAINING_SCORE}; train_mean, train_sd, train_low, "
                       "train_high) and the evaluation se (eval_se) are in summary.csv beside "
-                      "it, and no answer reads them.")
+                      "it, and no answer reads them. Evaluation se by value: "
+                      + "; ".join(f"{row['value']} {number(row['eval_se'], 3)}"
+                                  for _, row in sweep.summary.iterrows()) + ".")
         return (f"Confirmation of {len(sweep.values)} configurations{origin} on {fresh}"
                 f"{budget}. Status: {sweep.status()}.{scored}")
     if not sweep.parameter:
