@@ -441,7 +441,7 @@ def cmd_confirm(args: argparse.Namespace) -> int:
         with reader(cfg.storage) as store:
             source = confirmed_study(store.load(str(cfg.confirm.study)), int(cfg.confirm.top))
     cfg = resumed(cfg, confirm_name(source.name if source else None,
-                                    [arm.label for arm in baselines]))
+                                    [arm.label for arm in baselines], cfg.confirm.name))
     plan = confirm_plan(cfg, source, baselines)
     if dry_run(args):
         from kraby_study.plan.preview import plan_count

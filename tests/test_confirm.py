@@ -122,6 +122,26 @@ def test_baselines_alone_retrain_a_config_on_n_seeds(store_url: str) -> None:
     assert {t.params["config"] for t in trials} == {"ppo=tuned"}
 
 
+def test_confirm_name_keeps_a_second_confirm_of_the_same_baselines_apart(
+        store_url: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """Baselines alone are stored as confirm-<baselines>: the same baselines on another
+    budget (or env) clash with it, and the refusal names the option that keeps them apart."""
+    once = ["confirm", "--baseline", "ppo=tuned", "--seeds", "2", "--workers", "2",
+            "--storage", store_url, *TINY]
+    assert run_cli(*once) == 0
+    capsys.readouterr()
+    longer = [*once, "budget.steps=640"]
+    assert run_cli(*longer) == 2
+    error = capsys.readouterr().err.strip()
+    assert "was defined differently" in error and "confirm: confirm.name=..." in error
+    assert len(error.splitlines()) == 1
+    assert run_cli(*longer, "confirm.name=tuned-640") == 0
+    assert {t.user_attrs["steps"] for t in load(store_url, "tuned-640").trials} == {640}
+    assert {t.user_attrs["steps"] for t in load(store_url, "confirm-ppo=tuned").trials} == {512}
+    assert run_cli(*once, "confirm.name= ") == 2
+    assert "confirm.name must name a study" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("argv,message", [
     (["--study-name", "nope"], "no study named 'nope'"),
     (["--study-name", "tiny", "--top", "9"], "has 4 complete configuration(s), fewer than"),

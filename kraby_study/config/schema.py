@@ -282,6 +282,9 @@ class ConfirmConfig:
     seed a command uses by default, 0 onwards), a stored confirm study's own first seed."""
     baselines: list[str] = field(default_factory=list)
     """ppo config names added as arms, e.g. [tuned]."""
+    name: str | None = None
+    """The confirm study's name in the store; null: NAME-confirm, or confirm-<baselines> when
+    only baselines are retrained (two such confirms on two envs need a name each)."""
     select: str | None = None
     """The confirm study's selection rule (final_score, auc, fastest_equivalent or
     fastest_tied, as a sweep's study.select); null: fastest_equivalent for a two-objective

@@ -216,6 +216,9 @@ def validate(cfg: DictConfig) -> None:
         _require(cfg.search.eval_set in EVAL_SETS,
                  f"search.eval_set must be one of {', '.join(EVAL_SETS)} (or null: a stored "
                  f"study's own), got {cfg.search.eval_set!r}")
+    if cfg.confirm.name is not None:
+        _require(bool(str(cfg.confirm.name).strip()),
+                 "confirm.name must name a study (or be null for the default name)")
     if cfg.confirm.seed is not None:
         _require(int(cfg.confirm.seed) >= 0,
                  f"confirm.seed must be >= 0, got {cfg.confirm.seed}")

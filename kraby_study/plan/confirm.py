@@ -123,8 +123,11 @@ def confirm_rule(cfg: DictConfig, source: ConfirmedStudy | None) -> SelectRule:
     return SelectRule.FINAL_SCORE
 
 
-def confirm_name(source: str | None, baselines: list[str]) -> str:
-    """``NAME-confirm``, or ``confirm-<baselines>`` when only baselines are retrained."""
+def confirm_name(source: str | None, baselines: list[str], name: str | None = None) -> str:
+    """``name`` (``confirm.name``) when given; else ``NAME-confirm``, or
+    ``confirm-<baselines>`` when only baselines are retrained."""
+    if name is not None:
+        return str(name)
     return f"{source}-confirm" if source else "confirm-" + "+".join(baselines)
 
 
@@ -154,7 +157,8 @@ def confirm_plan(cfg: DictConfig, source: ConfirmedStudy | None, baselines: list
     racing = race_rules(cfg, seeds, "confirm.seeds")
     steps = source.steps if source else int(cfg.budget.steps)
     curve_every = source.curve_every if source else int(cfg.budget.curve_every)
-    name = confirm_name(source.name if source else None, [a.label for a in baselines])
+    name = confirm_name(source.name if source else None, [a.label for a in baselines],
+                        cfg.confirm.name)
     at = f" at {source.name}'s {steps} steps" if source else ""
     for arm in arms:
         validate_run_length(arm.settings["env"], arm.settings["ppo"], steps, objective,

@@ -131,7 +131,8 @@ def check_same_definition(name: str, url: str, stored: StudyAttrs, attrs: StudyA
     if stored.fingerprint is not None and stored.fingerprint != attrs.fingerprint:
         changed = describe_change(stored.definition, attrs.definition)
         raise StoreError(f"study {name!r} in {url} was defined differently ({changed}); "
-                         "choose another name (study.name=...) or another storage")
+                         "choose another name (run: study.name=..., optuna: --study-name, confirm: "
+                         "confirm.name=...) or another storage")
 
 
 def describe_change(old: dict[str, Any], new: dict[str, Any], prefix: str = "") -> str:
