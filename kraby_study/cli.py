@@ -671,7 +671,8 @@ def build_parser() -> argparse.ArgumentParser:
     parsers["confirm"].epilog = (
         "each configuration trains --seeds runs at the study's budget (steps and curve bins; "
         "budget=quick for baselines alone), with seeds no trial of the study used. The study "
-        "NAME-confirm is resumable like run; report it, then `kraby-study best --study-name "
+        "NAME-confirm (confirm-<baselines> for baselines alone; confirm.name=NAME names it) "
+        "is resumable like run; report it, then `kraby-study best --study-name "
         "NAME-confirm` writes the confirmed winner's settings, selected by --select (of a "
         "two-objective search's front by default fastest_equivalent: the cheapest in CPU "
         "seconds among the best arm and those shown equivalent to it). `kraby-study best "
