@@ -14,7 +14,7 @@ from optuna.trial import TrialState
 from kraby_study.config.compose import compose_config
 from kraby_study.plan.confirm import Arm, distinct_arms
 from kraby_study.plan.settings import resolved_settings
-from kraby_study.plan.space import fitted_params
+from kraby_study.plan.space import fitted_params, outside_space
 from kraby_study.records.stored import counted
 
 SPACE = """\
@@ -60,6 +60,24 @@ def test_known_settings_enter_a_space_only_as_far_as_it_holds_them() -> None:
     assert params["nminibatches"] == 1 and params["observation"] == "default"
     narrow = compose_config(["ppo=tuned", "search.params.gamma.low=0.85"])
     assert "gamma" not in fitted_params(narrow, resolved_settings(narrow))
+
+
+def test_a_known_configuration_names_what_its_space_cannot_hold(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """rl-zoo3's MountainCarContinuous-v0 settings (n_steps 8, learning rate 7.77e-05) lie
+    outside the default space: enqueued first, those two are drawn by the sampler, and the
+    search says so instead of claiming to evaluate the configuration as it is."""
+    zoo = compose_config(["env=gym", "env.id=MountainCarContinuous-v0", "ppo=zoo"])
+    assert outside_space(zoo, resolved_settings(zoo)) == {"n_steps": 8, "learning_rate": 7.77e-05}
+    tuned = compose_config(["ppo=tuned"])
+    assert outside_space(tuned, resolved_settings(tuned)) == {}
+    (workdir / "conf" / "search").mkdir(parents=True)
+    (workdir / "conf" / "search" / "tiny.yaml").write_text(SPACE)
+    assert run_cli("optuna", "search=tiny", "--trials", "1", *TINY, "budget.seeds=1",
+                   "search.params.gamma.low=0.85", "search.enqueue=[tuned]") == 0
+    said = capsys.readouterr()
+    assert ("evaluating ppo=tuned (outside the space, so drawn by the sampler: gamma=0.8) "
+            "first" in said.out + said.err)
 
 
 def test_confirm_retrains_the_top_configurations_on_fresh_seeds(

@@ -262,6 +262,32 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
                         seeding_of(cfg))
 
 
+def _setting_values(cfg: DictConfig, settings: dict[str, Any]) -> dict[str, Any]:
+    """Each space parameter's value in resolved settings (``nminibatches``: the rollout over the
+    batch size, a fraction where it does not divide it); a parameter the settings lack (a
+    leg's observation on a gym env) is left out."""
+    values: dict[str, Any] = {}
+    for name, p in cfg.search.params.items():
+        root, leaf = str(p.path).split(".", 1)
+        if str(p.path) == NMINIBATCHES:
+            ppo = settings["ppo"]
+            rollout = int(ppo["n_steps"]) * int(ppo["n_envs"])
+            batch = int(ppo["batch_size"])
+            values[str(name)] = rollout // batch if rollout % batch == 0 else rollout / batch
+        elif leaf in settings.get(root, {}):
+            values[str(name)] = settings[root][leaf]
+    return values
+
+
+def outside_space(cfg: DictConfig, settings: dict[str, Any]) -> dict[str, Any]:
+    """The values of resolved settings that the search's space cannot hold (outside a range or
+    the choices), by parameter: a known configuration enqueued first has these drawn by the
+    sampler instead, so the search does not evaluate it as it is."""
+    fitted = fitted_params(cfg, settings)
+    return {name: value for name, value in _setting_values(cfg, settings).items()
+            if name not in fitted}
+
+
 def fitted_params(cfg: DictConfig, settings: dict[str, Any]) -> dict[str, Any]:
     """The space's parameters that resolved settings take, as far as the space holds them.
 
@@ -269,18 +295,11 @@ def fitted_params(cfg: DictConfig, settings: dict[str, Any]) -> dict[str, Any]:
     it); ``nminibatches`` is read as the rollout over the batch size.
     """
     params: dict[str, Any] = {}
+    values = _setting_values(cfg, settings)
     for name, p in cfg.search.params.items():
-        root, leaf = str(p.path).split(".", 1)
-        if str(p.path) == NMINIBATCHES:
-            ppo = settings["ppo"]
-            rollout = int(ppo["n_steps"]) * int(ppo["n_envs"])
-            if rollout % int(ppo["batch_size"]):
-                continue
-            value: Any = rollout // int(ppo["batch_size"])
-        elif leaf in settings.get(root, {}):
-            value = settings[root][leaf]
-        else:
+        if str(name) not in values:
             continue
+        value = values[str(name)]
         if p.type == "categorical":
             match = [c for c in to_container(p.choices) if value_key(c) == value_key(value)]
             if match:

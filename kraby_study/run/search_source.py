@@ -15,6 +15,7 @@ from kraby_study.plan.space import (
     checkpoint_every,
     fitted_params,
     objectives,
+    outside_space,
     pruner_name,
     search_definition,
     search_floor,
@@ -140,7 +141,8 @@ def pruner_label(cfg: DictConfig) -> str:
 def warm_start(ledger: StudyLedger, cfg: DictConfig,
                starts: Sequence[tuple[str, dict[str, Any]]]) -> list[str]:
     """Queue the known configurations (name, resolved settings) a new search evaluates first, as
-    far as its space holds them, at most its trial total; returns the names queued."""
+    far as its space holds them, at most its trial total; returns each queued one as the
+    search's first line names it, with the settings its space could not hold."""
     queued: list[str] = []
     with ledger.plan_lock():
         if ledger.trials():
@@ -149,7 +151,10 @@ def warm_start(ledger: StudyLedger, cfg: DictConfig,
             params = fitted_params(cfg, settings)
             if params:
                 ledger.queue(params, TrialAttrs(enqueued=name))
-                queued.append(name)
+                outside = outside_space(cfg, settings)
+                queued.append(name if not outside else (
+                    f"{name} (outside the space, so drawn by the sampler: "
+                    + ", ".join(f"{k}={value_label(v)}" for k, v in outside.items()) + ")"))
     return queued
 
 
