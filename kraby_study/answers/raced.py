@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from kraby_study.decision.race import Race, StudyRace, mapped_race, race
+from kraby_study.decision.race import Race, RaceRuns, StudyRace, race
 from kraby_study.plan.spec import RaceRules
 from kraby_study.records.stored import StoredTrial, ended_runs, latest_by_key
 from kraby_study.records.values import value_key
@@ -19,18 +19,27 @@ def replay(rules: RaceRules, values: int, latest: Mapping[str, StoredTrial]
     return race(list(range(values)), runs, rules), runs
 
 
-def race_of(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
-            values: Sequence[Any]) -> StudyRace | None:
-    """The race of a stored study with its dropped values mapped onto ``values`` (matched by
-    :func:`kraby_study.records.values.value_key`, not by position); None for a study that did not
-    race. A dropped value not in ``values`` is left out."""
+def race_runs(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
+              values: Sequence[Any]) -> RaceRuns | None:
+    """A stored study's race as its ended runs, each planned value placed in ``values``
+    (matched by :func:`kraby_study.records.values.value_key`, not by position; a value not in
+    ``values`` is left out); None for a study that did not race."""
     rules = RaceRules.of(dict(definition))
     if rules is None:
         return None
     planned = list(definition["values"])
-    runs = ended_runs(latest_by_key(trials), list(rules.round_seeds))
     index = {value_key(v): i for i, v in enumerate(values)}
-    return mapped_race(rules, runs, len(planned), [index.get(value_key(v)) for v in planned])
+    return RaceRuns(rules=rules, planned=len(planned),
+                    runs=ended_runs(latest_by_key(trials), list(rules.round_seeds)),
+                    index=[index.get(value_key(v)) for v in planned])
+
+
+def race_of(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
+            values: Sequence[Any]) -> StudyRace | None:
+    """The race of a stored study with its dropped values mapped onto ``values``
+    (:func:`race_runs`, replayed); None for a study that did not race."""
+    runs = race_runs(definition, trials, values)
+    return runs.replayed() if runs is not None else None
 
 
 def dropped_indices(definition: Mapping[str, Any], trials: Sequence[StoredTrial],

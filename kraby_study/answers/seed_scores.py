@@ -4,6 +4,7 @@ study's rule selects from them (:func:`selected_index`)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -12,7 +13,7 @@ from kraby_study.decision.comparison import (
     MARGIN,
     MIN_SEEDS,
 )
-from kraby_study.decision.measures import auc
+from kraby_study.decision.measures import curve_rewards, seed_samples
 from kraby_study.decision.selection import select
 from kraby_study.records.attributes import StudyKind, TrialAttrs
 from kraby_study.records.stored import Outcome, StoredTrial, outcome
@@ -52,30 +53,18 @@ def samples(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: st
     ``values`` is left out. ``time_attr``: the trial attribute read as its training time
     (:func:`time_measure`)."""
     index = {value_key(v): i for i, v in enumerate(values)}
-    final: dict[int, list[float]] = {}
-    aucs: dict[int, list[float]] = {}
-    seconds: dict[int, list[float]] = {}
-    rewards = {}
-    if curves is not None:
-        ordered = curves.sort_values(["number", "step"], kind="stable")
-        rewards = {int(n): g["mean_reward"].to_numpy(dtype=float)
-                   for n, g in ordered.groupby("number", sort=False)}
+    runs = []
     for trial in trials:
         if outcome(trial) != Outcome.COMPLETE or trial.value is None:
             continue
         vi = index.get(value_key(swept_value(trial, name, values)))
         if vi is None:
             continue
-        final.setdefault(vi, []).append(float(trial.value))
-        if trial.number in rewards:
-            aucs.setdefault(vi, []).append(auc(rewards[trial.number]))
         spent = getattr(TrialAttrs.of(trial), time_attr)
-        if spent is not None:
-            seconds.setdefault(vi, []).append(float(spent))
-    order = sorted(final)
-    return Samples(values=list(values), final={vi: final[vi] for vi in order},
-                   aucs={vi: aucs.get(vi, []) for vi in order},
-                   seconds={vi: seconds.get(vi, []) for vi in order})
+        runs.append((vi, trial.number, float(trial.value),
+                     math.nan if spent is None else float(spent)))
+    final, aucs, seconds = seed_samples(runs, curve_rewards(curves) if curves is not None else {})
+    return Samples(values=list(values), final=final, aucs=aucs, seconds=seconds)
 
 
 def swept_values(kind: str, definition: Mapping[str, Any],

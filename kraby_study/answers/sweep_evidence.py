@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from kraby_study.answers.raced import race_runs
 from kraby_study.answers.seed_scores import swept_values, time_measure
 from kraby_study.answers.selected import study_rule
 from kraby_study.answers.study_data import StudyData
@@ -30,10 +31,9 @@ from kraby_study.decision.intervals import BOOTSTRAP_REPETITIONS
 from kraby_study.decision.race import Drop, RaceRuns, StudyRace
 from kraby_study.decision.summary import SEED_COLUMNS, decide_sweep
 from kraby_study.decision.verdict import Verdict
-from kraby_study.plan.spec import RaceRules
 from kraby_study.records.attributes import SelectRule, StudyKind
 from kraby_study.records.definition import scored_by_evaluation
-from kraby_study.records.stored import Outcome, ended_runs, latest_by_key, outcome, tally
+from kraby_study.records.stored import Outcome, outcome, tally
 from kraby_study.records.values import swept_value, value_key, value_label
 
 SINGLE_LABEL = "all seeds"
@@ -206,7 +206,6 @@ def sweep_evidence(data: StudyData) -> SweepEvidence:
     one pass over the trials, through the record schema alone."""
     definition = data.definition
     time_attr = time_measure(data.kind)  # the training time the summary shows and the rule reads
-    rules = RaceRules.of(dict(definition)) if data.kind.swept else None
     if data.kind.swept:
         parameter = str(definition["parameter"])
         name, values = swept_values(data.kind, definition, data.trials)
@@ -249,15 +248,8 @@ def sweep_evidence(data: StudyData) -> SweepEvidence:
     if (trials["vi"] < 0).any():  # a run whose value cannot be read: show it, do not drop it
         values, labels = values + ["?"], labels + ["?"]
         trials.loc[trials["vi"] < 0, "vi"] = len(values) - 1
-    # A race's ended runs by the study file's value index, and where each value stands here
-    # (the report's order), matched by value.
-    race = None
-    if rules is not None:
-        planned = list(definition["values"])
-        race = RaceRuns(
-            rules=rules, planned=len(planned),
-            runs=ended_runs(latest_by_key(data.trials), list(rules.round_seeds)),
-            index=[index.get(value_key(v)) for v in planned])
+    # A race's ended runs, each value placed in the report's order (matched by value).
+    race = race_runs(definition, data.trials, values[:known]) if data.kind.swept else None
     complete = trials[trials["outcome"] == Outcome.COMPLETE][["vi", "seed", "number"]]
     return SweepEvidence(parameter=parameter, name=name, values=values, labels=labels,
                          known=known, trials=trials,

@@ -6,13 +6,17 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from statistics import NormalDist
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy
 
 from kraby_study.decision.intervals import LEVEL, _array
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 AUC_NAME = ("sample efficiency (AUC): the mean of a seed's binned mean episode rewards over the"
             " whole run, the normalised area under its learning curve")
@@ -36,6 +40,38 @@ def auc(rewards: Sequence[float]) -> float:
     """
     x = _array(rewards)
     return float(np.mean(x)) if len(x) else math.nan
+
+
+SeedScores = dict[int, list[float]]
+"""One number per complete seed, by value index (in value order), each in run order."""
+
+
+def curve_rewards(curves: pd.DataFrame) -> dict[int, np.ndarray]:
+    """Each run's binned mean episode rewards in step order, by trial number (columns number,
+    step, mean_reward): what :func:`auc` reads."""
+    ordered = curves.sort_values(["number", "step"], kind="stable")
+    return {int(n): g["mean_reward"].to_numpy(dtype=float)
+            for n, g in ordered.groupby("number", sort=False)}
+
+
+def seed_samples(runs: Iterable[tuple[int, int, float, float]],
+                 rewards: Mapping[int, np.ndarray]) -> tuple[SeedScores, SeedScores, SeedScores]:
+    """The seed scores every decision reads, from the complete runs (value index, trial
+    number, final score, training time; NaN: no time stored) in run order, with their curves'
+    rewards (:func:`curve_rewards`): per value with a run, in value order, the final scores,
+    the AUCs of the runs with a curve and the training times."""
+    final: SeedScores = {}
+    aucs: SeedScores = {}
+    seconds: SeedScores = {}
+    for vi, number, score, spent in runs:
+        final.setdefault(vi, []).append(score)
+        if number in rewards:
+            aucs.setdefault(vi, []).append(auc(rewards[number]))
+        if not math.isnan(spent):
+            seconds.setdefault(vi, []).append(spent)
+    order = sorted(final)
+    return ({vi: final[vi] for vi in order}, {vi: aucs.get(vi, []) for vi in order},
+            {vi: seconds.get(vi, []) for vi in order})
 
 
 def first_reach(steps: Sequence[float], rewards: Sequence[float], wall_times: Sequence[float],

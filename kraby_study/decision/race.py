@@ -168,25 +168,9 @@ class StudyRace:
         return f"raced: {self.runs} of {self.fixed_runs} runs ({100 * self.share:.0f} %)"
 
 
-def mapped_race(rules: RaceRules, runs: Mapping[int, Mapping[int, float]], planned: int,
-                index: Sequence[int | None]) -> StudyRace:
-    """The race of a study's ``planned`` values (by their index in its study file) replayed on
-    their ended runs, its dropped and settled values mapped to the caller's indices:
-    ``index[v]`` for planned value v, None for one the caller does not list (left out)."""
-    state = race(list(range(planned)), runs, rules)
-
-    def mapped(left: Mapping[int, Drop]) -> dict[int, Drop]:
-        return {at: drop for v, drop in left.items() if (at := index[v]) is not None}
-
-    return StudyRace(rules=rules, dropped=mapped(state.dropped),
-                     runs=sum(len(r) for r in runs.values()), fixed_runs=planned * rules.seeds,
-                     rounds=state.rounds, over=state.over, settled=mapped(state.settled))
-
-
 @dataclass(frozen=True)
 class RaceRuns:
-    """A raced study's ended runs as its evidence holds them, to be replayed
-    (:func:`mapped_race`)."""
+    """A raced study's ended runs as its evidence holds them, to be replayed."""
 
     rules: RaceRules
     planned: int
@@ -197,6 +181,15 @@ class RaceRuns:
     """The caller's index of each planned value, None where the caller does not list it."""
 
     def replayed(self) -> StudyRace:
-        """The race these runs make (:func:`mapped_race`)."""
-        return mapped_race(self.rules, self.runs, self.planned, self.index)
+        """The race of the planned values (by their index in the study file) replayed on these
+        runs, its dropped and settled values mapped to the caller's indices (a value the
+        caller does not list is left out)."""
+        state = race(list(range(self.planned)), self.runs, self.rules)
 
+        def mapped(left: Mapping[int, Drop]) -> dict[int, Drop]:
+            return {at: drop for v, drop in left.items() if (at := self.index[v]) is not None}
+
+        return StudyRace(rules=self.rules, dropped=mapped(state.dropped),
+                         runs=sum(len(r) for r in self.runs.values()),
+                         fixed_runs=self.planned * self.rules.seeds, rounds=state.rounds,
+                         over=state.over, settled=mapped(state.settled))

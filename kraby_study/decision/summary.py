@@ -27,12 +27,14 @@ from kraby_study.decision.intervals import (
 )
 from kraby_study.decision.measures import (
     auc,
+    curve_rewards,
     default_threshold,
     first_reach,
     iqr,
     iqr_unbiased,
     p_improvement,
     p_improvement_interval,
+    seed_samples,
 )
 from kraby_study.decision.race import Drop, RaceRuns, StudyRace
 from kraby_study.decision.selection import RULES, mean_by_value
@@ -415,23 +417,9 @@ def seed_scores(trials: pd.DataFrame, curves: pd.DataFrame, known: int, time_att
     each in run order: the numbers every decision reads."""
     done = trials[(trials["outcome"] == Outcome.COMPLETE) & trials["final_score"].notna()
                   & (trials["vi"] < known)]
-    ordered = curves.sort_values(["number", "step"], kind="stable")
-    rewards = {int(n): g["mean_reward"].to_numpy(dtype=float)
-               for n, g in ordered.groupby("number", sort=False)}
-    final: dict[int, list[float]] = {}
-    aucs: dict[int, list[float]] = {}
-    seconds: dict[int, list[float]] = {}
-    for row in done.itertuples(index=False):
-        vi = int(row.vi)
-        final.setdefault(vi, []).append(float(row.final_score))
-        if int(row.number) in rewards:
-            aucs.setdefault(vi, []).append(auc(rewards[int(row.number)]))
-        spent = float(getattr(row, time_attr))
-        if not math.isnan(spent):
-            seconds.setdefault(vi, []).append(spent)
-    order = sorted(final)
-    return ({vi: final[vi] for vi in order}, {vi: aucs.get(vi, []) for vi in order},
-            {vi: seconds.get(vi, []) for vi in order})
+    runs = done[["vi", "number", "final_score", time_attr]].itertuples(index=False)
+    return seed_samples(((int(vi), int(number), float(score), float(spent))
+                         for vi, number, score, spent in runs), curve_rewards(curves))
 
 
 def decide_sweep(trials: pd.DataFrame, curves: pd.DataFrame, labels: list[str],
