@@ -62,6 +62,8 @@ STUDIES = {
     # name: (parameter, values, extra settings of the study file)
     "s_gamma": ("ppo.gamma", [0.5, 0.99], {}),
     "s_clip": ("ppo.clip_range", [0.1, 0.3], {}),
+    # Eight runs: a kill on its first complete run lands mid-stage even on a loaded machine.
+    "s_clip4": ("ppo.clip_range", [0.1, 0.2, 0.3, 0.4], {}),
     "s_ent": ("ppo.ent_coef", [0.0, 0.05], {}),
     # Bad ones: a winner of a later stage, and of itself.
     "s_fwd": ("ppo.gae_lambda", [0.9, 0.95], {"ppo": {"clip_range": "${winner:s_clip}"}}),
@@ -76,6 +78,8 @@ CAMPAIGNS = {
             "stages": [{"study": "s_gamma", "documented": 0.99},
                        {"study": "s_clip", "documented": 0.3},
                        {"study": "s_ent", "select": "fastest_tied", "documented": 0.0}]},
+    "long": {"name": "long", "start": {"ppo.gamma": 0.9},
+             "stages": [{"study": "s_gamma"}, {"study": "s_clip4"}, {"study": "s_ent"}]},
     "fwd": {"name": "fwd", "stages": [{"study": "s_fwd"}, {"study": "s_clip"}]},
     "selfref": {"name": "selfref", "stages": [{"study": "s_gamma"}, {"study": "s_self"}]},
     "unknown": {"name": "unknown", "stages": [{"study": "s_gamma"}, {"study": "nope"}]},
@@ -275,27 +279,27 @@ def complete_keys(url: str, name: str) -> list[str]:
 @pytest.mark.slow
 def test_a_killed_campaign_resumes_where_it_stopped(workdir: Path, store_url: str) -> None:
     write_conf(workdir)
-    args = ["run", "campaign=tri", "workers=2", f"storage={store_url}", SEEDS, *SLOWER,
+    args = ["run", "campaign=long", "workers=2", f"storage={store_url}", SEEDS, *SLOWER,
             *FAST_HEARTBEAT]
     proc = spawn_cli(*args, cwd=workdir)
-    wait_for(lambda: len(complete_keys(store_url, "tri-s_clip")) >= 1, proc=proc)
+    wait_for(lambda: len(complete_keys(store_url, "long-s_clip4")) >= 1, proc=proc)
     for pid in [proc.pid, *children(proc.pid, workers_only=False)]:
         os.kill(pid, signal.SIGKILL)
     proc.wait()
-    first = [t.number for t in load(store_url, "tri-s_gamma").get_trials()]
-    assert len(complete_keys(store_url, "tri-s_gamma")) == 4
-    assert 1 <= len(complete_keys(store_url, "tri-s_clip")) < 4
-    assert not has_study(store_url, "tri-s_ent")
+    first = [t.number for t in load(store_url, "long-s_gamma").get_trials()]
+    assert len(complete_keys(store_url, "long-s_gamma")) == 4
+    assert 1 <= len(complete_keys(store_url, "long-s_clip4")) < 8
+    assert not has_study(store_url, "long-s_ent")
     if not store_url.startswith("sqlite"):
         time.sleep(5)  # a server waits for the heartbeat grace (4 s) before taking them over
     proc = spawn_cli(*args, cwd=workdir)
     out, _ = proc.communicate(timeout=600)
     assert proc.returncode == 0, out
     assert "3/3 stages finished" in out
-    assert [t.number for t in load(store_url, "tri-s_gamma").get_trials()] == first
-    for name in STAGES:
+    assert [t.number for t in load(store_url, "long-s_gamma").get_trials()] == first
+    for name, runs in (("long-s_gamma", 4), ("long-s_clip4", 8), ("long-s_ent", 4)):
         keys = complete_keys(store_url, name)
-        assert len(keys) == 4 and len(set(keys)) == 4, (name, keys)
+        assert len(keys) == runs and len(set(keys)) == runs, (name, keys)
 
 
 @pytest.mark.slow
