@@ -81,6 +81,16 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid number: {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
 def _whole(text: str) -> int:
     try:
         return int(text)
@@ -133,6 +143,10 @@ SEARCH_FLAGS = [
     Flag("--trials", "search.trials", "total trials of the study, as search.trials=N: "
          "rerunning tops it up to this number, so --trials 50 twice gives 50, not 100 "
          "(default 50)", "N", _positive_int),
+    Flag("--cpu-budget", "search.cpu_budget", "CPU seconds the search may spend over all "
+         "its trials, as search.cpu_budget=S: it starts no trial once its ended trials have "
+         "used them (the running ones finish), so two searches compare at equal cost "
+         "(default: none, --trials alone)", "S", _positive_float),
     WORKERS, STORAGE,
     Flag("--study-name", "search.name", "name of the search in the store, as search.name=NAME "
          "(default ppo_search)", "NAME"),

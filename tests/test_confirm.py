@@ -65,9 +65,12 @@ def test_known_settings_enter_a_space_only_as_far_as_it_holds_them() -> None:
 def test_a_known_configuration_names_what_its_space_cannot_hold(
         workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """rl-zoo3's MountainCarContinuous-v0 settings (n_steps 8, learning rate 7.77e-05) lie
-    outside the default space: enqueued first, those two are drawn by the sampler, and the
-    search says so instead of claiming to evaluate the configuration as it is."""
-    zoo = compose_config(["env=gym", "env.id=MountainCarContinuous-v0", "ppo=zoo"])
+    outside a space of rollouts from 16 steps and rates from 1e-4: enqueued first, those two
+    are drawn by the sampler, and the search says so instead of claiming to evaluate the
+    configuration as it is."""
+    zoo = compose_config(["env=gym", "env.id=MountainCarContinuous-v0", "ppo=zoo",
+                          "search.params.n_steps.choices=[16,32]",
+                          "search.params.learning_rate.low=1e-4"])
     assert outside_space(zoo, resolved_settings(zoo)) == {"n_steps": 8, "learning_rate": 7.77e-05}
     tuned = compose_config(["ppo=tuned"])
     assert outside_space(tuned, resolved_settings(tuned)) == {}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import optuna
@@ -107,6 +108,36 @@ def test_smoke_search_and_the_total_over_invocations(
     assert run_cli("optuna", "--trials", "3", *args) == 0
     assert "0 to run" in capsys.readouterr().out
     assert len(load(db, "tiny").trials) == 3
+
+
+def test_a_cpu_budget_stops_the_search_before_its_trial_total(
+        spaces: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["search=tiny", "--workers", "1", "--pruner", "none", *TINY, "budget.seeds=1"]
+    # A budget far below one trial's CPU time: the first trial runs, then none.
+    assert run_cli("optuna", "--trials", "4", "--cpu-budget", "0.001", *args) == 0
+    out = capsys.readouterr().out
+    db = spaces / "studies" / "kraby.db"
+    # (The second of the warm start's two configurations stays queued for a later command.)
+    trials = [t for t in load(db, "tiny").trials if t.state != TrialState.WAITING]
+    assert len(trials) == 1 and trials[0].state == TrialState.COMPLETE
+    spent = trials[0].user_attrs["cpu_time"]
+    assert spent > 0.001
+    assert "until 0 CPU s are used (0 so far)" in out
+    assert f"{spent:,.0f} of its 0 CPU s used, 1 of 4 trials (stopped by the CPU budget)" in out
+    # Its plan ended at the budget: list counts the trial it ran and the queued one.
+    assert load(db, "tiny").user_attrs["kraby_cpu_budget"] == 0.001
+    assert run_cli("list", "--storage", f"sqlite:///{db}") == 0
+    assert re.search(r"^tiny +search +1/2 ", capsys.readouterr().out, re.M)
+    # A rerun under the same budget starts nothing; a larger one tops the study up to its
+    # total, and the budget is not part of the search's definition.
+    assert run_cli("optuna", "--trials", "4", "--cpu-budget", "0.001", *args) == 0
+    assert [t.state for t in load(db, "tiny").trials] == [TrialState.COMPLETE,
+                                                          TrialState.WAITING]
+    capsys.readouterr()
+    assert run_cli("optuna", "--trials", "4", "--cpu-budget", "100000", *args) == 0
+    trials = load(db, "tiny").trials
+    assert len(trials) == 4 and all(t.state == TrialState.COMPLETE for t in trials)
+    assert "stopped by the CPU budget" not in capsys.readouterr().out
 
 
 def test_a_trial_of_three_seeds_reports_its_first_seed_then_each_seed_score(
@@ -219,6 +250,9 @@ def test_best_of_a_sweep_writes_the_best_value(workdir: Path,
 @pytest.mark.parametrize("argv,message", [
     (["--trials", "0"], "--trials"),
     (["--trials", "abc"], "--trials"),
+    (["--cpu-budget", "0"], "--cpu-budget"),
+    (["--cpu-budget", "inf"], "--cpu-budget"),
+    (["search.cpu_budget=-5"], "search.cpu_budget must be a positive number"),
     (["--sampler", "grid"], "--sampler"),
     (["--pruner", "sometimes"], "--pruner"),
     (["search.params.gamma.low=0.99", "search.params.gamma.high=0.5"], "above high"),

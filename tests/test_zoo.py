@@ -16,6 +16,7 @@ from kraby_study.config import zoo
 from kraby_study.config.compose import compose_config
 from kraby_study.errors import ConfigError
 from kraby_study.plan.settings import resolved_settings
+from kraby_study.plan.space import apply_params, fitted_params, outside_space, validate_search
 from kraby_study.plan.spec import OPTIONAL_PPO, TrialSpec
 from kraby_study.records.stored import Outcome
 from kraby_study.store.store import Store
@@ -150,6 +151,34 @@ def test_the_round_trip_gives_every_classic_control_entry_back(env_id: str) -> N
     # ... and every key rl-zoo3 left out is written at the default it left in force.
     for key in set(written) - set(published):
         assert _means_the_same(key, written[key], zoo.SB3_DEFAULTS[key]), key
+
+
+@pytest.mark.parametrize("env_id", CLASSIC)
+def test_the_gym_space_holds_every_classic_control_entry_as_it_is(env_id: str) -> None:
+    """Enqueued first (search.enqueue=[zoo]), rl-zoo3's settings are evaluated as published:
+    every searched value lies in the default gym space, and the trial they make trains the
+    same settings."""
+    cfg = zoo_config(env_id, "budget=zoo", "search=gym")
+    settings = resolved_settings(cfg)
+    assert outside_space(cfg, settings) == {}
+    params = fitted_params(cfg, settings)
+    assert set(params) == set(cfg.search.params)
+    assert resolved_settings(apply_params(cfg, params)) == settings
+
+
+def test_a_searched_batch_size_at_or_above_the_rollout_is_the_whole_rollout() -> None:
+    cfg = zoo_config("CartPole-v1", "search=gym")  # 8 envs
+    params = {"n_steps": 16, "batch_size": 512}
+    assert apply_params(cfg, params).ppo.batch_size is None  # one minibatch of 128
+    assert apply_params(cfg, {"n_steps": 16, "batch_size": 32}).ppo.batch_size == 32
+    validate_search(cfg)
+    bad = zoo_config("CartPole-v1", "search=gym",
+                     "search.params.batch_size.choices=[24]")
+    with pytest.raises(ConfigError, match="batch_size 24 does not divide the rollout 8 x 8"):
+        validate_search(bad)
+    one = zoo_config("CartPole-v1", "search=gym", "search.params.batch_size.choices=[1]")
+    with pytest.raises(ConfigError, match="batch sizes must be whole numbers >= 2"):
+        validate_search(one)
 
 
 def test_the_round_trip_holds_for_every_key_and_string_the_translation_reads() -> None:

@@ -162,6 +162,10 @@ class SearchConfig:
     """Name of the study in the store."""
     trials: int = 50
     """Total trials of the study, over every invocation (a rerun tops it up to this number)."""
+    cpu_budget: float | None = None
+    """CPU seconds the search may spend, over every attempt of every trial and invocation:
+    once its ended trials have used them it asks for no new trial (those running finish), so
+    two searches compare at equal cost. null: no limit but ``trials``."""
     sampler: str = "tpe"
     """tpe, random or nsga2 (NSGA-II, Optuna's default population of 50). TPE handles one
     objective or two."""

@@ -65,4 +65,11 @@ def search_count(cfg: DictConfig) -> Count:
     return Count(study=str(cfg.search.name), trials=int(cfg.search.trials),
                  steps_per_trial=seeds * int(cfg.budget.steps),
                  shape=f"search.trials, each {seeds} seeds x {int(cfg.budget.steps):,} env "
-                       "steps", definition=search_definition(cfg))
+                       "steps" + _budget_part(cfg), definition=search_definition(cfg))
+
+
+def _budget_part(cfg: DictConfig) -> str:
+    """A search's CPU budget as the plan names it: fewer trials may run."""
+    budget = cfg.search.get("cpu_budget")
+    return "" if budget is None else (f"; fewer if its {float(budget):,.0f} CPU s "
+                                      "(search.cpu_budget) are used first")

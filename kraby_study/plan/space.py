@@ -21,7 +21,9 @@ from kraby_study.config.validate import (
 from kraby_study.errors import ConfigError
 from kraby_study.plan.settings import resolved_settings, with_value
 from kraby_study.plan.spec import (
+    OPTIONAL_PPO,
     evaluation_of,
+    ppo_setting,
     seeding_of,
     with_evaluation,
     with_seeding,
@@ -32,6 +34,9 @@ from kraby_study.records.values import value_key
 SAMPLERS = ("tpe", "random", "nsga2")
 PRUNERS = ("median", "hyperband", "wilcoxon", "none")
 NMINIBATCHES = "ppo.nminibatches"
+BATCH_SIZE = "ppo.batch_size"
+"""A searched batch size at or above a trial's rollout means the whole rollout (batch_size
+null), as rl-zoo3's settings mean it; below it, it must divide the rollout."""
 
 
 def _fail(message: str) -> None:
@@ -52,6 +57,9 @@ def validate_search(cfg: DictConfig) -> None:
     for name in ("trials", "checkpoints"):
         if int(search[name]) < 1:
             _fail(f"search.{name} must be at least 1, got {search[name]}")
+    if search.cpu_budget is not None and not float(search.cpu_budget) > 0:
+        _fail(f"search.cpu_budget must be a positive number of CPU seconds (or null), "
+              f"got {search.cpu_budget}")
     for name in ("startup_trials", "pruner_startup_trials"):
         if int(search[name]) < 0:
             _fail(f"search.{name} must be >= 0, got {search[name]}")
@@ -155,6 +163,10 @@ def _validate_param(cfg: DictConfig, name: str, param: DictConfig) -> None:
         if any(not float(s).is_integer() or s < 1 for s in samples):
             _fail(f"{where}: nminibatches must be whole numbers >= 1")
         return
+    if param.path == BATCH_SIZE:
+        if any(not float(s).is_integer() or s < 2 for s in samples):
+            _fail(f"{where}: batch sizes must be whole numbers >= 2")
+        return
     for sample in samples:
         value = int(sample) if param.type == "int" else sample
         try:
@@ -173,7 +185,17 @@ def _choices(cfg: DictConfig, path: str, default: Any) -> list[Any]:
 
 
 def _validate_batches(cfg: DictConfig) -> None:
-    """Every sampled n_steps x n_envs rollout must split into the sampled minibatch counts."""
+    """Every sampled n_steps x n_envs rollout must split into the sampled minibatch counts, and
+    every sampled batch size below a rollout must divide it."""
+    sizes = _choices(cfg, BATCH_SIZE, None)
+    if sizes != [None]:
+        for n_steps in _choices(cfg, "ppo.n_steps", cfg.ppo.n_steps):
+            for n_envs in _choices(cfg, "ppo.n_envs", cfg.ppo.n_envs):
+                rollout = int(n_steps) * int(n_envs)
+                for size in sizes:
+                    if int(size) < rollout and rollout % int(size):
+                        _fail(f"search.params: batch_size {size} does not divide the rollout "
+                              f"{n_steps} x {n_envs} = {rollout}")
     counts = _choices(cfg, NMINIBATCHES, None)
     if counts == [None]:
         return
@@ -205,16 +227,21 @@ def _validate_run_lengths(cfg: DictConfig) -> None:
 def apply_params(cfg: DictConfig, params: dict[str, Any]) -> DictConfig:
     """The config of one trial: the sampled values set, the batch size made explicit."""
     trial_cfg = cfg
-    minibatches = None
+    minibatches = batch = None
     for name, value in params.items():
         path = str(cfg.search.params[name].path)
         if path == NMINIBATCHES:
             minibatches = int(value)
+        elif path == BATCH_SIZE:
+            batch = int(value)
         else:
             trial_cfg = with_value(trial_cfg, path, value)
     if minibatches is not None:
         trial_cfg = with_value(trial_cfg, "ppo.batch_size", rollout_size(trial_cfg.ppo)
                                // minibatches)
+    if batch is not None:
+        whole = batch >= rollout_size(trial_cfg.ppo)
+        trial_cfg = with_value(trial_cfg, "ppo.batch_size", None if whole else batch)
     validate_env(trial_cfg.env, trial_cfg.ppo)
     validate_ppo(trial_cfg.ppo)
     return trial_cfg
@@ -235,6 +262,7 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
     search = to_container(cfg.search)
     search.pop("trials")
     search.pop("name")
+    search.pop("cpu_budget", None)  # when to stop, like the trial total: a search may extend
     # Resolved as before the defaults existed: a one-objective search keeps the definition
     # (and the fingerprint) it had when its pruner was median and its objective one name.
     search["pruner"] = pruner_name(cfg)
@@ -269,14 +297,29 @@ def _setting_values(cfg: DictConfig, settings: dict[str, Any]) -> dict[str, Any]
     values: dict[str, Any] = {}
     for name, p in cfg.search.params.items():
         root, leaf = str(p.path).split(".", 1)
-        if str(p.path) == NMINIBATCHES:
+        if str(p.path) in (NMINIBATCHES, BATCH_SIZE):
             ppo = settings["ppo"]
             rollout = int(ppo["n_steps"]) * int(ppo["n_envs"])
             batch = int(ppo["batch_size"])
-            values[str(name)] = rollout // batch if rollout % batch == 0 else rollout / batch
+            if str(p.path) == BATCH_SIZE:
+                values[str(name)] = _batch_choice(p, batch, rollout)
+            else:
+                values[str(name)] = (rollout // batch if rollout % batch == 0
+                                     else rollout / batch)
         elif leaf in settings.get(root, {}):
             values[str(name)] = settings[root][leaf]
+        elif root == "ppo" and leaf in OPTIONAL_PPO:
+            values[str(name)] = ppo_setting(settings["ppo"], leaf)  # left out at its default
     return values
+
+
+def _batch_choice(param: DictConfig, batch: int, rollout: int) -> int:
+    """The searched batch size that gives a resolved batch: itself below the rollout; for the
+    whole rollout, the smallest choice at or above it (the batch itself when none is)."""
+    if batch < rollout or param.type != "categorical":
+        return batch
+    above = sorted(int(c) for c in to_container(param.choices) if int(c) >= rollout)
+    return above[0] if above else batch
 
 
 def outside_space(cfg: DictConfig, settings: dict[str, Any]) -> dict[str, Any]:

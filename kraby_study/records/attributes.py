@@ -201,7 +201,11 @@ class StudyAttrs:
     fingerprint: str | None = None
     """Hash of the definition; a command with another definition under this name is refused."""
     planned: int | None = None
-    """Runs planned (sweeps) or the trial total (searches)."""
+    """Runs planned (sweeps) or the trial total (searches); a search its CPU budget stopped
+    plans the trials it ran."""
+    cpu_budget: float | None = None
+    """A search's CPU budget (search.cpu_budget) in CPU seconds, as the latest command that
+    set one gave it."""
     sampler: str | None = field(default=None, metadata={"stored": "sampler"})
     """A search's sampler (tpe or random)."""
     sampler_seed: int | None = field(default=None, metadata={"stored": "sampler_seed"})

@@ -162,6 +162,12 @@ def counted(trials: Iterable[T]) -> list[T]:
     return [t for t in ordered if counts(t)]
 
 
+def spent_cpu(trials: Iterable[StoredTrial]) -> float:
+    """CPU seconds the trials used, every attempt counted (a failed or retried one too): the
+    ended trials' stored ``cpu_time``; a running trial has none yet."""
+    return float(sum(float(t.user_attrs.get("cpu_time") or 0.0) for t in trials))
+
+
 def latest_by_key(trials: Iterable[T]) -> dict[str, T]:
     """The counted trial of each key."""
     return {str(t.user_attrs["key"]): t for t in counted(trials)

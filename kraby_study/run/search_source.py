@@ -24,7 +24,7 @@ from kraby_study.plan.space import (
 from kraby_study.plan.spec import TrialSpec, evaluation_of, fingerprint, seeding_of
 from kraby_study.records.attributes import SelectRule, StudyAttrs, TrialAttrs, TrialResult
 from kraby_study.records.definition import floor_score
-from kraby_study.records.stored import Failure, Outcome, failure, search_key
+from kraby_study.records.stored import Failure, Outcome, failure, search_key, spent_cpu
 from kraby_study.records.values import value_label
 from kraby_study.run.executor import Executor
 from kraby_study.run.progress import Progress
@@ -61,12 +61,25 @@ class SearchSource(StudySource):
         super().__init__(ledger)
         self.cfg = cfg
         self.total = int(cfg.search.trials)
+        budget = cfg.search.get("cpu_budget")
+        self.cpu_budget = None if budget is None else float(budget)
         self.space = distributions(cfg)
 
+    def spent(self) -> float:
+        """CPU seconds the search's ended trials have used, every attempt counted."""
+        return spent_cpu(self.ledger.trials())
+
+    def over_budget(self) -> bool:
+        """Whether the search has used its CPU budget (never without one)."""
+        return self.cpu_budget is not None and self.spent() >= self.cpu_budget
+
     def next_trial(self) -> tuple[int, TrialSpec] | None:
-        """Ask for the next trial (a queued retry first), or None when the total is reached."""
+        """Ask for the next trial (a queued retry first), or None when the total is reached or
+        the CPU budget is used."""
         while True:
             with self.ledger.plan_lock():
+                if self.over_budget():
+                    return None
                 waiting = self.ledger.trials(TrialState.WAITING)
                 if not waiting and len(self.counted()) >= self.total:
                     return None
@@ -169,8 +182,10 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
                                      fingerprint=fingerprint(definition)),
                           sampler=make_sampler(cfg), pruner=make_pruner(cfg),
                           directions=directions(cfg))
+    budget = cfg.search.get("cpu_budget")
     ledger.update(StudyAttrs(sampler=str(cfg.search.sampler), sampler_seed=int(cfg.search.seed),
-                             planned=int(cfg.search.trials)))
+                             planned=int(cfg.search.trials),
+                             cpu_budget=None if budget is None else float(budget)))
     if len(objectives(cfg)) == 2 and ledger.attrs.select is None and not ledger.trials():
         # A new front is selected by evidence; a search stored before rules were stored keeps
         # fastest_tied (answers.search_front.front_rule), so it selects as it did.
@@ -186,8 +201,25 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
     slots = max(1, min(workers, left))
     print(f"search {ledger.name}: {source.total} trials, {done} done, {left} to run on "
           f"{slots} worker(s); {cfg.budget.seeds} seed(s) x {cfg.budget.steps:,} steps each, "
-          f"{cfg.search.sampler} sampler, {pruner_label(cfg)}", file=stream, flush=True)
+          f"{cfg.search.sampler} sampler, {pruner_label(cfg)}{_budget_text(source)}",
+          file=stream, flush=True)
     progress = Progress(ledger.name, source.total, done, stream, live)
     summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream), slots, progress,
                          executor, heartbeat_seconds=float(cfg.heartbeat_interval))
+    if source.cpu_budget is not None:
+        ended = len([t for t in source.counted() if t.state != TrialState.WAITING])
+        stopped = source.over_budget() and ended < source.total
+        print(f"search {ledger.name}: {source.spent():,.0f} of its {source.cpu_budget:,.0f} "
+              f"CPU s used, {ended} of {source.total} trials"
+              + (" (stopped by the CPU budget)" if stopped else ""), file=stream, flush=True)
+        if stopped:
+            # The search's plan ended at its budget: list and the report count it complete.
+            ledger.update(StudyAttrs(planned=ended))
     return summary, ledger
+
+
+def _budget_text(source: SearchSource) -> str:
+    """The start line's CPU budget part: the budget and what is already spent."""
+    if source.cpu_budget is None:
+        return ""
+    return (f"; until {source.cpu_budget:,.0f} CPU s are used ({source.spent():,.0f} so far)")

@@ -1,0 +1,187 @@
+"""Benchmark: the default search against random search at equal CPU cost, on one Gymnasium env.
+
+Run: python benchmarks/bench_search.py --env-id Pendulum-v1 --cpu-budget 1800
+         [--sampler-seeds 0 1 2] [--confirm-seeds 5] [--storage URL] [--workers 2]
+         [--samplers tpe random] [--tag NAME] [--no-zoo] [KEY=VALUE ...]
+
+For each sampler seed and each sampler, one search (``kraby-study optuna``, evaluation
+objective, rl-zoo3's settings for the env as the fixed ones, ``budget=zoo``) runs until it has
+used ``--cpu-budget`` CPU seconds (``search.cpu_budget``: no trial starts after that, the running
+ones finish, so each search overshoots by less than one trial per worker). Nothing is enqueued,
+so neither search starts from rl-zoo3's settings. The search's pick (its best complete trial)
+is then retrained by ``kraby-study confirm --top 1`` on ``--confirm-seeds`` fresh seeds, each
+scored on its own evaluation episodes, and rl-zoo3's settings are confirmed once on the same
+fresh seeds, for reference.
+
+Two searches are compared by what their picks do on the fresh seeds, not by the search's own
+best score (the maximum of noisy scores, which overstates its pick: the table shows both). One
+sampler seed says little about a sampler, so the comparison is over several: per sampler seed,
+the difference of the two picks' confirmed means (paired: same seed of the sampler, same fresh
+seeds, same budget), then their mean with a 95 % Student-t interval over the sampler seeds and
+an exact one-sided Wilcoxon signed-rank p (scipy) that the default does worse, where there are
+at least 2 sampler seeds. Extra ``KEY=VALUE`` overrides go to every command (e.g.
+``budget.seeds=2``).
+
+The last line reads ``bench_search: <default> - random confirmed mean difference D (95 % t CI
+[lo, hi], S sampler seeds); CPU <default> C1 s, random C2 s``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import subprocess
+import sys
+from dataclasses import dataclass
+
+import optuna
+from scipy import stats
+
+optuna.logging.set_verbosity(optuna.logging.WARNING)
+
+
+@dataclass
+class Arm:
+    """One search and its confirmed pick."""
+
+    sampler: str
+    seed: int
+    study: str
+    trials: str = ""
+    cpu: float = math.nan
+    pick: str = ""
+    search_score: float = math.nan
+    confirmed: list[float] | None = None
+    confirm_cpu: float = math.nan
+
+    @property
+    def mean(self) -> float:
+        return statistics.fmean(self.confirmed) if self.confirmed else math.nan
+
+
+def kraby(*args: str) -> None:
+    """Run one kraby-study command; stop the benchmark if it fails."""
+    command = [sys.executable, "-m", "kraby_study.cli", *args]
+    print("$ kraby-study " + " ".join(args), flush=True)
+    done = subprocess.run(command, text=True, capture_output=True)
+    if done.returncode != 0:
+        sys.exit(f"bench_search: a command failed ({done.returncode}):\n{done.stdout}"
+                 f"{done.stderr}")
+    lines = done.stdout.strip().splitlines()
+    for line in lines[-3:]:
+        print("  " + line)
+
+
+def read_search(storage: str, arm: Arm) -> None:
+    """The search's trials, CPU seconds used and pick (its best complete trial)."""
+    study = optuna.load_study(study_name=arm.study, storage=storage)
+    trials = [t for t in study.trials if t.state != optuna.trial.TrialState.WAITING]
+    states = [t.state for t in trials]
+    complete = [t for t in trials if t.state == optuna.trial.TrialState.COMPLETE]
+    arm.trials = (f"{len(complete)}/{states.count(optuna.trial.TrialState.PRUNED)}/"
+                  f"{states.count(optuna.trial.TrialState.FAIL)}")
+    arm.cpu = sum(float(t.user_attrs.get("cpu_time") or 0.0) for t in trials)
+    best = max(complete, key=lambda t: float(t.value))  # type: ignore[arg-type]
+    arm.pick, arm.search_score = f"t{best.number}", float(best.value)  # type: ignore[arg-type]
+
+
+def read_confirm(storage: str, name: str, label: str | None = None) -> tuple[list[float], float]:
+    """One arm's confirmed scores by fresh seed (in seed order) and its mean CPU s per run."""
+    study = optuna.load_study(study_name=name, storage=storage)
+    runs = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE
+            and (label is None or str(t.user_attrs.get("key", "")).startswith(label))]
+    runs.sort(key=lambda t: int(t.user_attrs["seed"]))
+    scores = [float(t.user_attrs["final_score"]) for t in runs]
+    cpu = statistics.fmean(float(t.user_attrs["cpu_time"]) for t in runs) if runs else math.nan
+    return scores, cpu
+
+
+def t_interval(values: list[float]) -> tuple[float, float]:
+    """95 % Student-t interval of the mean (nan below 2 values)."""
+    if len(values) < 2:
+        return math.nan, math.nan
+    half = stats.t.ppf(0.975, len(values) - 1) * statistics.stdev(values) / math.sqrt(len(values))
+    mean = statistics.fmean(values)
+    return mean - half, mean + half
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env-id", required=True)
+    parser.add_argument("--cpu-budget", type=float, required=True,
+                        help="CPU seconds each search may use")
+    parser.add_argument("--sampler-seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--samplers", nargs="+", default=["tpe", "random"],
+                        help="the default's sampler, then the one it is compared with (one "
+                             "sampler: its searches alone, no comparison)")
+    parser.add_argument("--tag", default=None,
+                        help="first word of the study names (default: the env's name)")
+    parser.add_argument("--no-zoo", action="store_true",
+                        help="do not confirm rl-zoo3's settings")
+    parser.add_argument("--confirm-seeds", type=int, default=5)
+    parser.add_argument("--storage", default="sqlite:///bench_search.db")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("overrides", nargs="*", help="KEY=VALUE for every command")
+    args = parser.parse_intermixed_args(argv)
+    if (args.cpu_budget <= 0 or args.confirm_seeds < 2 or not args.sampler_seeds
+            or len(args.samplers) > 2):
+        parser.error("--cpu-budget must be positive, --confirm-seeds at least 2, "
+                     "--sampler-seeds not empty and --samplers one or two")
+    env = ["env=gym", f"env.id={args.env_id}", "ppo=zoo", "budget=zoo", *args.overrides]
+    common = ["--storage", args.storage, "--workers", str(args.workers), "save_models=false"]
+    tag = args.tag or args.env_id.split("-")[0].lower()
+    arms: list[Arm] = []
+    for seed in args.sampler_seeds:
+        for sampler in args.samplers:
+            arm = Arm(sampler, seed, f"{tag}-{sampler}-s{seed}")
+            kraby("optuna", "--objective", "evaluation", "--sampler", sampler, "--seed",
+                  str(seed), "--cpu-budget", f"{args.cpu_budget:g}", "--trials", "100000",
+                  "--study-name", arm.study, "search.enqueue=[]", *common, *env)
+            read_search(args.storage, arm)
+            kraby("confirm", "--study-name", arm.study, "--top", "1", "--seeds",
+                  str(args.confirm_seeds), *common, *env)
+            arm.confirmed, arm.confirm_cpu = read_confirm(args.storage, f"{arm.study}-confirm")
+            arms.append(arm)
+    zoo_scores: list[float] = []
+    if not args.no_zoo:
+        zoo = f"{tag}-zoo-confirm"
+        kraby("confirm", "--baseline", "ppo=zoo", "--seeds", str(args.confirm_seeds),
+              f"confirm.name={zoo}", "search.objective=evaluation", *common, *env)
+        zoo_scores, zoo_cpu = read_confirm(args.storage, zoo)
+
+    print(f"\n{args.env_id}: each search {args.cpu_budget:,.0f} CPU s; picks retrained on "
+          f"{args.confirm_seeds} fresh seeds (mean [95 % t CI over the seeds])")
+    print("| sampler | seed | trials c/p/f | CPU s used | pick | search score | confirmed mean "
+          "| CPU s per run |")
+    print("|---|---:|---:|---:|---|---:|---|---:|")
+    for arm in arms:
+        low, high = t_interval(arm.confirmed or [])
+        print(f"| {arm.sampler} | {arm.seed} | {arm.trials} | {arm.cpu:,.0f} | {arm.pick} | "
+              f"{arm.search_score:.1f} | {arm.mean:.1f} [{low:.1f}, {high:.1f}] | "
+              f"{arm.confirm_cpu:.1f} |")
+    if zoo_scores:
+        low, high = t_interval(zoo_scores)
+        print(f"| ppo=zoo | - | - | - | - | - | {statistics.fmean(zoo_scores):.1f} "
+              f"[{low:.1f}, {high:.1f}] | {zoo_cpu:.1f} |")
+    if len(args.samplers) == 1:
+        return 0
+
+    default, other = args.samplers
+    by = {(a.sampler, a.seed): a for a in arms}
+    diffs = [by[(default, s)].mean - by[(other, s)].mean for s in args.sampler_seeds]
+    low, high = t_interval(diffs)
+    if len(diffs) >= 2 and any(d != 0 for d in diffs):
+        p = stats.wilcoxon(diffs, alternative="less").pvalue
+        print(f"Wilcoxon signed-rank (exact, one-sided, {default} worse), n={len(diffs)} "
+              f"sampler seeds: p = {p:.3g}")
+    cpu = {name: statistics.fmean(a.cpu for a in arms if a.sampler == name)
+           for name in args.samplers}
+    print(f"bench_search: {default} - {other} confirmed mean difference "
+          f"{statistics.fmean(diffs):.1f} (95 % t CI [{low:.1f}, {high:.1f}], {len(diffs)} "
+          f"sampler seeds); CPU {default} {cpu[default]:,.0f} s, {other} {cpu[other]:,.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,61 @@
+"""benchmarks/bench_search.py: two samplers' searches at equal CPU cost, each pick confirmed."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+import sys
+from pathlib import Path
+
+import optuna
+import pytest
+from optuna.trial import TrialState
+
+optuna.logging.set_verbosity(optuna.logging.WARNING)
+
+
+def _bench() -> object:
+    path = Path(__file__).parents[1] / "benchmarks" / "bench_search.py"
+    spec = importlib.util.spec_from_file_location("bench_search", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["bench_search"] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.slow
+def test_the_comparison_runs_both_samplers_at_equal_cost_and_confirms_each_pick(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)
+    url = f"sqlite:///{tmp_path / 'b.db'}"
+    budget = 4.0
+    bench = _bench()
+    assert bench.main([  # type: ignore[attr-defined]
+        "--env-id", "CartPole-v1", "--cpu-budget", str(budget), "--sampler-seeds", "0", "1",
+        "--confirm-seeds", "2", "--storage", url, "--workers", "1",
+        "budget.steps=1024", "budget.seeds=1", "budget.curve_every=128",
+        "search.eval_episodes=4", "search.params.n_steps.choices=[8,16]",
+        "search.params.n_epochs.high=2"]) == 0
+    out = capsys.readouterr().out
+    for sampler in ("tpe", "random"):
+        for seed in (0, 1):
+            study = optuna.load_study(study_name=f"cartpole-{sampler}-s{seed}", storage=url)
+            ended = [t for t in study.trials if t.state != TrialState.WAITING]
+            spent = sum(t.user_attrs["cpu_time"] for t in ended)
+            # It stopped at its budget: the trials before the last had not used it up.
+            assert spent >= budget > spent - ended[-1].user_attrs["cpu_time"]
+            assert study.user_attrs["sampler"] == sampler
+            assert study.user_attrs["sampler_seed"] == seed
+            confirm = optuna.load_study(study_name=f"cartpole-{sampler}-s{seed}-confirm",
+                                        storage=url)
+            runs = [t for t in confirm.trials if t.state == TrialState.COMPLETE]
+            assert sorted(t.user_attrs["seed"] for t in runs) == [1000, 1001]
+            assert re.search(rf"^\| {sampler} \| {seed} \| \d+/\d+/\d+ \| ", out, re.M)
+    zoo = optuna.load_study(study_name="cartpole-zoo-confirm", storage=url)
+    assert len([t for t in zoo.trials if t.state == TrialState.COMPLETE]) == 2
+    last = out.strip().splitlines()[-1]
+    assert re.fullmatch(r"bench_search: tpe - random confirmed mean difference -?[\d.]+ \(95 % "
+                        r"t CI \[-?[\d.]+, -?[\d.]+\], 2 sampler seeds\); CPU tpe [\d,]+ s, "
+                        r"random [\d,]+ s", last), last
