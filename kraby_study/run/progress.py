@@ -88,11 +88,16 @@ class Progress:
       are counted as waiting here, so the ETA is then an upper bound.
 
     Interrupted attempts are not ended trials: they do not count as done.
+
+    A search under a CPU budget ends when the budget is used, whatever its trial total, so its
+    ``budget`` (a callable giving e.g. ``845 of 1,200 CPU s used``) takes the ETA's place.
     """
 
     def __init__(self, title: str, total: int, done: int, stream: TextIO | None = None,
-                 live: bool | None = None, *, clock: Callable[[], float] = time.monotonic) -> None:
+                 live: bool | None = None, *, clock: Callable[[], float] = time.monotonic,
+                 budget: Callable[[], str] | None = None) -> None:
         self.title = title
+        self.budget = budget
         self.total = total
         self.done = done
         self.failed = 0
@@ -204,7 +209,7 @@ class Progress:
 
     def figures(self) -> str:
         """``1,820 steps/s, ETA 1m05s``: what every line ends with."""
-        return f"{self.speed()} steps/s, ETA {self.eta()}"
+        return f"{self.speed()} steps/s, {self._left()}"
 
     # -- output -------------------------------------------------------------------------------
 
@@ -221,7 +226,11 @@ class Progress:
     def _status(self) -> str:
         """What the bar shows after its count: ``1,820 steps/s, 2 running, 0 failed, ETA ...``."""
         return (f"{self.speed()} steps/s, {len(self.running)} running, {self.failed} failed, "
-                f"ETA {self.eta()}")
+                f"{self._left()}")
+
+    def _left(self) -> str:
+        """``ETA 1m05s``, or under a CPU budget what of it is used."""
+        return self.budget() if self.budget is not None else f"ETA {self.eta()}"
 
     def _postfix(self) -> None:
         if self.bar is not None:

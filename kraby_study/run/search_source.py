@@ -73,6 +73,10 @@ class SearchSource(StudySource):
         """Whether the search has used its CPU budget (never without one)."""
         return self.cpu_budget is not None and self.spent() >= self.cpu_budget
 
+    def used_text(self) -> str:
+        """What a progress line shows of the CPU budget: ``845 of 1,200 CPU s used``."""
+        return f"{self.spent():,.0f} of {self.cpu_budget or 0:,.0f} CPU s used"
+
     def next_trial(self) -> tuple[int, TrialSpec] | None:
         """Ask for the next trial (a queued retry first), or None when the total is reached or
         the CPU budget is used."""
@@ -203,7 +207,8 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
           f"{slots} worker(s); {cfg.budget.seeds} seed(s) x {cfg.budget.steps:,} steps each, "
           f"{cfg.search.sampler} sampler, {pruner_label(cfg)}{_budget_text(source)}",
           file=stream, flush=True)
-    progress = Progress(ledger.name, source.total, done, stream, live)
+    progress = Progress(ledger.name, source.total, done, stream, live,
+                        budget=None if source.cpu_budget is None else source.used_text)
     summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream), slots, progress,
                          executor, heartbeat_seconds=float(cfg.heartbeat_interval))
     if source.cpu_budget is not None:
