@@ -195,3 +195,34 @@ def test_a_lost_database_is_retried_then_given_up(capsys: pytest.CaptureFixture[
     assert "retrying" in capsys.readouterr().out
     with pytest.raises(DatabaseLost, match="lost the database for 1 s"):
         Retrying(_Flaky(failures=10**6), patience=1, stream=os.sys.stdout).next_trial()
+
+
+def test_a_trial_taken_but_never_beaten_is_requeued_after_the_grace() -> None:
+    """A command killed between taking a trial and its first heartbeat leaves it running with
+    no heartbeat, which Optuna's stale check skips: past the grace it is requeued too."""
+    from datetime import datetime, timedelta
+
+    from kraby_study.records.attributes import StudyAttrs, TrialAttrs
+    from kraby_study.store.store import opened
+
+    with fresh_database() as url, opened(url, heartbeat_interval=1, heartbeat_grace=4) as store:
+        ledger = store.define("orphan", StudyAttrs(kind="sweep", definition={"x": 1},
+                                                   fingerprint="f"))
+        ledger.queue({}, TrialAttrs(key="v0-s0"))
+        storage = ledger._storage
+        waiting = ledger.trials(TrialState.WAITING)[0]
+        trial_id = storage.get_trial_id_from_study_id_trial_number(ledger._study_id,
+                                                                   waiting.number)
+        # Taken (running) without a heartbeat, as the killed command left it.
+        assert storage.set_trial_state_values(trial_id, TrialState.RUNNING)
+        assert ledger.requeue_orphans() == 0  # within the grace: its owner may be alive
+        from optuna.storages._rdb import models
+        session = storage.scoped_session()
+        row = session.query(models.TrialModel).filter_by(trial_id=trial_id).one()
+        row.datetime_start = datetime.now() - timedelta(seconds=10)
+        session.commit()
+        session.close()
+        assert ledger.requeue_orphans() == 1
+        states = [t.state for t in ledger.trials()]
+        assert states == [TrialState.FAIL, TrialState.WAITING]
+        assert ledger.trials(TrialState.WAITING)[0].user_attrs["key"] == "v0-s0"

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Collection, Iterable, Mapping, Sequence
 from contextlib import AbstractContextManager
+from datetime import datetime
 from typing import TYPE_CHECKING, Any
 
 import optuna
@@ -222,7 +223,30 @@ class StudyLedger:
             return len(orphans)
         before = len(self.trials(TrialState.RUNNING))
         optuna.storages.fail_stale_trials(self._study)
+        # Optuna skips a running trial with no heartbeat at all: one whose command stopped
+        # between taking it and its first heartbeat. Past the grace period it is an orphan too.
+        for number in self._unbeaten(self._storage.grace_period or 0):
+            self.requeue(number, failure(Failure.INTERRUPTED, "its command stopped before "
+                                         "its first heartbeat"))
         return before - len(self.trials(TrialState.RUNNING))
+
+    def _unbeaten(self, grace: float) -> list[int]:
+        """Running trials that never had a heartbeat and started over ``grace`` seconds ago
+        (``datetime_start`` is the taking command's local time, as Optuna writes it)."""
+        from optuna.storages._rdb import models
+
+        session = self._storage.scoped_session()
+        try:
+            rows = (session.query(models.TrialModel)
+                    .filter(models.TrialModel.study_id == self._study_id,
+                            models.TrialModel.state == TrialState.RUNNING)
+                    .all())
+            now = datetime.now()
+            return [row.number for row in rows
+                    if not row.heartbeats and row.datetime_start is not None
+                    and (now - row.datetime_start).total_seconds() > grace]
+        finally:
+            session.close()
 
     def heartbeat(self, numbers: Iterable[int]) -> None:
         """Tell other machines these trials' owner is alive (PostgreSQL only)."""
