@@ -86,11 +86,10 @@ def read_search(storage: str, arm: Arm) -> None:
     arm.pick, arm.search_score = f"t{best.number}", float(best.value)  # type: ignore[arg-type]
 
 
-def read_confirm(storage: str, name: str, label: str | None = None) -> tuple[list[float], float]:
-    """One arm's confirmed scores by fresh seed (in seed order) and its mean CPU s per run."""
+def read_confirm(storage: str, name: str) -> tuple[list[float], float]:
+    """A one-arm confirm's scores by fresh seed (in seed order) and its mean CPU s per run."""
     study = optuna.load_study(study_name=name, storage=storage)
-    runs = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE
-            and (label is None or str(t.user_attrs.get("key", "")).startswith(label))]
+    runs = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
     runs.sort(key=lambda t: int(t.user_attrs["seed"]))
     scores = [float(t.user_attrs["final_score"]) for t in runs]
     cpu = statistics.fmean(float(t.user_attrs["cpu_time"]) for t in runs) if runs else math.nan

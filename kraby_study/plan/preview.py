@@ -12,7 +12,7 @@ from typing import Any
 from omegaconf import DictConfig
 
 from kraby_study.config.validate import to_container
-from kraby_study.plan.space import search_definition
+from kraby_study.plan.space import search_cpu_budget, search_definition
 from kraby_study.plan.spec import StudyPlan
 
 
@@ -70,6 +70,6 @@ def search_count(cfg: DictConfig) -> Count:
 
 def _budget_part(cfg: DictConfig) -> str:
     """A search's CPU budget as the plan names it: fewer trials may run."""
-    budget = cfg.search.get("cpu_budget")
+    budget = search_cpu_budget(cfg)
     return "" if budget is None else (f"; fewer if its {float(budget):,.0f} CPU s "
                                       "(search.cpu_budget) are used first")

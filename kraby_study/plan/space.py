@@ -100,6 +100,13 @@ def pruner_name(cfg: DictConfig) -> str:
     return "none" if len(objectives(cfg)) == 2 else "median"
 
 
+def search_cpu_budget(cfg: DictConfig) -> float | None:
+    """The CPU seconds a search may spend over all its trials (``search.cpu_budget``), or None
+    for no limit but the trial total."""
+    budget = cfg.search.get("cpu_budget")
+    return None if budget is None else float(budget)
+
+
 def search_floor(cfg: DictConfig) -> str | None:
     """The search's floor: the enqueued ppo config whose score a two-objective search's trials
     must reach to be feasible (``search.floor``); None with one objective, which has none."""

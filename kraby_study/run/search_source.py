@@ -17,6 +17,7 @@ from kraby_study.plan.space import (
     objectives,
     outside_space,
     pruner_name,
+    search_cpu_budget,
     search_definition,
     search_floor,
     wilcoxon_seeds,
@@ -61,8 +62,7 @@ class SearchSource(StudySource):
         super().__init__(ledger)
         self.cfg = cfg
         self.total = int(cfg.search.trials)
-        budget = cfg.search.get("cpu_budget")
-        self.cpu_budget = None if budget is None else float(budget)
+        self.cpu_budget = search_cpu_budget(cfg)
         self.space = distributions(cfg)
 
     def spent(self) -> float:
@@ -186,10 +186,8 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
                                      fingerprint=fingerprint(definition)),
                           sampler=make_sampler(cfg), pruner=make_pruner(cfg),
                           directions=directions(cfg))
-    budget = cfg.search.get("cpu_budget")
     ledger.update(StudyAttrs(sampler=str(cfg.search.sampler), sampler_seed=int(cfg.search.seed),
-                             planned=int(cfg.search.trials),
-                             cpu_budget=None if budget is None else float(budget)))
+                             planned=int(cfg.search.trials), cpu_budget=search_cpu_budget(cfg)))
     if len(objectives(cfg)) == 2 and ledger.attrs.select is None and not ledger.trials():
         # A new front is selected by evidence; a search stored before rules were stored keeps
         # fastest_tied (answers.search_front.front_rule), so it selects as it did.

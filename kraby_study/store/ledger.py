@@ -225,10 +225,17 @@ class StudyLedger:
         optuna.storages.fail_stale_trials(self._study)
         # Optuna skips a running trial with no heartbeat at all: one whose command stopped
         # between taking it and its first heartbeat. Past the grace period it is an orphan too.
-        for number in self._unbeaten(self._storage.grace_period or 0):
+        for number in self._unbeaten(self._grace()):
             self.requeue(number, failure(Failure.INTERRUPTED, "its command stopped before "
                                          "its first heartbeat"))
         return before - len(self.trials(TrialState.RUNNING))
+
+    def _grace(self) -> float:
+        """Seconds without a heartbeat after which a running trial is stale: the storage's
+        grace period, or twice its heartbeat interval when it has none (Optuna's rule)."""
+        if self._storage.grace_period is not None:
+            return float(self._storage.grace_period)
+        return 2.0 * float(self._storage.heartbeat_interval or 0)
 
     def _unbeaten(self, grace: float) -> list[int]:
         """Running trials that never had a heartbeat and started over ``grace`` seconds ago
