@@ -15,7 +15,7 @@ from kraby_study.plan.space import validate_search
 from kraby_study.records.attributes import StudyAttrs, TrialResult
 from kraby_study.records.stored import Outcome
 from kraby_study.run.sampling import make_pruner
-from kraby_study.run.search_source import SearchSource
+from kraby_study.run.search_source import SearchSource, pruner_label, short_label
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import opened
 
@@ -418,3 +418,19 @@ def test_the_wilcoxon_threshold_is_in_the_definition_of_wilcoxon_searches_only()
     pruner = make_pruner(racing)
     assert isinstance(pruner, optuna.pruners.WilcoxonPruner)
     assert [wilcoxon_seeds(p) for p in (0.3, 0.25, 0.1, 0.05, 0.01)] == [2, 3, 4, 5, 7]
+
+
+@pytest.mark.parametrize(("overrides", "label"), [
+    (["search.pruner=none"], "no pruner"),
+    (["search.pruner=median"], "median pruner"),
+    (["search.pruner=wilcoxon"], "wilcoxon pruner (a trial's seeds against the best's, p < 0.1, "
+                                 "from 4 seeds)"),
+])
+def test_the_start_line_names_the_pruner_in_words(overrides: list[str], label: str) -> None:
+    assert pruner_label(compose_config(overrides)) == label
+
+
+def test_progress_labels_keep_a_value_near_one_off_one() -> None:
+    label = short_label({"gamma": 0.9999, "learning_rate": 0.000123456, "clip_range": 0.2}, "t0")
+    assert label == "gamma=0.9999 lr=0.000123 clip=0.2 (t0)"
+    assert short_label({"gamma": 0.999999}, "t1") == "gamma=0.999999 (t1)"

@@ -52,7 +52,15 @@ def short_label(params: dict[str, Any], key: str) -> str:
 
 
 def _rounded(value: Any) -> Any:
-    return float(f"{value:.3g}") if isinstance(value, float) else value
+    """Three significant figures, or as many more (up to 6) as keep a value off a whole
+    number it is not: gamma 0.9999 reads 0.9999, not 1."""
+    if not isinstance(value, float):
+        return value
+    for digits in range(3, 7):
+        rounded = float(f"{value:.{digits}g}")
+        if not rounded.is_integer() or value.is_integer():
+            return rounded
+    return rounded
 
 
 class SearchSource(StudySource):
@@ -152,7 +160,7 @@ def pruner_label(cfg: DictConfig) -> str:
         floor = search_floor(cfg)
         below = f", trials below ppo={floor}'s score infeasible" if floor else ""
         return f"objectives {' and '.join(objectives(cfg))}, no pruner{below}"
-    return f"{pruner} pruner"
+    return "no pruner" if pruner == "none" else f"{pruner} pruner"
 
 
 def warm_start(ledger: StudyLedger, cfg: DictConfig,
