@@ -568,7 +568,7 @@ def write_zoo(overrides: Sequence[str], name: str | None, fmt: str = "ppo") -> i
             f"rl-zoo3 {read.version}'s PPO settings for {read.env_id}, as ppo=zoo reads them",
             config_name, f"ppo=zoo for {read.env_id}")
     path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
-    write_ppo_config(settings, ["normalize", "normalize_reward"],
+    write_ppo_config(settings, [],
                      f"rl-zoo3 {read.version}'s PPO settings for {read.env_id} (its budget, "
                      f"n_timesteps {read.n_timesteps:,}, is budget=zoo)", path)
     print(f"wrote {path}: use it with `kraby-study train env=gym env.id={read.env_id} "

@@ -294,6 +294,26 @@ def test_best_format_zoo_writes_a_gym_study_s_selection(
     assert not (workdir / "conf").exists()
 
 
+def test_best_writes_a_gym_study_s_normalisation_into_its_ppo_config(
+        workdir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A setting selected under ppo=zoo's VecNormalize keeps it when used as ppo=best_NAME
+    without ppo=zoo: a confirm baseline or a train of it is the setting that was selected."""
+    stored = resolved_settings(zoo_config("MountainCarContinuous-v0"))
+    assert stored["env"]["normalize"] is True  # rl-zoo3 normalises this id
+    store = Store(sqlite_url(workdir / "k.db"))
+    try:
+        _gym_sweep(store, monkeypatch, stored)
+    finally:
+        store.close()
+    assert run_cli("best", "--study-name", "gam", "--storage", sqlite_url(workdir / "k.db")) == 0
+    body = yaml.safe_load((workdir / "conf" / "ppo" / "best_gam.yaml").read_text())
+    assert body["env"] == {"normalize": True, "normalize_reward": True}
+    used = resolved_settings(compose_config(["env=gym", "env.id=MountainCarContinuous-v0",
+                                             "ppo=best_gam"]))
+    assert used["env"] == stored["env"]
+    assert used["ppo"] == {**stored["ppo"], "gamma": 0.95}
+
+
 def test_best_zoo_format_zoo_writes_rl_zoo3_s_settings_back(workdir: Path) -> None:
     assert run_cli("best", "--zoo", "--format", "zoo", "env=gym",
                    "env.id=MountainCarContinuous-v0") == 0
