@@ -147,6 +147,11 @@ SEARCH_FLAGS = [
          "its trials, as search.cpu_budget=S: it starts no trial once its ended trials have "
          "used them (the running ones finish), so two searches compare at equal cost "
          "(default: none, --trials alone)", "S", _positive_float),
+    Flag("--recheck", "search.recheck", "before the search ends, retrain its K best trials "
+         "on search.recheck_seeds (2) more seeds each, ranking each by all its seeds, and the "
+         "next in line when one drops out of the top K, within --cpu-budget (exploring stops "
+         "early enough to pay for them), as search.recheck=K (default 0: none; one objective "
+         "only)", "K", _whole),
     WORKERS, STORAGE,
     Flag("--study-name", "search.name", "name of the search in the store, as search.name=NAME "
          "(default ppo_search)", "NAME"),

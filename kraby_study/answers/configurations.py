@@ -36,8 +36,7 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
     if attrs.kind == StudyKind.SEARCH:
         arms = (_front_arms(ledger.name, done, top, stored_floor(definition)) if front
                 else _search_arms(ledger.name, done))
-        per_trial = int(definition.get("seeds", 1))
-        used = {seed for t in trials for seed in trial_seeds(t, per_trial)}
+        used = _search_seeds(ledger.trials(), int(definition.get("seeds", 1)))
         env_keys = searched_env_keys(definition)
     elif attrs.kind == StudyKind.SWEEP:
         arms = _sweep_arms(ledger.name, str(definition["parameter"]),
@@ -59,6 +58,22 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
                           curve_every=int(definition["curve_every"]), env_keys=env_keys,
                           two_objectives=front,
                           objective=objective_names(search.get("objective", REWARDS[0]))[0])
+
+
+def _search_seeds(trials: list[Any], per_trial: int) -> set[int]:
+    """The seeds a search's trials trained, every attempt's: a trial's ``per_trial`` seeds,
+    a recheck's those after its trial's (as many as it added to the trial's scores)."""
+    by_number = {t.number: t for t in trials}
+    used: set[int] = set()
+    for trial in trials:
+        of = trial.user_attrs.get("recheck_of")
+        if of is not None and of in by_number:
+            added = (len(trial.user_attrs.get("scores") or [])
+                     - len(by_number[of].user_attrs.get("scores") or []))
+            used.update(trial_seeds(trial, max(added, 1)))
+        else:
+            used.update(trial_seeds(trial, per_trial))
+    return used
 
 
 def _front_arms(name: str, done: list[Any], top: int, floor: str | None) -> list[Arm]:

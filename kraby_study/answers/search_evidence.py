@@ -127,7 +127,8 @@ def importances(maximize: bool, trials: list[FrozenTrial],
 
 def trial_rows(trials: list[FrozenTrial], params: list[str],
                two: bool = False) -> pd.DataFrame:
-    """One row per trial with its outcome, value (its score), costs and parameters; with
+    """One row per trial with its outcome, value (its score) and the seeds it is the mean of
+    (``seeds``: none for a trial that did not complete), costs and parameters; with
     ``two`` (a two-objective search) also its cost objective (``cost``, CPU s per seed) and
     the configuration it was enqueued as (``enqueued``)."""
     rows = []
@@ -141,6 +142,9 @@ def trial_rows(trials: list[FrozenTrial], params: list[str],
             "number": trial.number, "outcome": state.value,
             "value": float(score(trial))  # type: ignore[arg-type]
             if state == Outcome.COMPLETE and score(trial) is not None else math.nan,
+            # The seeds its score is the mean of: budget.seeds, more for a rechecked trial.
+            "seeds": (len(attrs["scores"]) if state == Outcome.COMPLETE and attrs.get("scores")
+                      else math.nan),
             "cost": cost(trial) if state == Outcome.COMPLETE else None,
             "enqueued": TrialAttrs.of(trial).enqueued or "",
             "env_steps": steps, "wall_time": attrs.get("wall_time", _duration(trial)),
@@ -151,9 +155,10 @@ def trial_rows(trials: list[FrozenTrial], params: list[str],
             **{name: trial.params.get(name) for name in params},
         })
     extra = ["cost", "enqueued"] if two else []
-    frame = pd.DataFrame(rows, columns=["number", "outcome", "value", *extra, "env_steps",
+    frame = pd.DataFrame(rows, columns=["number", "outcome", "value", "seeds", *extra,
+                                        "env_steps",
                                         "wall_time", "pruned_at", "failure", *params])
-    for column in ("env_steps", "wall_time", "pruned_at", *extra[:1]):
+    for column in ("seeds", "env_steps", "wall_time", "pruned_at", *extra[:1]):
         frame[column] = pd.to_numeric(frame[column], errors="coerce").astype(float)
     return frame
 
@@ -224,5 +229,5 @@ def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:
     done = search.trials[search.trials["outcome"] == Outcome.COMPLETE]
     done = done.sort_values("value", ascending=not search.maximize, kind="stable").head(count)
     return done.drop(columns=["outcome", "pruned_at", "failure"]).assign(
-        rank=range(1, len(done) + 1))[["rank", "number", "value", *search.params, "env_steps",
-                                       "wall_time"]]
+        rank=range(1, len(done) + 1))[["rank", "number", "value", "seeds", *search.params,
+                                       "env_steps", "wall_time"]]

@@ -25,7 +25,7 @@ from kraby_study.answers.seed_scores import samples, swept_values, time_measure
 from kraby_study.decision.comparison import CompareOptions, compare, seeds_needed
 from kraby_study.decision.selection import RULES, mean_by_value
 from kraby_study.errors import StoreError
-from kraby_study.records.attributes import SelectRule, StudyAttrs, StudyKind
+from kraby_study.records.attributes import SelectRule, StudyAttrs, StudyKind, TrialAttrs
 from kraby_study.records.definition import stored_floor, two_objectives
 from kraby_study.records.stored import Outcome, StoredTrial, Tally, counted, outcome, tally
 from kraby_study.records.values import (
@@ -94,9 +94,12 @@ def selection_of(ledger: StudyLedger, options: CompareOptions | None = None
     env_keys = searched_env_keys(definition)
     params = ", ".join(f"{k}={value_label(v)}" for k, v in trial.params.items())
     value = float(score(trial))  # type: ignore[arg-type]
+    held = TrialAttrs.of(trial)
+    seeds = (f" over {len(held.scores or [])} seeds (rechecked)"
+             if held.recheck_of is not None else "")
     return Selection(short=trial_short(trial),
                      description=f"trial {trial.number} of {attrs.kind or 'study'} "
-                                 f"{ledger.name!r}: score {value:.4g} ({params})",
+                                 f"{ledger.name!r}: score {value:.4g}{seeds} ({params})",
                      settings=trial.user_attrs.get("settings", {}), env_keys=env_keys,
                      steps=trial.user_attrs.get("steps"))
 

@@ -181,6 +181,14 @@ class SearchConfig:
     """Trials sampled at random before TPE starts."""
     pruner_startup_trials: int = 3
     """Complete trials the median pruner waits for: it compares with their values."""
+    recheck: int = 0
+    """Leading trials retrained on ``recheck_seeds`` more seeds before the search ends, so its
+    pick is judged on more seeds than it was found on: a trial ranks by the mean over all its
+    seeds, and a trial that drops out of the top is replaced by the next, until the top
+    ``recheck`` are all rechecked. Under a CPU budget the rechecks come out of it (exploring
+    stops early enough to pay for them). 0: none. One objective only."""
+    recheck_seeds: int = 2
+    """More seeds a rechecked trial trains (after its own: seeds budget.seeds, ...)."""
     wilcoxon_p: float = 0.1
     """The wilcoxon pruner's p threshold: a trial's remaining seeds are stopped when the
     one-sided Wilcoxon signed-rank test of its finished seeds against the best trial's same

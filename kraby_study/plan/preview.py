@@ -12,7 +12,7 @@ from typing import Any
 from omegaconf import DictConfig
 
 from kraby_study.config.validate import to_container
-from kraby_study.plan.space import search_cpu_budget, search_definition
+from kraby_study.plan.space import recheck_plan, search_cpu_budget, search_definition
 from kraby_study.plan.spec import StudyPlan
 
 
@@ -69,7 +69,12 @@ def search_count(cfg: DictConfig) -> Count:
 
 
 def _budget_part(cfg: DictConfig) -> str:
-    """A search's CPU budget as the plan names it: fewer trials may run."""
+    """A search's CPU budget and rechecks as the plan names them: fewer trials may run."""
     budget = search_cpu_budget(cfg)
-    return "" if budget is None else (f"; fewer if its {float(budget):,.0f} CPU s "
+    text = "" if budget is None else (f"; fewer if its {float(budget):,.0f} CPU s "
                                       "(search.cpu_budget) are used first")
+    leaders, seeds = recheck_plan(cfg)
+    if leaders:
+        text += (f"; then its top {leaders} retrained on {seeds} more seed(s) each "
+                 "(search.recheck), and the next in line for each that drops out")
+    return text

@@ -66,6 +66,7 @@ def validate_search(cfg: DictConfig) -> None:
     if not 0 <= float(search.warmup) < 1:
         _fail(f"search.warmup must be in [0, 1) (a fraction of the first seed), "
               f"got {search.warmup}")
+    _validate_recheck(cfg)
     if not 0 < float(search.wilcoxon_p) < 1:
         _fail(f"search.wilcoxon_p must be in (0, 1) (a p threshold), got {search.wilcoxon_p}")
     floor = search_floor(cfg)
@@ -105,6 +106,26 @@ def search_cpu_budget(cfg: DictConfig) -> float | None:
     for no limit but the trial total."""
     budget = cfg.search.get("cpu_budget")
     return None if budget is None else float(budget)
+
+
+def recheck_plan(cfg: DictConfig) -> tuple[int, int]:
+    """(leading trials rechecked, more seeds each) of a search (``search.recheck``,
+    ``search.recheck_seeds``); (0, n) for none."""
+    leaders, seeds = cfg.search.get("recheck"), cfg.search.get("recheck_seeds")
+    return int(0 if leaders is None else leaders), int(2 if seeds is None else seeds)
+
+
+def _validate_recheck(cfg: DictConfig) -> None:
+    leaders, seeds = recheck_plan(cfg)
+    if leaders < 0 or seeds < 1:
+        _fail(f"search.recheck must be >= 0 and search.recheck_seeds >= 1, got "
+              f"{leaders} and {seeds}")
+    if leaders and len(objectives(cfg)) == 2:
+        _fail("search.recheck needs one objective: a two-objective search's front is "
+              "confirmed instead (kraby-study confirm --study-name NAME)")
+    if leaders and pruner_name(cfg) == "wilcoxon":
+        _fail("search.recheck with the wilcoxon pruner: it already races a trial's seeds; "
+              "choose one (search.recheck=0 or another --pruner)")
 
 
 def search_floor(cfg: DictConfig) -> str | None:
@@ -270,6 +291,10 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
     search.pop("trials")
     search.pop("name")
     search.pop("cpu_budget", None)  # when to stop, like the trial total: a search may extend
+    # What a search does before it ends, not what its trials are: a stored search may be
+    # rechecked later, and keeps the fingerprint it had before rechecks existed.
+    search.pop("recheck", None)
+    search.pop("recheck_seeds", None)
     # Resolved as before the defaults existed: a one-objective search keeps the definition
     # (and the fingerprint) it had when its pruner was median and its objective one name.
     search["pruner"] = pruner_name(cfg)

@@ -171,6 +171,10 @@ class TrialAttrs(TrialMeasures):
     """Where its final model (SB3 zip) is saved, if models are kept."""
     retry_of: int | None = None
     """Number of the interrupted trial this attempt replaces."""
+    recheck_of: int | None = None
+    """Number of the search trial this attempt rechecks on more seeds (``search.recheck``): it
+    trains the seeds after the trial's own and holds the scores of both, so it replaces the
+    trial (same key)."""
     provenance: str | None = None
     """Key of what made it (:func:`provenance_key`): the record itself is stored once per study
     under ``kraby_provenance:<key>``."""

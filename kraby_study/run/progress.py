@@ -148,6 +148,10 @@ class Progress:
         self.ended_steps += trained
         self.ended += 1
         self.done += 1
+        if self.done > self.total:  # a search's rechecks may outnumber the ones foreseen
+            self.total = self.done
+            if self.bar is not None:
+                self.bar.total = self.total
         if result.outcome == Outcome.FAILED:
             self.failed += 1
         if self.bar is not None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any, TextIO
 
 from omegaconf import DictConfig
@@ -17,6 +18,7 @@ from kraby_study.plan.space import (
     objectives,
     outside_space,
     pruner_name,
+    recheck_plan,
     search_cpu_budget,
     search_definition,
     search_floor,
@@ -25,10 +27,11 @@ from kraby_study.plan.space import (
 from kraby_study.plan.spec import TrialSpec, evaluation_of, fingerprint, seeding_of
 from kraby_study.records.attributes import SelectRule, StudyAttrs, TrialAttrs, TrialResult
 from kraby_study.records.definition import floor_score
-from kraby_study.records.stored import Failure, Outcome, failure, search_key, spent_cpu
+from kraby_study.records.stored import Failure, Outcome, counted, failure, search_key, spent_cpu
 from kraby_study.records.values import value_label
 from kraby_study.run.executor import Executor
 from kraby_study.run.progress import Progress
+from kraby_study.run.recheck import combined, first_seed, leaders, next_recheck, reserve
 from kraby_study.run.runner import CommandRun, Retrying, run_trials
 from kraby_study.run.sampling import directions, distributions, make_pruner, make_sampler
 from kraby_study.run.source import StudySource, requeue_orphans
@@ -72,6 +75,8 @@ class SearchSource(StudySource):
         self.total = int(cfg.search.trials)
         self.cpu_budget = search_cpu_budget(cfg)
         self.space = distributions(cfg)
+        self.recheck, self.recheck_seeds = recheck_plan(cfg)
+        self._rechecks: dict[int, int] = {}  # recheck trial -> the trial it rechecks
 
     def spent(self) -> float:
         """CPU seconds the search's ended trials have used, every attempt counted."""
@@ -85,16 +90,33 @@ class SearchSource(StudySource):
         """What a progress line shows of the CPU budget: ``845 of 1,200 CPU s used``."""
         return f"{self.spent():,.0f} of {self.cpu_budget or 0:,.0f} CPU s used"
 
+    def exploring(self, trials: list[Any]) -> bool:
+        """Whether the search still asks its sampler for new trials: its total is not reached
+        and, with rechecks under a CPU budget, what is spent leaves room to recheck today's
+        leaders."""
+        if len(counted(trials)) >= self.total:
+            return False
+        if self.cpu_budget is None or not self.recheck:
+            return True
+        return (spent_cpu(trials) + reserve(trials, self.recheck, self.recheck_seeds)
+                < self.cpu_budget)
+
     def next_trial(self) -> tuple[int, TrialSpec] | None:
-        """Ask for the next trial (a queued retry first), or None when the total is reached or
-        the CPU budget is used."""
+        """Ask for the next trial (a queued retry first, then new ones while exploring, then
+        rechecks of the leading trials), or None when all is done or the CPU budget is used."""
         while True:
             with self.ledger.plan_lock():
                 if self.over_budget():
                     return None
-                waiting = self.ledger.trials(TrialState.WAITING)
-                if not waiting and len(self.counted()) >= self.total:
-                    return None
+                trials = self.ledger.trials()
+                waiting = any(t.state == TrialState.WAITING for t in trials)
+                if not waiting and not self.exploring(trials):
+                    leader = next_recheck(trials, self.recheck) if self.recheck else None
+                    if leader is None:
+                        return None
+                    held = TrialAttrs.of(leader)
+                    self.ledger.queue(leader.params, TrialAttrs(
+                        key=held.key, recheck_of=leader.number, enqueued=held.enqueued))
                 trial = self.ledger.ask(self.space)
             number = trial.number
             params = {name: trial.params[name] for name in self.space}
@@ -106,6 +128,10 @@ class SearchSource(StudySource):
             # A retry keeps the key of the trial it replaces; a new trial is named by its number.
             key = str(trial.user_attrs.get("key", search_key(number)))
             spec = self._spec(key, trial_cfg, params)
+            of = trial.user_attrs.get("recheck_of")
+            if of is not None:
+                spec = self._recheck_spec(spec, int(of))
+                self._rechecks[number] = int(of)
             self.ledger.set_attrs(number, TrialAttrs(
                 key=spec.key, seed=spec.seed, settings=spec.settings, steps=spec.steps,
                 model_path=spec.model_path))
@@ -132,6 +158,18 @@ class SearchSource(StudySource):
             tensorboard_run=tensorboard_run(cfg, self.ledger.name, key),
             seeding=seeding_of(cfg))
 
+    def _recheck_spec(self, spec: TrialSpec, of: int) -> TrialSpec:
+        """A recheck of trial ``of``: the seeds after its own, nothing for the pruner."""
+        original = self._trial(of)
+        seed = first_seed(original)
+        seeds = (f"seed {seed}" if self.recheck_seeds == 1
+                 else f"seeds {seed}-{seed + self.recheck_seeds - 1}")
+        return replace(spec, seed=seed, seeds=self.recheck_seeds, checkpoint_every=None,
+                       seed_scores=False, label=f"{spec.label} recheck, {seeds}")
+
+    def _trial(self, number: int) -> Any:
+        return next(t for t in self.ledger.trials() if t.number == number)
+
     def checkpoint(self, number: int, step: int, value: float) -> bool:
         """Report an intermediate value to the pruner; False stops the trial."""
         return self.ledger.checkpoint(number, step, value)
@@ -139,7 +177,10 @@ class SearchSource(StudySource):
     def record(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
         """Store a finished trial. Under a floor a complete one first gets its constraint
         ``floor``: the floor's measured score minus its own (feasible at 0 or less; 0 while the
-        floor is not measured). Optuna's samplers rank feasible trials first."""
+        floor is not measured). Optuna's samplers rank feasible trials first. A recheck is
+        stored with the seeds of the trial it rechecks (:func:`combined`)."""
+        if number in self._rechecks:
+            result = combined(self._trial(self._rechecks[number]), result)
         floor = search_floor(self.cfg)
         if (floor is not None and result.outcome == Outcome.COMPLETE
                 and result.final_score is not None):
@@ -211,9 +252,9 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
     slots = max(1, min(workers, left))
     print(f"search {ledger.name}: {source.total} trials, {done} done, {left} to run on "
           f"{slots} worker(s); {cfg.budget.seeds} seed(s) x {cfg.budget.steps:,} steps each, "
-          f"{cfg.search.sampler} sampler, {pruner_label(cfg)}{_budget_text(source)}",
-          file=stream, flush=True)
-    progress = Progress(ledger.name, source.total, done, stream, live,
+          f"{cfg.search.sampler} sampler, {pruner_label(cfg)}{_budget_text(source)}"
+          f"{_recheck_text(source)}", file=stream, flush=True)
+    progress = Progress(ledger.name, source.total + source.recheck, done, stream, live,
                         budget=None if source.cpu_budget is None else source.used_text)
     summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream), slots, progress,
                          executor, heartbeat_seconds=float(cfg.heartbeat_interval))
@@ -226,7 +267,30 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
         if stopped:
             # The search's plan ended at its budget: list and the report count it complete.
             ledger.update(StudyAttrs(planned=ended))
+    if source.recheck:
+        print(f"search {ledger.name}: {_leaders_text(source)}", file=stream, flush=True)
     return summary, ledger
+
+
+def _recheck_text(source: SearchSource) -> str:
+    """The start line's recheck part."""
+    if not source.recheck:
+        return ""
+    return (f"; then its top {source.recheck} rechecked on {source.recheck_seeds} more "
+            f"seed(s) each")
+
+
+def _leaders_text(source: SearchSource) -> str:
+    """The end line of a search with rechecks: its leaders by all their seeds."""
+    found = leaders(source.ledger.trials(), source.recheck)
+    if not found:
+        return "no complete trial to recheck"
+    parts = []
+    for lead in found:
+        seeds = len(TrialAttrs.of(lead.trial).scores or [])
+        mark = "" if TrialAttrs.of(lead.trial).recheck_of is not None else ", not rechecked"
+        parts.append(f"{lead.trial.user_attrs.get('key')} {lead.score:.4g} ({seeds} seeds{mark})")
+    return "leaders by all their seeds: " + "; ".join(parts)
 
 
 def _budget_text(source: SearchSource) -> str:

@@ -15,6 +15,6 @@ def requeue_stale(study: optuna.Study, trial: FrozenTrial) -> None:
     """
     old = TrialAttrs.of(trial)
     attrs = TrialAttrs(key=old.key, seed=old.seed, retry_of=trial.number,
-                       enqueued=old.enqueued)
+                       enqueued=old.enqueued, recheck_of=old.recheck_of)
     params = trial.params or trial.system_attrs.get("fixed_params", {})
     study.enqueue_trial(params=dict(params), user_attrs=attrs.stored())

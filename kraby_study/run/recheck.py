@@ -1,0 +1,94 @@
+"""Rechecks: a search's leading trials retrained on more seeds before the search ends.
+
+A search ranks trials by the mean score of a few seeds, and the best of many noisy means
+overstates its trial: a setting that fails on some seeds can lead by doing well on the few it
+was given. ``search.recheck = K`` answers this as racing methods do: once the search stops
+exploring, each of its K leading trials is retrained on ``search.recheck_seeds`` more seeds,
+and ranks by the mean over all its seeds. A rechecked trial that falls out of the top K lets
+the next one in, which is rechecked in turn, until the top K are all rechecked (or the CPU
+budget is used). A recheck is an attempt of its trial (the same key), so everything that
+reads a study's counted trials reads the trial by all its seeds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from optuna.trial import FrozenTrial, TrialState
+
+from kraby_study.records.attributes import TrialAttrs, TrialResult
+from kraby_study.records.stored import Outcome, counted, outcome
+from kraby_study.records.values import score
+
+
+@dataclass(frozen=True)
+class Leader:
+    """One of a search's leading configurations, as its counted attempt."""
+
+    trial: FrozenTrial
+    """The complete trial, or the recheck of it that is queued or running."""
+    score: float
+    """Its score (a rechecked trial's over all its seeds; one being rechecked, its score
+    before)."""
+    rechecked: bool
+    """Whether it is rechecked, or its recheck is queued or running."""
+
+
+def leaders(trials: Sequence[FrozenTrial], count: int) -> list[Leader]:
+    """The ``count`` best configurations of a search, best first."""
+    by_number = {t.number: t for t in trials}
+    ranked: list[Leader] = []
+    for trial in counted(trials):
+        of = TrialAttrs.of(trial).recheck_of
+        value = score(trial)
+        if outcome(trial) == Outcome.COMPLETE and value is not None:
+            ranked.append(Leader(trial, value, of is not None))
+        elif (trial.state in (TrialState.WAITING, TrialState.RUNNING) and of is not None
+              and of in by_number and (before := score(by_number[of])) is not None):
+            ranked.append(Leader(trial, before, True))
+    ranked.sort(key=lambda leader: -leader.score)
+    return ranked[:count]
+
+
+def next_recheck(trials: Sequence[FrozenTrial], count: int) -> FrozenTrial | None:
+    """The best of the top ``count`` trials not rechecked yet; None when all are."""
+    return next((lead.trial for lead in leaders(trials, count) if not lead.rechecked), None)
+
+
+def reserve(trials: Sequence[FrozenTrial], count: int, seeds: int) -> float:
+    """CPU seconds the rechecks of today's leaders would use: each one not rechecked yet, its
+    CPU seconds per seed times ``seeds``."""
+    total = 0.0
+    for lead in leaders(trials, count):
+        if not lead.rechecked:
+            attrs = TrialAttrs.of(lead.trial)
+            total += float(attrs.cpu_time or 0.0) / max(1, len(attrs.scores or [])) * seeds
+    return total
+
+
+def first_seed(original: FrozenTrial) -> int:
+    """The first seed a recheck of ``original`` trains: the one after the trial's own."""
+    attrs = TrialAttrs.of(original)
+    return int(attrs.seed or 0) + len(attrs.scores or [])
+
+
+def combined(original: FrozenTrial, result: TrialResult) -> TrialResult:
+    """A complete recheck's result with the original trial's seeds first: every seed's score,
+    the score their mean (likewise the training reward and the evaluation errors). Its CPU
+    seconds, env steps and times stay its own, so the search's spending counts each seed once.
+    A recheck that did not complete is returned as it is."""
+    before = TrialAttrs.of(original)
+    if result.outcome != Outcome.COMPLETE or not result.scores or not before.scores:
+        return result
+    scores = [*before.scores, *result.scores]
+    rewards = [(r, len(s)) for r, s in ((before.train_reward, before.scores),
+                                         (result.train_reward, result.scores)) if r is not None]
+    train_reward = (math.fsum(r * n for r, n in rewards) / sum(n for _, n in rewards)
+                    if rewards else None)
+    errors = ([*before.eval_errors, *result.eval_errors]
+              if before.eval_errors and result.eval_errors else result.eval_errors)
+    return dataclasses.replace(result, scores=scores, final_score=math.fsum(scores) / len(scores),
+                               train_reward=train_reward, eval_errors=errors)

@@ -1,0 +1,207 @@
+"""A search's rechecks (search.recheck): its leaders retrained on more seeds before it ends."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import optuna
+import pytest
+from conftest import TINY, load, run_cli
+from optuna.distributions import FloatDistribution
+from optuna.trial import TrialState, create_trial
+
+from kraby_study.records.attributes import TrialResult
+from kraby_study.records.stored import Outcome
+from kraby_study.run.recheck import combined, first_seed, leaders, next_recheck, reserve
+
+SPACE = """\
+name: tiny
+sampler: random
+pruner: none
+seed: 3
+startup_trials: 1
+checkpoints: 4
+objective: final_reward
+trials: 3
+enqueue: []
+params:
+  learning_rate: {path: ppo.learning_rate, type: float, low: 1.0e-4, high: 1.0e-2, log: true}
+  gamma: {path: ppo.gamma, type: float, low: 0.5, high: 0.99}
+"""
+
+
+def _trial(number: int, scores: list[float] | None, *, key: str | None = None,
+           of: int | None = None, cpu: float = 10.0, seed: int = 0,
+           state: TrialState = TrialState.COMPLETE) -> optuna.trial.FrozenTrial:
+    attrs = {"key": key or f"t{number}", "seed": seed, "cpu_time": cpu}
+    if scores is not None:
+        attrs["scores"] = scores
+    if of is not None:
+        attrs["recheck_of"] = of
+    value = sum(scores) / len(scores) if scores and state == TrialState.COMPLETE else None
+    trial = create_trial(state=state, value=value, params={"x": 0.5},
+                         distributions={"x": FloatDistribution(0, 1)}, user_attrs=attrs)
+    trial.number = number
+    return trial
+
+
+def test_leaders_rank_a_rechecked_trial_by_all_its_seeds() -> None:
+    trials = [_trial(0, [-1.0, -1.2]), _trial(1, [-0.5, -0.7]), _trial(2, [-0.8, -0.8]),
+              # t1 rechecked on seeds 2 and 3: it failed there, so by 4 seeds it is last.
+              _trial(3, [-0.5, -0.7, -3.0, -2.8], key="t1", of=1, seed=2)]
+    top = leaders(trials, 2)
+    assert [lead.trial.number for lead in top] == [2, 0]
+    assert [lead.rechecked for lead in top] == [False, False]
+    # So the next in line is rechecked now: the top 2 are never left unrechecked.
+    assert next_recheck(trials, 2).number == 2
+    assert leaders(trials, 3)[2].trial.number == 3 and leaders(trials, 3)[2].score == -1.75
+
+
+def test_a_queued_or_running_recheck_holds_its_place_by_the_score_before() -> None:
+    trials = [_trial(0, [-1.0]), _trial(1, [-0.5]),
+              _trial(2, None, key="t1", of=1, state=TrialState.RUNNING)]
+    top = leaders(trials, 2)
+    assert [(lead.trial.number, lead.score, lead.rechecked) for lead in top] == [
+        (2, -0.5, True), (0, -1.0, False)]
+    assert next_recheck(trials, 2).number == 0
+    assert next_recheck(trials, 1) is None
+
+
+def test_the_reserve_is_each_unchecked_leaders_cpu_per_seed_times_the_seeds() -> None:
+    trials = [_trial(0, [-1.0, -1.0], cpu=30.0), _trial(1, [-0.5, -0.5], cpu=50.0),
+              _trial(2, [-9.0, -9.0], cpu=1000.0)]
+    assert reserve(trials, 2, seeds=3) == pytest.approx(30.0 / 2 * 3 + 50.0 / 2 * 3)
+    rechecked = [*trials, _trial(3, [-0.5, -0.5, -0.4], key="t1", of=1, seed=2)]
+    assert reserve(rechecked, 2, seeds=3) == pytest.approx(45.0)
+
+
+def test_a_recheck_is_stored_with_the_seeds_of_its_trial() -> None:
+    original = _trial(4, [-1.0, -2.0], seed=0)
+    original.user_attrs.update(train_reward=-1.5, eval_errors=[0.1, 0.2])
+    assert first_seed(original) == 2
+    result = TrialResult(outcome=Outcome.COMPLETE, scores=[-3.0], final_score=-3.0,
+                         train_reward=-3.5, eval_errors=[0.3], cpu_time=7.0, env_steps=512)
+    both = combined(original, result)
+    assert both.scores == [-1.0, -2.0, -3.0] and both.final_score == pytest.approx(-2.0)
+    assert both.train_reward == pytest.approx((-1.5 * 2 - 3.5) / 3)
+    assert both.eval_errors == [0.1, 0.2, 0.3]
+    # Its cost stays its own: the search's spending counts each seed once.
+    assert both.cpu_time == 7.0 and both.env_steps == 512
+    failed = TrialResult(outcome=Outcome.FAILED, failure="diverged: NaN")
+    assert combined(original, failed) is failed
+
+
+@pytest.fixture
+def space(workdir: Path) -> Path:
+    folder = workdir / "conf" / "search"
+    folder.mkdir(parents=True)
+    (folder / "tiny.yaml").write_text(SPACE)
+    return workdir
+
+
+def test_a_search_rechecks_its_leaders_and_picks_by_all_their_seeds(
+        space: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["search=tiny", "--workers", "2", *TINY, "budget.seeds=1", "--recheck", "2",
+            "search.recheck_seeds=1"]
+    assert run_cli("optuna", *args) == 0
+    out = capsys.readouterr().out
+    assert "then its top 2 rechecked on 1 more seed(s) each" in out
+    db = space / "studies" / "kraby.db"
+    trials = load(db, "tiny").trials
+    explored = [t for t in trials if "recheck_of" not in t.user_attrs]
+    rechecks = [t for t in trials if "recheck_of" in t.user_attrs]
+    assert len(explored) == 3 and len(rechecks) >= 2
+    by_number = {t.number: t for t in trials}
+    for recheck in rechecks:
+        original = by_number[recheck.user_attrs["recheck_of"]]
+        assert recheck.user_attrs["key"] == original.user_attrs["key"]
+        assert recheck.params == original.params
+        assert recheck.user_attrs["seed"] == 1  # the seed after the trial's own (0)
+        scores = recheck.user_attrs["scores"]
+        assert scores[0] == original.user_attrs["scores"][0] and len(scores) == 2
+        assert recheck.value == pytest.approx(sum(scores) / 2)
+        assert f"({original.user_attrs['key']}) recheck, seed 1: complete" in out
+    # The top 2 by all their seeds are rechecked, and the search's pick is the best of them.
+    final = {t.user_attrs["key"]: t for t in trials}  # the latest attempt of each key
+    complete = sorted((t for t in final.values() if t.state == TrialState.COMPLETE),
+                      key=lambda t: -t.value)
+    assert all("recheck_of" in t.user_attrs for t in complete[:2])
+    assert re.search(r"leaders by all their seeds: t\d [-\d.e]+ \(2 seeds\); t\d", out)
+    assert run_cli("best", "--study-name", "tiny", "--storage", f"sqlite:///{db}",
+                   "--name", "picked") == 0
+    best_out = capsys.readouterr().out
+    assert f"trial {complete[0].number} of search 'tiny'" in best_out
+    assert "over 2 seeds (rechecked)" in best_out
+    # A rerun finds its leaders rechecked and the total reached: nothing more runs.
+    assert run_cli("optuna", *args) == 0
+    assert len(load(db, "tiny").trials) == len(trials)
+    # A confirm's fresh seeds avoid the rechecks' seeds too.
+    assert run_cli("confirm", "--study-name", "tiny", "--top", "1", "--seeds", "2",
+                   "confirm.seed=0", "--dry-run", *TINY, "--storage", f"sqlite:///{db}") == 0
+    assert "seeds 2-3" in capsys.readouterr().out
+
+
+def test_rechecks_come_out_of_the_cpu_budget(space: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    # A budget below one trial: the first trial is the only one explored (nothing is spent
+    # before it), and its recheck would overspend, so the budget leaves it unrechecked.
+    args = ["search=tiny", "--workers", "1", *TINY, "budget.seeds=1", "--recheck", "1",
+            "--cpu-budget", "0.001"]
+    assert run_cli("optuna", *args) == 0
+    out = capsys.readouterr().out
+    trials = load(space / "studies" / "kraby.db", "tiny").trials
+    assert len(trials) == 1 and "recheck_of" not in trials[0].user_attrs
+    assert "(1 seeds, not rechecked)" in out
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["search.recheck=-1"], "search.recheck must be >= 0"),
+    (["search.recheck=2", "search.recheck_seeds=0"], "search.recheck_seeds >= 1"),
+    (["--recheck", "2", "--objective", "final_reward,training_time"],
+     "search.recheck needs one objective"),
+    (["--recheck", "2", "--pruner", "wilcoxon", "budget.seeds=5"], "already races"),
+])
+def test_a_recheck_that_cannot_run_is_refused_before_anything_runs(
+        workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str],
+        message: str) -> None:
+    assert run_cli("optuna", *argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (workdir / "studies").exists()
+
+
+@pytest.mark.parametrize("budget,exploring", [(130.0, True), (110.0, False), (None, True)])
+def test_exploring_stops_when_what_is_left_pays_for_the_rechecks(
+        tmp_path: Path, budget: float | None, exploring: bool) -> None:
+    from kraby_study.config.compose import compose_config
+    from kraby_study.records.attributes import StudyAttrs
+    from kraby_study.run.search_source import SearchSource
+    from kraby_study.store.store import opened
+
+    cfg = compose_config(["budget=smoke", "search.recheck=2", "search.recheck_seeds=2",
+                          f"search.cpu_budget={'null' if budget is None else budget}",
+                          f"storage=sqlite:///{tmp_path}/k.db"])
+    with opened(cfg.storage) as store:
+        source = SearchSource(store.define("s", StudyAttrs(kind="search")), cfg)
+        # 60 CPU s spent; rechecking the two leaders on 2 more seeds each costs 2 x 30 more.
+        trials = [_trial(0, [-1.0, -1.0], cpu=30.0), _trial(1, [-2.0, -2.0], cpu=30.0)]
+        assert source.exploring(trials) is exploring
+        # Once the total is reached, exploring ends whatever the budget.
+        source.total = 2
+        assert source.exploring(trials) is False
+
+
+def test_the_report_says_over_how_many_seeds_each_top_trial_scored(
+        space: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import pandas as pd
+
+    assert run_cli("optuna", "search=tiny", "--workers", "1", *TINY, "budget.seeds=1",
+                   "--recheck", "1", "search.recheck_seeds=2") == 0
+    db = space / "studies" / "kraby.db"
+    assert run_cli("report", "--storage", f"sqlite:///{db}", "--out", str(space / "r")) == 0
+    top = pd.read_csv(space / "r" / "tiny" / "top_trials.csv")
+    # The top trial is rechecked: 1 seed of its own and 2 more.
+    assert top["seeds"].iloc[0] == 3 and set(top["seeds"].iloc[1:]) == {1}
+    table = (space / "r" / "tiny" / "top_trials.md").read_text()
+    assert "| rank | trial | objective | seeds |" in table
