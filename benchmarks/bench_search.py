@@ -38,6 +38,8 @@ from dataclasses import dataclass
 import optuna
 from scipy import stats
 
+from kraby_study.records.stored import counted
+
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
 
@@ -74,16 +76,21 @@ def kraby(*args: str) -> None:
 
 
 def read_search(storage: str, arm: Arm) -> None:
-    """The search's trials, CPU seconds used and pick (its best complete trial)."""
+    """The search's trials (each by its latest attempt: a rechecked trial by its recheck), CPU
+    seconds used (every attempt's) and pick (its best complete trial)."""
     study = optuna.load_study(study_name=arm.study, storage=storage)
-    trials = [t for t in study.trials if t.state != optuna.trial.TrialState.WAITING]
+    every = [t for t in study.trials if t.state != optuna.trial.TrialState.WAITING]
+    trials = counted(every)
     states = [t.state for t in trials]
     complete = [t for t in trials if t.state == optuna.trial.TrialState.COMPLETE]
+    rechecked = sum(1 for t in complete if "recheck_of" in t.user_attrs)
     arm.trials = (f"{len(complete)}/{states.count(optuna.trial.TrialState.PRUNED)}/"
-                  f"{states.count(optuna.trial.TrialState.FAIL)}")
-    arm.cpu = sum(float(t.user_attrs.get("cpu_time") or 0.0) for t in trials)
+                  f"{states.count(optuna.trial.TrialState.FAIL)}"
+                  + (f" ({rechecked} rechecked)" if rechecked else ""))
+    arm.cpu = sum(float(t.user_attrs.get("cpu_time") or 0.0) for t in every)
     best = max(complete, key=lambda t: float(t.value))  # type: ignore[arg-type]
-    arm.pick, arm.search_score = f"t{best.number}", float(best.value)  # type: ignore[arg-type]
+    arm.pick = str(best.user_attrs.get("key", f"t{best.number}"))
+    arm.search_score = float(best.value)  # type: ignore[arg-type]
 
 
 def read_confirm(storage: str, name: str) -> tuple[list[float], float]:

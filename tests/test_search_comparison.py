@@ -59,3 +59,24 @@ def test_the_comparison_runs_both_samplers_at_equal_cost_and_confirms_each_pick(
     assert re.fullmatch(r"bench_search: tpe - random confirmed mean difference -?[\d.]+ \(95 % "
                         r"t CI \[-?[\d.]+, -?[\d.]+\], 2 sampler seeds\); CPU tpe [\d,]+ s, "
                         r"random [\d,]+ s", last), last
+
+
+def test_a_rechecked_trial_is_read_by_its_recheck(tmp_path: Path) -> None:
+    from optuna.distributions import FloatDistribution
+    from optuna.trial import create_trial
+
+    url = f"sqlite:///{tmp_path / 'r.db'}"
+    study = optuna.create_study(study_name="s", storage=url, direction="maximize")
+    space = {"x": FloatDistribution(0, 1)}
+
+    def add(value: float, key: str, cpu: float, **attrs: object) -> None:
+        study.add_trial(create_trial(value=value, params={"x": 0.5}, distributions=space,
+                                     user_attrs={"key": key, "cpu_time": cpu, **attrs}))
+    add(-1.0, "t0", 10.0)
+    add(-0.5, "t1", 10.0)  # led on its own seeds ...
+    add(-2.0, "t1", 20.0, recheck_of=1)  # ... and fell back when rechecked
+    bench = _bench()
+    arm = bench.Arm("tpe", 0, "s")  # type: ignore[attr-defined]
+    bench.read_search(url, arm)  # type: ignore[attr-defined]
+    assert (arm.pick, arm.search_score) == ("t0", -1.0)
+    assert arm.trials == "2/0/0 (1 rechecked)" and arm.cpu == 40.0
