@@ -104,6 +104,9 @@ def test_a_search_rechecks_its_leaders_and_picks_by_all_their_seeds(
         space: Path, capsys: pytest.CaptureFixture[str]) -> None:
     args = ["search=tiny", "--workers", "2", *TINY, "budget.seeds=1", "--recheck", "2",
             "search.recheck_seeds=1"]
+    assert run_cli("optuna", "--dry-run", *args) == 0
+    assert ("then its top 2 rechecked on 1 more seed(s) each, and the next in line for each "
+            "that drops out (search.recheck)") in capsys.readouterr().out
     assert run_cli("optuna", *args) == 0
     out = capsys.readouterr().out
     assert "then its top 2 rechecked on 1 more seed(s) each" in out

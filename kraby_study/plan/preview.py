@@ -12,7 +12,7 @@ from typing import Any
 from omegaconf import DictConfig
 
 from kraby_study.config.validate import to_container
-from kraby_study.plan.space import recheck_plan, search_cpu_budget, search_definition
+from kraby_study.plan.space import recheck_text, search_cpu_budget, search_definition
 from kraby_study.plan.spec import StudyPlan
 
 
@@ -73,8 +73,5 @@ def _budget_part(cfg: DictConfig) -> str:
     budget = search_cpu_budget(cfg)
     text = "" if budget is None else (f"; fewer if its {float(budget):,.0f} CPU s "
                                       "(search.cpu_budget) are used first")
-    leaders, seeds = recheck_plan(cfg)
-    if leaders:
-        text += (f"; then its top {leaders} retrained on {seeds} more seed(s) each "
-                 "(search.recheck), and the next in line for each that drops out")
-    return text
+    rechecks = recheck_text(cfg)
+    return text + (f"; {rechecks} (search.recheck)" if rechecks else "")

@@ -115,6 +115,15 @@ def recheck_plan(cfg: DictConfig) -> tuple[int, int]:
     return int(0 if leaders is None else leaders), int(2 if seeds is None else seeds)
 
 
+def recheck_text(cfg: DictConfig) -> str:
+    """A search's rechecks as its start line and its dry run name them; empty for none."""
+    leaders, seeds = recheck_plan(cfg)
+    if not leaders:
+        return ""
+    return (f"then its top {leaders} rechecked on {seeds} more seed(s) each, and the next in "
+            "line for each that drops out")
+
+
 def _validate_recheck(cfg: DictConfig) -> None:
     leaders, seeds = recheck_plan(cfg)
     if leaders < 0 or seeds < 1:

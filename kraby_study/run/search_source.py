@@ -19,6 +19,7 @@ from kraby_study.plan.space import (
     outside_space,
     pruner_name,
     recheck_plan,
+    recheck_text,
     search_cpu_budget,
     search_definition,
     search_floor,
@@ -76,7 +77,7 @@ class SearchSource(StudySource):
         self.cpu_budget = search_cpu_budget(cfg)
         self.space = distributions(cfg)
         self.recheck, self.recheck_seeds = recheck_plan(cfg)
-        self._rechecks: dict[int, int] = {}  # recheck trial -> the trial it rechecks
+        self._rechecks: dict[int, Any] = {}  # recheck trial -> the trial it rechecks
 
     def spent(self) -> float:
         """CPU seconds the search's ended trials have used, every attempt counted."""
@@ -130,8 +131,10 @@ class SearchSource(StudySource):
             spec = self._spec(key, trial_cfg, params)
             of = trial.user_attrs.get("recheck_of")
             if of is not None:
-                spec = self._recheck_spec(spec, int(of))
-                self._rechecks[number] = int(of)
+                # Complete, so it stays as read here until the recheck is recorded.
+                original = next(t for t in self.ledger.trials() if t.number == int(of))
+                spec = self._recheck_spec(spec, original)
+                self._rechecks[number] = original
             self.ledger.set_attrs(number, TrialAttrs(
                 key=spec.key, seed=spec.seed, settings=spec.settings, steps=spec.steps,
                 model_path=spec.model_path))
@@ -158,17 +161,14 @@ class SearchSource(StudySource):
             tensorboard_run=tensorboard_run(cfg, self.ledger.name, key),
             seeding=seeding_of(cfg))
 
-    def _recheck_spec(self, spec: TrialSpec, of: int) -> TrialSpec:
-        """A recheck of trial ``of``: the seeds after its own, nothing for the pruner."""
-        original = self._trial(of)
+    def _recheck_spec(self, spec: TrialSpec, original: Any) -> TrialSpec:
+        """A recheck of the trial ``original``: the seeds after its own, nothing for the
+        pruner."""
         seed = first_seed(original)
         seeds = (f"seed {seed}" if self.recheck_seeds == 1
                  else f"seeds {seed}-{seed + self.recheck_seeds - 1}")
         return replace(spec, seed=seed, seeds=self.recheck_seeds, checkpoint_every=None,
                        seed_scores=False, label=f"{spec.label} recheck, {seeds}")
-
-    def _trial(self, number: int) -> Any:
-        return next(t for t in self.ledger.trials() if t.number == number)
 
     def checkpoint(self, number: int, step: int, value: float) -> bool:
         """Report an intermediate value to the pruner; False stops the trial."""
@@ -180,7 +180,7 @@ class SearchSource(StudySource):
         floor is not measured). Optuna's samplers rank feasible trials first. A recheck is
         stored with the seeds of the trial it rechecks (:func:`combined`)."""
         if number in self._rechecks:
-            result = combined(self._trial(self._rechecks[number]), result)
+            result = combined(self._rechecks[number], result)
         floor = search_floor(self.cfg)
         if (floor is not None and result.outcome == Outcome.COMPLETE
                 and result.final_score is not None):
@@ -250,10 +250,11 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
     done = sum(1 for t in counted if t.state not in (TrialState.WAITING, TrialState.RUNNING))
     left = max(0, source.total - done)
     slots = max(1, min(workers, left))
+    rechecks = recheck_text(cfg)
     print(f"search {ledger.name}: {source.total} trials, {done} done, {left} to run on "
           f"{slots} worker(s); {cfg.budget.seeds} seed(s) x {cfg.budget.steps:,} steps each, "
           f"{cfg.search.sampler} sampler, {pruner_label(cfg)}{_budget_text(source)}"
-          f"{_recheck_text(source)}", file=stream, flush=True)
+          f"{'; ' + rechecks if rechecks else ''}", file=stream, flush=True)
     progress = Progress(ledger.name, source.total + source.recheck, done, stream, live,
                         budget=None if source.cpu_budget is None else source.used_text)
     summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream), slots, progress,
@@ -272,14 +273,6 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
     return summary, ledger
 
 
-def _recheck_text(source: SearchSource) -> str:
-    """The start line's recheck part."""
-    if not source.recheck:
-        return ""
-    return (f"; then its top {source.recheck} rechecked on {source.recheck_seeds} more "
-            f"seed(s) each")
-
-
 def _leaders_text(source: SearchSource) -> str:
     """The end line of a search with rechecks: its leaders by all their seeds."""
     found = leaders(source.ledger.trials(), source.recheck)
@@ -287,8 +280,9 @@ def _leaders_text(source: SearchSource) -> str:
         return "no complete trial to recheck"
     parts = []
     for lead in found:
-        seeds = len(TrialAttrs.of(lead.trial).scores or [])
-        mark = "" if TrialAttrs.of(lead.trial).recheck_of is not None else ", not rechecked"
+        held = TrialAttrs.of(lead.trial)
+        seeds = len(held.scores or [])
+        mark = "" if held.recheck_of is not None else ", not rechecked"
         parts.append(f"{lead.trial.user_attrs.get('key')} {lead.score:.4g} ({seeds} seeds{mark})")
     return "leaders by all their seeds: " + "; ".join(parts)
 
