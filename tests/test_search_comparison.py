@@ -80,3 +80,51 @@ def test_a_rechecked_trial_is_read_by_its_recheck(tmp_path: Path) -> None:
     bench.read_search(url, arm)  # type: ignore[attr-defined]
     assert (arm.pick, arm.search_score) == ("t0", -1.0)
     assert arm.trials == "2/0/0 (1 rechecked)" and arm.cpu == 40.0
+
+
+def test_a_two_objective_search_is_read_by_its_fronts_best_score(tmp_path: Path) -> None:
+    from optuna.distributions import FloatDistribution
+    from optuna.trial import create_trial
+
+    url = f"sqlite:///{tmp_path / 'c.db'}"
+    study = optuna.create_study(study_name="s", storage=url,
+                                directions=["maximize", "minimize"])
+    space = {"x": FloatDistribution(0, 1)}
+    for number, (score, cost) in enumerate([(500.0, 30.0), (500.0, 12.0), (480.0, 5.0),
+                                            (500.0, 20.0)]):
+        study.add_trial(create_trial(values=[score, cost], params={"x": 0.5},
+                                     distributions=space,
+                                     user_attrs={"key": f"t{number}", "cpu_time": 2 * cost}))
+    bench = _bench()
+    arm = bench.Arm("tpe", 0, "s")  # type: ignore[attr-defined]
+    bench.read_search(url, arm)  # type: ignore[attr-defined]
+    # The best score is shared by three trials; the front holds the cheapest of them.
+    assert (arm.pick, arm.search_score) == ("t1", 500.0)
+    assert arm.trials == "4/0/0" and arm.cpu == 134.0
+
+
+@pytest.mark.slow
+def test_with_cost_each_search_has_two_objectives_and_its_pick_is_the_one_confirmed(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)
+    url = f"sqlite:///{tmp_path / 'c.db'}"
+    bench = _bench()
+    assert bench.main([  # type: ignore[attr-defined]
+        "--env-id", "CartPole-v1", "--cpu-budget", "3", "--sampler-seeds", "0",
+        "--confirm-seeds", "2", "--storage", url, "--workers", "1", "--no-zoo", "--cost",
+        "budget.steps=1024", "budget.seeds=1", "budget.curve_every=128",
+        "search.eval_episodes=4", "search.params.n_steps.choices=[8,16]",
+        "search.params.n_epochs.high=2"]) == 0
+    out = capsys.readouterr().out
+    for sampler in ("tpe", "random"):
+        study = optuna.load_study(study_name=f"cartpole-{sampler}-s0", storage=url)
+        assert len(study.directions) == 2
+        picked = re.search(rf"^\| {sampler} \| 0 \| [^|]+\| [^|]+\| (t\d+) \|", out, re.M)
+        assert picked is not None
+        trial = next(t for t in study.trials if t.user_attrs.get("key") == picked.group(1))
+        confirm = optuna.load_study(study_name=f"cartpole-{sampler}-s0-confirm", storage=url)
+        assert all(t.user_attrs["settings"]["ppo"] == trial.user_attrs["settings"]["ppo"]
+                   for t in confirm.trials)
+    assert re.search(r"^The picks' CPU s per run, tpe / random by sampler seed: [\d.]+ "
+                     r"\(geometric mean [\d.]+\)$", out, re.M)
