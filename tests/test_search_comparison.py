@@ -14,6 +14,11 @@ from optuna.trial import TrialState
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
 
+# Trials small enough for a test: 1,024 steps, one seed, tiny rollouts, at most 2 epochs.
+TINY = ["budget.steps=1024", "budget.seeds=1", "budget.curve_every=128", "search.eval_episodes=4",
+        "search.params.n_steps.choices=[8,16]", "search.params.n_epochs.high=2"]
+
+
 def _bench() -> object:
     path = Path(__file__).parents[1] / "benchmarks" / "bench_search.py"
     spec = importlib.util.spec_from_file_location("bench_search", path)
@@ -24,20 +29,23 @@ def _bench() -> object:
     return module
 
 
+def _run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, *args: str) -> str:
+    """Run the benchmark on CartPole-v1 with tiny trials, one worker and 2 confirm seeds, in
+    a fresh store; return the store's URL."""
+    monkeypatch.chdir(tmp_path)
+    url = f"sqlite:///{tmp_path / 'b.db'}"
+    assert _bench().main([  # type: ignore[attr-defined]
+        "--env-id", "CartPole-v1", "--confirm-seeds", "2", "--storage", url, "--workers", "1",
+        *TINY, *args]) == 0
+    return url
+
+
 @pytest.mark.slow
 def test_the_comparison_runs_both_samplers_at_equal_cost_and_confirms_each_pick(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
-    monkeypatch.chdir(tmp_path)
-    url = f"sqlite:///{tmp_path / 'b.db'}"
     budget = 4.0
-    bench = _bench()
-    assert bench.main([  # type: ignore[attr-defined]
-        "--env-id", "CartPole-v1", "--cpu-budget", str(budget), "--sampler-seeds", "0", "1",
-        "--confirm-seeds", "2", "--storage", url, "--workers", "1",
-        "budget.steps=1024", "budget.seeds=1", "budget.curve_every=128",
-        "search.eval_episodes=4", "search.params.n_steps.choices=[8,16]",
-        "search.params.n_epochs.high=2"]) == 0
+    url = _run(tmp_path, monkeypatch, "--cpu-budget", str(budget), "--sampler-seeds", "0", "1")
     out = capsys.readouterr().out
     for sampler in ("tpe", "random"):
         for seed in (0, 1):
@@ -107,15 +115,8 @@ def test_a_two_objective_search_is_read_by_its_fronts_best_score(tmp_path: Path)
 def test_with_cost_each_search_has_two_objectives_and_its_pick_is_the_one_confirmed(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
-    monkeypatch.chdir(tmp_path)
-    url = f"sqlite:///{tmp_path / 'c.db'}"
-    bench = _bench()
-    assert bench.main([  # type: ignore[attr-defined]
-        "--env-id", "CartPole-v1", "--cpu-budget", "3", "--sampler-seeds", "0",
-        "--confirm-seeds", "2", "--storage", url, "--workers", "1", "--no-zoo", "--cost",
-        "budget.steps=1024", "budget.seeds=1", "budget.curve_every=128",
-        "search.eval_episodes=4", "search.params.n_steps.choices=[8,16]",
-        "search.params.n_epochs.high=2"]) == 0
+    url = _run(tmp_path, monkeypatch, "--cpu-budget", "3", "--sampler-seeds", "0", "--no-zoo",
+               "--cost")
     out = capsys.readouterr().out
     for sampler in ("tpe", "random"):
         study = optuna.load_study(study_name=f"cartpole-{sampler}-s0", storage=url)
