@@ -43,6 +43,8 @@ from dataclasses import dataclass
 import optuna
 from scipy import stats
 
+from kraby_study.answers.search_front import search_front
+from kraby_study.decision.front import spread
 from kraby_study.records.stored import counted
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -94,9 +96,12 @@ def read_search(storage: str, arm: Arm) -> None:
                   f"{states.count(optuna.trial.TrialState.FAIL)}"
                   + (f" ({rechecked} rechecked)" if rechecked else ""))
     arm.cpu = sum(float(t.user_attrs.get("cpu_time") or 0.0) for t in every)
-    # One objective: the best score. Two: the front's best score, which is the cheapest of
-    # the trials with that score (a dearer one with the same score is not on the front).
-    best = max(complete, key=lambda t: (t.values[0], -t.values[1]) if two else t.values[0])
+    if two:
+        # The front's best score, as confirm --top 1 takes it (no floor: the searches have none).
+        number = spread(search_front(complete).front, 1)[0].key
+        best = next(t for t in complete if t.number == number)
+    else:
+        best = max(complete, key=lambda t: float(t.value))  # type: ignore[arg-type]
     arm.pick = str(best.user_attrs.get("key", f"t{best.number}"))
     arm.search_score = float(best.values[0])
 
