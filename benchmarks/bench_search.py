@@ -2,13 +2,15 @@
 
 Run: python benchmarks/bench_search.py --env-id Pendulum-v1 --cpu-budget 1800
          [--sampler-seeds 0 1 2] [--confirm-seeds 5] [--storage URL] [--workers 2]
-         [--samplers tpe random] [--tag NAME] [--no-zoo] [--cost] [KEY=VALUE ...]
+         [--samplers tpe random] [--tag NAME] [--enqueue zoo] [--no-zoo] [--cost]
+         [KEY=VALUE ...]
 
 For each sampler seed and each sampler, one search (``kraby-study optuna``, evaluation
 objective, rl-zoo3's settings for the env as the fixed ones, ``budget=zoo``) runs until it has
 used ``--cpu-budget`` CPU seconds (``search.cpu_budget``: no trial starts after that, the running
-ones finish, so each search overshoots by less than one trial per worker). Nothing is enqueued,
-so neither search starts from rl-zoo3's settings. The search's pick (its best complete trial)
+ones finish, so each search overshoots by less than one trial per worker). Nothing is enqueued
+unless ``--enqueue`` names ppo configs (``--enqueue zoo``: both searches evaluate rl-zoo3's
+settings first, then sample). The search's pick (its best complete trial)
 is then retrained by ``kraby-study confirm --top 1`` on ``--confirm-seeds`` fresh seeds, each
 scored on its own evaluation episodes, and rl-zoo3's settings are confirmed once on the same
 fresh seeds, for reference.
@@ -17,6 +19,11 @@ With ``--cost`` each search has two objectives, the evaluation return and CPU se
 (``--objective evaluation,training_time --floor none``: unpruned, a front), and its pick is what
 ``confirm --top 1`` takes from the front: the best score, the cheapest among equal scores. The
 comparison then also pairs the picks' CPU seconds per run in the confirm.
+
+After the table, one line per search says what its sampler chose after the random start
+(the first ``search.startup_trials`` trials, the same for TPE as for random search of the same
+seed): how many trials, how many pruned, and how many distinct settings of the space's
+categorical parameters, which shows a sampler drawing the same few again.
 
 Two searches are compared by what their picks do on the fresh seeds, not by the search's own
 best score (the maximum of noisy scores, which overstates its pick: the table shows both). One
@@ -61,6 +68,7 @@ class Arm:
     cpu: float = math.nan
     pick: str = ""
     search_score: float = math.nan
+    after_start: str = ""
     confirmed: list[float] | None = None
     confirm_cpu: float = math.nan
 
@@ -96,6 +104,7 @@ def read_search(storage: str, arm: Arm) -> None:
                   f"{states.count(optuna.trial.TrialState.FAIL)}"
                   + (f" ({rechecked} rechecked)" if rechecked else ""))
     arm.cpu = sum(float(t.user_attrs.get("cpu_time") or 0.0) for t in every)
+    arm.after_start = after_start(study, trials)
     if two:
         # The front's best score, as confirm --top 1 takes it (no floor: the searches have none).
         number = spread(search_front(complete).front, 1)[0].key
@@ -104,6 +113,23 @@ def read_search(storage: str, arm: Arm) -> None:
         best = max(complete, key=lambda t: float(t.value))  # type: ignore[arg-type]
     arm.pick = str(best.user_attrs.get("key", f"t{best.number}"))
     arm.search_score = float(best.values[0])
+
+
+def after_start(study: optuna.Study, trials: list[optuna.trial.FrozenTrial]) -> str:
+    """What the sampler chose after its random start (the first ``startup_trials`` trials,
+    which a seeded TPE draws as random search of the same seed does): trials, pruned, and
+    distinct settings of the space's categorical parameters among them, the sign of a sampler
+    that keeps drawing the same few (random search draws them nearly all different)."""
+    start = int(study.user_attrs["kraby_definition"]["search"]["startup_trials"])
+    own = [t for t in trials if t.number >= start and "recheck_of" not in t.user_attrs]
+    pruned = sum(1 for t in own if t.state == optuna.trial.TrialState.PRUNED)
+    kinds = {name: d for t in own for name, d in t.distributions.items()}
+    names = sorted(n for n, d in kinds.items()
+                   if isinstance(d, optuna.distributions.CategoricalDistribution))
+    distinct = len({tuple(t.params.get(n) for n in names) for t in own})
+    return (f"{len(own)} trials, {pruned} pruned, {distinct} distinct "
+            f"setting{'s' if distinct != 1 else ''} of "
+            f"{', '.join(names) or 'no categorical parameter'}")
 
 
 def read_confirm(storage: str, name: str) -> tuple[list[float], float]:
@@ -136,6 +162,9 @@ def main(argv: list[str] | None = None) -> int:
                              "sampler: its searches alone, no comparison)")
     parser.add_argument("--tag", default=None,
                         help="first word of the study names (default: the env's name)")
+    parser.add_argument("--enqueue", nargs="+", default=[],
+                        help="ppo configs every search evaluates first (search.enqueue), e.g. "
+                             "zoo: both samplers start from rl-zoo3's settings")
     parser.add_argument("--no-zoo", action="store_true",
                         help="do not confirm rl-zoo3's settings")
     parser.add_argument("--cost", action="store_true",
@@ -160,7 +189,8 @@ def main(argv: list[str] | None = None) -> int:
                          if args.cost else ["--objective", "evaluation"])
             kraby("optuna", *objective, "--sampler", sampler, "--seed",
                   str(seed), "--cpu-budget", f"{args.cpu_budget:g}", "--trials", "100000",
-                  "--study-name", arm.study, "search.enqueue=[]", *common, *env)
+                  "--study-name", arm.study, f"search.enqueue=[{','.join(args.enqueue)}]",
+                  *common, *env)
             read_search(args.storage, arm)
             kraby("confirm", "--study-name", arm.study, "--top", "1", "--seeds",
                   str(args.confirm_seeds), *common, *env)
@@ -187,6 +217,9 @@ def main(argv: list[str] | None = None) -> int:
         low, high = t_interval(zoo_scores)
         print(f"| ppo=zoo | - | - | - | - | - | {statistics.fmean(zoo_scores):.1f} "
               f"[{low:.1f}, {high:.1f}] | {zoo_cpu:.1f} |")
+    print("After each search's random start (the first search.startup_trials trials):")
+    for arm in arms:
+        print(f"- {arm.sampler} seed {arm.seed}: {arm.after_start}")
     if len(args.samplers) == 1:
         return 0
 

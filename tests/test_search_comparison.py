@@ -75,6 +75,7 @@ def test_a_rechecked_trial_is_read_by_its_recheck(tmp_path: Path) -> None:
 
     url = f"sqlite:///{tmp_path / 'r.db'}"
     study = optuna.create_study(study_name="s", storage=url, direction="maximize")
+    study.set_user_attr("kraby_definition", {"search": {"startup_trials": 1}})
     space = {"x": FloatDistribution(0, 1)}
 
     def add(value: float, key: str, cpu: float, **attrs: object) -> None:
@@ -97,6 +98,7 @@ def test_a_two_objective_search_is_read_by_its_fronts_best_score(tmp_path: Path)
     url = f"sqlite:///{tmp_path / 'c.db'}"
     study = optuna.create_study(study_name="s", storage=url,
                                 directions=["maximize", "minimize"])
+    study.set_user_attr("kraby_definition", {"search": {"startup_trials": 1}})
     space = {"x": FloatDistribution(0, 1)}
     for number, (score, cost) in enumerate([(500.0, 30.0), (500.0, 12.0), (480.0, 5.0),
                                             (500.0, 20.0)]):
@@ -109,6 +111,32 @@ def test_a_two_objective_search_is_read_by_its_fronts_best_score(tmp_path: Path)
     # The best score is shared by three trials; the front holds the cheapest of them.
     assert (arm.pick, arm.search_score) == ("t1", 500.0)
     assert arm.trials == "4/0/0" and arm.cpu == 134.0
+    assert arm.after_start == "3 trials, 0 pruned, 1 distinct setting of no categorical parameter"
+
+
+def test_after_the_random_start_a_search_counts_its_distinct_categorical_settings(
+        tmp_path: Path) -> None:
+    from optuna.distributions import CategoricalDistribution, FloatDistribution
+    from optuna.trial import create_trial
+
+    url = f"sqlite:///{tmp_path / 'd.db'}"
+    study = optuna.create_study(study_name="s", storage=url, direction="maximize")
+    study.set_user_attr("kraby_definition", {"search": {"startup_trials": 2}})
+    space = {"n": CategoricalDistribution([8, 16]), "s": CategoricalDistribution(["a", "b"]),
+             "x": FloatDistribution(0, 1)}
+    drawn = [(8, "a", TrialState.COMPLETE), (16, "b", TrialState.COMPLETE),  # the start
+             (8, "a", TrialState.PRUNED), (8, "a", TrialState.COMPLETE),
+             (8, "b", TrialState.PRUNED), (8, "a", TrialState.PRUNED)]
+    for number, (n, kind, state) in enumerate(drawn):
+        # The float differs in every trial: only the categorical settings are counted.
+        study.add_trial(create_trial(
+            state=state, value=-1.0 if state == TrialState.COMPLETE else None,
+            intermediate_values={1: -1.0}, params={"n": n, "s": kind, "x": number / 10},
+            distributions=space, user_attrs={"key": f"t{number}", "cpu_time": 1.0}))
+    bench = _bench()
+    arm = bench.Arm("tpe", 0, "s")  # type: ignore[attr-defined]
+    bench.read_search(url, arm)  # type: ignore[attr-defined]
+    assert arm.after_start == "4 trials, 3 pruned, 2 distinct settings of n, s"
 
 
 @pytest.mark.slow
@@ -129,3 +157,20 @@ def test_with_cost_each_search_has_two_objectives_and_its_pick_is_the_one_confir
                    for t in confirm.trials)
     assert re.search(r"^The picks' CPU s per run, tpe / random by sampler seed: [\d.]+ "
                      r"\(geometric mean [\d.]+\)$", out, re.M)
+
+
+@pytest.mark.parametrize(("extra", "enqueued"), [([], "search.enqueue=[]"),
+                                                 (["--enqueue", "zoo"], "search.enqueue=[zoo]")])
+def test_every_search_evaluates_the_enqueued_configs_first(
+        monkeypatch: pytest.MonkeyPatch, extra: list[str], enqueued: str) -> None:
+    bench = _bench()
+    commands: list[tuple[str, ...]] = []
+    monkeypatch.setattr(bench, "kraby", lambda *args: commands.append(args))
+    monkeypatch.setattr(bench, "read_search", lambda storage, arm: None)
+    monkeypatch.setattr(bench, "read_confirm", lambda storage, name: ([-1.0, -2.0], 1.0))
+    assert bench.main(["--env-id", "Pendulum-v1", "--cpu-budget", "10",  # type: ignore[attr-defined]
+                       "--sampler-seeds", "0", "1", "--no-zoo", *extra]) == 0
+    searches = [c for c in commands if c[0] == "optuna"]
+    assert [c[c.index("--sampler") + 1] for c in searches] == ["tpe", "random"] * 2
+    assert all(enqueued in c and sum(a.startswith("search.enqueue=") for a in c) == 1
+               for c in searches)
