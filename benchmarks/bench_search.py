@@ -2,18 +2,19 @@
 
 Run: python benchmarks/bench_search.py --env-id Pendulum-v1 --cpu-budget 1800
          [--sampler-seeds 0 1 2] [--confirm-seeds 5] [--storage URL] [--workers 2]
-         [--samplers tpe random] [--tag NAME] [--enqueue zoo] [--no-zoo] [--cost]
+         [--samplers tpe random] [--tag NAME] [--enqueue [NAME ...]] [--no-zoo] [--cost]
          [KEY=VALUE ...]
 
 For each sampler seed and each sampler, one search (``kraby-study optuna``, evaluation
 objective, rl-zoo3's settings for the env as the fixed ones, ``budget=zoo``) runs until it has
 used ``--cpu-budget`` CPU seconds (``search.cpu_budget``: no trial starts after that, the running
-ones finish, so each search overshoots by less than one trial per worker). Nothing is enqueued
-unless ``--enqueue`` names ppo configs (``--enqueue zoo``: both searches evaluate rl-zoo3's
-settings first, then sample). The search's pick (its best complete trial)
-is then retrained by ``kraby-study confirm --top 1`` on ``--confirm-seeds`` fresh seeds, each
-scored on its own evaluation episodes, and rl-zoo3's settings are confirmed once on the same
-fresh seeds, for reference.
+ones finish, so each search overshoots by less than one trial per worker). Both searches
+evaluate rl-zoo3's settings first, as the default search does when it trains with them
+(``search.enqueue`` null: the command's ppo config), then sample; ``--enqueue NAME ...`` names
+other ppo configs, and ``--enqueue`` alone none (a cold start). The search's pick (its best
+complete trial) is then retrained by ``kraby-study confirm --top 1`` on ``--confirm-seeds``
+fresh seeds, each scored on its own evaluation episodes, and rl-zoo3's settings are
+confirmed once on the same fresh seeds, for reference.
 
 With ``--cost`` each search has two objectives, the evaluation return and CPU seconds per seed
 (``--objective evaluation,training_time --floor none``: unpruned, a front), and its pick is what
@@ -162,9 +163,10 @@ def main(argv: list[str] | None = None) -> int:
                              "sampler: its searches alone, no comparison)")
     parser.add_argument("--tag", default=None,
                         help="first word of the study names (default: the env's name)")
-    parser.add_argument("--enqueue", nargs="+", default=[],
-                        help="ppo configs every search evaluates first (search.enqueue), e.g. "
-                             "zoo: both samplers start from rl-zoo3's settings")
+    parser.add_argument("--enqueue", nargs="*", default=None,
+                        help="ppo configs every search evaluates first (search.enqueue); "
+                             "default: the search's own default, rl-zoo3's settings; "
+                             "none named: a cold start")
     parser.add_argument("--no-zoo", action="store_true",
                         help="do not confirm rl-zoo3's settings")
     parser.add_argument("--cost", action="store_true",
@@ -181,6 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     env = ["env=gym", f"env.id={args.env_id}", "ppo=zoo", "budget=zoo", *args.overrides]
     common = ["--storage", args.storage, "--workers", str(args.workers), "save_models=false"]
     tag = args.tag or args.env_id.split("-")[0].lower()
+    queue = [] if args.enqueue is None else [f"search.enqueue=[{','.join(args.enqueue)}]"]
     arms: list[Arm] = []
     for seed in args.sampler_seeds:
         for sampler in args.samplers:
@@ -189,8 +192,7 @@ def main(argv: list[str] | None = None) -> int:
                          if args.cost else ["--objective", "evaluation"])
             kraby("optuna", *objective, "--sampler", sampler, "--seed",
                   str(seed), "--cpu-budget", f"{args.cpu_budget:g}", "--trials", "100000",
-                  "--study-name", arm.study, f"search.enqueue=[{','.join(args.enqueue)}]",
-                  *common, *env)
+                  "--study-name", arm.study, *queue, *common, *env)
             read_search(args.storage, arm)
             kraby("confirm", "--study-name", arm.study, "--top", "1", "--seeds",
                   str(args.confirm_seeds), *common, *env)

@@ -389,3 +389,31 @@ def test_a_gym_campaign_race_train_and_ray_run(workdir: Path) -> None:
     assert run_cli("train", "env=gym", "env.id=Pendulum-v1", "ppo=zoo", "budget.steps=8192",
                    "env.normalize=true") == 0
     assert list(workdir.glob("**/s0.zip")) and list(workdir.glob("**/s0.vecnormalize.pkl"))
+
+
+def test_a_gym_search_starts_from_the_ppo_config_it_trains_with(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from kraby_study.records.attributes import TrialAttrs
+
+    cart = ["env=gym", "env.id=CartPole-v1", "budget=smoke", "budget.steps=1024",
+            "budget.curve_every=256", "budget.seeds=1", "ppo.n_envs=2", "ppo.n_steps=32",
+            "ppo.n_epochs=1", "ppo.net_arch=[16]", "save_models=false", "workers=1"]
+    db = workdir / "studies" / "kraby.db"
+
+    def enqueued(name: str) -> list[str | None]:
+        return [TrialAttrs.of(t).enqueued for t in load(db, name).trials]
+
+    assert run_cli("optuna", "--trials", "1", "--study-name", "warm", "ppo=zoo", *cart) == 0
+    assert "search warm: evaluating ppo=zoo first" in capsys.readouterr().out
+    assert enqueued("warm") == ["ppo=zoo"]
+    assert run_cli("optuna", "--trials", "1", "--study-name", "cold", "search.enqueue=[]",
+                   *cart) == 0
+    assert "first" not in capsys.readouterr().out and enqueued("cold") == [None]
+    # A stored search resumes with what it stored: no refusal, nothing queued again.
+    for name, ppo in (("warm", "ppo=zoo"), ("cold", "ppo=start")):
+        assert run_cli("optuna", "--trials", "2", "--study-name", name, ppo, *cart) == 0
+        assert enqueued(name)[0] == ("ppo=zoo" if name == "warm" else None)
+        assert len(enqueued(name)) == 2
+    # Without ppo=..., the command trains with conf/config.yaml's default and starts there.
+    assert run_cli("optuna", "--trials", "1", "--study-name", "plain", *cart) == 0
+    assert enqueued("plain") == ["ppo=start"]

@@ -9,6 +9,8 @@ changed resumes exactly as it began; a new study gets today's default.
 - ``search.eval_set``: the stored evaluation set (fixed for a study stored before runs drew
   their own episodes), else run.
 - ``search.eval_episodes``: the stored number, else 200.
+- ``search.enqueue``: a stored search's (stored before the default followed the command's
+  ppo config), else left null for the command to fill (:func:`kraby_study.cli.cmd_optuna`).
 
 A setting the command gives stays as given: if it differs from the stored study, the store
 refuses it as a changed definition, naming the setting.
@@ -25,6 +27,7 @@ from kraby_study.records.definition import (
     EVAL_EPISODES,
     EVAL_SET,
     SEEDING,
+    stored_enqueue,
     stored_eval_episodes,
     stored_eval_set,
     stored_seeding,
@@ -42,13 +45,14 @@ def stored_attrs(url: str, name: str) -> StudyAttrs | None:
 
 
 def resumed(cfg: DictConfig, name: str) -> DictConfig:
-    """``cfg`` with ``seeding``, ``search.eval_set`` and ``search.eval_episodes`` (and, for a
-    confirm, ``confirm.seed`` and ``confirm.select``) settled for the study named ``name`` in
-    ``cfg.storage``: as given, else as stored, else the default. A stored confirm keeps its
+    """``cfg`` with ``seeding``, ``search.eval_set``, ``search.eval_episodes`` and a stored
+    search's ``search.enqueue`` (and, for a confirm, ``confirm.seed`` and ``confirm.select``)
+    settled for the study named ``name`` in ``cfg.storage``: as given, else as stored, else
+    the default. A stored confirm keeps its
     rule unless one is given, so resuming it never changes what it selects."""
     if cfg.seeding is not None and cfg.confirm.seed is not None and (
             cfg.confirm.select is not None and cfg.search.eval_set is not None
-            and cfg.search.eval_episodes is not None):
+            and cfg.search.eval_episodes is not None and cfg.search.enqueue is not None):
         return cfg
     attrs = stored_attrs(str(cfg.storage), name)
     definition = attrs.definition if attrs is not None and attrs.fingerprint else None
@@ -62,6 +66,8 @@ def resumed(cfg: DictConfig, name: str) -> DictConfig:
         if out.search.eval_episodes is None:
             stored = stored_eval_episodes(definition) if definition is not None else None
             out.search.eval_episodes = EVAL_EPISODES if stored is None else stored
+        if out.search.enqueue is None and definition is not None:
+            out.search.enqueue = stored_enqueue(definition)
         if (out.confirm.seed is None and definition is not None
                 and definition.get("kind") == StudyKind.CONFIRM.value
                 and definition.get("seeds")):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
+from importlib.resources import files
 
 from hydra import compose, initialize_config_module
 from hydra.core.config_search_path import ConfigSearchPath
@@ -78,6 +79,19 @@ def renamed(overrides: Sequence[str]) -> list[str]:
         key, sep, value = override.partition("=")
         out.append(f"{RENAMED.get(key, key)}{sep}{value}" if sep else override)
     return out
+
+
+def ppo_choice(overrides: Sequence[str]) -> str:
+    """The ppo config a command trains with: its last ``ppo=NAME``, else the primary config's
+    default (``defaults: - ppo: ...`` in conf/config.yaml)."""
+    chosen = [o.split("=", 1)[1] for o in overrides if o.startswith("ppo=")]
+    if chosen:
+        return chosen[-1]
+    primary = files(CONFIG_MODULE).joinpath("config.yaml").read_text()
+    for entry in OmegaConf.create(primary).get("defaults", []):
+        if isinstance(entry, DictConfig) and "ppo" in entry:
+            return str(entry["ppo"])
+    raise ConfigError("conf/config.yaml chooses no ppo config in its defaults")
 
 
 def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:

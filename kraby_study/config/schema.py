@@ -220,9 +220,10 @@ class SearchConfig:
     a new one."""
     params: dict[str, ParamSpace] = field(default_factory=dict)
     """The space: Optuna parameter name -> range."""
-    enqueue: list[str] = field(default_factory=lambda: ["tuned", "start"])
+    enqueue: list[str] | None = field(default_factory=lambda: ["tuned", "start"])
     """ppo config names whose settings are evaluated first, as far as the space holds them, so
-    a search never ends below the settings it was given."""
+    a search never ends below the settings it was given. null: a stored search's own, else the
+    ppo config the command trains with (``optuna env=gym ppo=zoo`` starts from rl-zoo3's)."""
     floor: str | None = "tuned"
     """A two-objective search's floor: one of ``enqueue``. A trial scoring below the floor's
     measured score is infeasible: the sampler's good trials and the front leave it out, so the

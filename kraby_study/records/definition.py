@@ -133,6 +133,14 @@ def stored_eval_set(definition: Mapping[str, Any]) -> str:
     return str(_evaluation_part(definition).get("eval_set", LEGACY_EVAL_SET))
 
 
+def stored_enqueue(definition: Mapping[str, Any]) -> list[str] | None:
+    """A stored search's enqueued ppo configs; None when the definition is not a search's."""
+    search = definition.get("search")
+    if not isinstance(search, Mapping) or search.get("enqueue") is None:
+        return None
+    return [str(name) for name in search["enqueue"]]
+
+
 def stored_eval_episodes(definition: Mapping[str, Any]) -> int | None:
     """A stored definition's evaluation episodes; None when it stores none (a study not
     scored by evaluation)."""
