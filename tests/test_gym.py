@@ -411,9 +411,13 @@ def test_a_gym_search_starts_from_the_ppo_config_it_trains_with(
     assert "first" not in capsys.readouterr().out and enqueued("cold") == [None]
     # A stored search resumes with what it stored: no refusal, nothing queued again.
     for name, ppo in (("warm", "ppo=zoo"), ("cold", "ppo=start")):
-        assert run_cli("optuna", "--trials", "2", "--study-name", name, ppo, *cart) == 0
+        # 1: a drawn setting may end no episode in its last 10 % at this budget (a failed run).
+        assert run_cli("optuna", "--trials", "2", "--study-name", name, ppo, *cart) in (0, 1)
         assert enqueued(name)[0] == ("ppo=zoo" if name == "warm" else None)
         assert len(enqueued(name)) == 2
+    # Resumed, the sampler draws from a seed of its own, not the first command's trials again.
+    first, second = load(db, "cold").trials
+    assert first.params != second.params
     # Without ppo=..., the command trains with conf/config.yaml's default and starts there.
     assert run_cli("optuna", "--trials", "1", "--study-name", "plain", *cart) == 0
     assert enqueued("plain") == ["ppo=start"]

@@ -241,6 +241,9 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
         # A new front is selected by evidence; a search stored before rules were stored keeps
         # fastest_tied (answers.search_front.front_rule), so it selects as it did.
         ledger.update(StudyAttrs(select=SelectRule.FASTEST_EQUIVALENT.value))
+    held = len(ledger.trials())
+    if held:  # resumed or joined: not the random trials the first command drew
+        ledger.use_sampler(make_sampler(cfg, held))
     requeue_orphans(ledger, stream)
     queued = warm_start(ledger, cfg, starts)
     if queued:

@@ -109,6 +109,10 @@ class StudyLedger:
                 self._study_id, number)
         return self._ids[number]
 
+    def use_sampler(self, sampler: optuna.samplers.BaseSampler) -> None:
+        """Draw this command's new trials with ``sampler`` (stored trials are kept)."""
+        self._study.sampler = sampler
+
     def queue(self, params: Mapping[str, Any], attrs: TrialAttrs) -> None:
         """Queue a trial with fixed parameters, to be claimed or asked for later."""
         self._study.enqueue_trial(params=dict(params), user_attrs=attrs.stored())
