@@ -41,7 +41,7 @@ RAY = str(Path(sys.executable).with_name("ray"))
 os.environ.setdefault("RAY_AUTH_MODE", "disabled")
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 
-SLOWER = tiny_with_steps(4096)
+SLOWER = tiny_with_steps(32768)
 
 
 def outcomes(db: Path, name: str) -> dict[str, list[TrialState]]:
