@@ -19,6 +19,7 @@ from kraby_study.env.gym_vec import sub_env_seeds
 from kraby_study.errors import ConfigError
 from kraby_study.plan.settings import resolved_settings
 from kraby_study.plan.spec import OPTIONAL_PPO, TrialSpec
+from kraby_study.records.attributes import TrialAttrs
 from kraby_study.records.stored import Outcome
 
 TESTS = Path(__file__).resolve().parent
@@ -393,8 +394,6 @@ def test_a_gym_campaign_race_train_and_ray_run(workdir: Path) -> None:
 
 def test_a_gym_search_starts_from_the_ppo_config_it_trains_with(
         workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from kraby_study.records.attributes import TrialAttrs
-
     cart = ["env=gym", "env.id=CartPole-v1", "budget=smoke", "budget.steps=1024",
             "budget.curve_every=256", "budget.seeds=1", "ppo.n_envs=2", "ppo.n_steps=32",
             "ppo.n_epochs=1", "ppo.net_arch=[16]", "save_models=false", "workers=1"]

@@ -9,8 +9,8 @@ changed resumes exactly as it began; a new study gets today's default.
 - ``search.eval_set``: the stored evaluation set (fixed for a study stored before runs drew
   their own episodes), else run.
 - ``search.eval_episodes``: the stored number, else 200.
-- ``search.enqueue``: a stored search's (stored before the default followed the command's
-  ppo config), else left null for the command to fill (:func:`kraby_study.cli.cmd_optuna`).
+- ``search.enqueue``: a stored search's own list, else left null for the command to fill
+  with its ppo config (:func:`kraby_study.cli.cmd_optuna`).
 
 A setting the command gives stays as given: if it differs from the stored study, the store
 refuses it as a changed definition, naming the setting.
@@ -48,8 +48,8 @@ def resumed(cfg: DictConfig, name: str) -> DictConfig:
     """``cfg`` with ``seeding``, ``search.eval_set``, ``search.eval_episodes`` and a stored
     search's ``search.enqueue`` (and, for a confirm, ``confirm.seed`` and ``confirm.select``)
     settled for the study named ``name`` in ``cfg.storage``: as given, else as stored, else
-    the default. A stored confirm keeps its
-    rule unless one is given, so resuming it never changes what it selects."""
+    the default. A stored confirm keeps its rule unless one is given, so resuming it never
+    changes what it selects."""
     if cfg.seeding is not None and cfg.confirm.seed is not None and (
             cfg.confirm.select is not None and cfg.search.eval_set is not None
             and cfg.search.eval_episodes is not None and cfg.search.enqueue is not None):
