@@ -167,6 +167,29 @@ def test_commands_starting_at_once_on_an_empty_database_all_open_it() -> None:
             studies.engine.dispose()
 
 
+TAKE_OPENING = """\
+import sys
+from kraby_study.records.attributes import StudyAttrs
+from kraby_study.run.search_source import take_opening
+from kraby_study.store.store import Store
+store = Store(sys.argv[1])
+print(take_opening(store.define("joined", StudyAttrs(kind="search"))))
+store.close()
+"""
+
+
+def test_commands_joining_a_search_at_once_take_different_openings() -> None:
+    # Each opening seeds its own sampler (run.sampling.sampler_seed): two commands that saw
+    # the same trial count at once drew the same random trials before openings were counted.
+    with fresh_database() as url:
+        procs = [subprocess.Popen([sys.executable, "-c", TAKE_OPENING, url], text=True,
+                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+                 for _ in range(4)]
+        outputs = [p.communicate(timeout=120)[0] for p in procs]
+        assert sorted(int(out.strip().splitlines()[-1]) for out in outputs) == [0, 1, 2, 3], \
+            outputs
+
+
 def test_an_unreachable_server_is_one_line_and_non_zero(
         workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     url = "postgresql+psycopg://nobody@127.0.0.1:9/nothing"

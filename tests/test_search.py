@@ -14,8 +14,13 @@ from kraby_study.config.compose import compose_config
 from kraby_study.plan.space import validate_search
 from kraby_study.records.attributes import StudyAttrs, TrialResult
 from kraby_study.records.stored import Outcome
-from kraby_study.run.sampling import make_pruner
-from kraby_study.run.search_source import SearchSource, pruner_label, short_label
+from kraby_study.run.sampling import make_pruner, sampler_seed
+from kraby_study.run.search_source import (
+    SearchSource,
+    pruner_label,
+    short_label,
+    take_opening,
+)
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import opened
 
@@ -176,6 +181,22 @@ def test_median_pruner_stops_bad_trials_in_a_controlled_case(spaces: Path) -> No
         assert trial.user_attrs["pruned_at"] <= 1024
         assert trial.user_attrs["env_steps"] < 2 * 1024
         assert max(trial.intermediate_values) == trial.user_attrs["pruned_at"]
+
+
+def test_each_command_on_a_search_takes_the_next_opening_and_its_own_seed(
+        tmp_path: Path) -> None:
+    with opened(f"sqlite:///{tmp_path}/k.db") as store:
+        ledger = store.define("s", StudyAttrs(kind="search"))
+        assert [take_opening(ledger) for _ in range(3)] == [0, 1, 2]
+        assert ledger.attrs.openings == 3
+        # A search stored before openings were counted takes its trial count, as its resumes
+        # did: here 2 trials.
+        old = _one_done(_one_done(store.define("old", StudyAttrs(kind="search")),
+                                  ((512, -0.2),)), ((512, -0.3),))
+        assert take_opening(old) == 2 and take_opening(old) == 3
+    # The first command draws from the seed itself, so a new search reproduces as before.
+    seeds = [sampler_seed(7, opening) for opening in range(4)]
+    assert seeds[0] == 7 and len(set(seeds)) == 4
 
 
 def test_checkpoint_prunes_a_trial_below_the_median_at_equal_steps(tmp_path: Path) -> None:

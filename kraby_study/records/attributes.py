@@ -214,6 +214,9 @@ class StudyAttrs:
     """A search's sampler (tpe or random)."""
     sampler_seed: int | None = field(default=None, metadata={"stored": "sampler_seed"})
     """A search's sampler seed."""
+    openings: int | None = None
+    """How many commands have started on a search: the next one's sampler draws from a child
+    of (seed, openings), so no two commands draw alike (:mod:`kraby_study.run.sampling`)."""
     select: str | None = None
     """A sweep's selection rule (:mod:`kraby_study.decision.selection`); None: final_score. Not part
     of the definition: choosing another rule changes no run."""

@@ -39,21 +39,21 @@ def directions(cfg: DictConfig) -> list[str]:
     return ["maximize", "minimize"][:len(objectives(cfg))]
 
 
-def sampler_seed(seed: int, held: int) -> int:
-    """The seed a command's sampler draws from when it starts on a search that already holds
-    ``held`` trials: ``seed`` for a new search (0 held), else a child of (seed, held). A command
-    that resumes a search, or joins it from another machine, seeded as the first was would
-    draw the first one's random trials again."""
-    if held == 0:
+def sampler_seed(seed: int, opening: int) -> int:
+    """The seed the sampler of a search's ``opening``-th command (from 0) draws from: ``seed``
+    for the first, else a child of (seed, opening). A command that resumes a search, or joins
+    it from another machine, seeded as the first was would draw the first one's random trials
+    again; two that join at once take different openings."""
+    if opening == 0:
         return seed
-    return int(np.random.SeedSequence([seed, held]).generate_state(1)[0])
+    return int(np.random.SeedSequence([seed, opening]).generate_state(1)[0])
 
 
-def make_sampler(cfg: DictConfig, held: int = 0) -> optuna.samplers.BaseSampler:
-    """The seeded sampler of a search that holds ``held`` trials (:func:`sampler_seed`). TPE
+def make_sampler(cfg: DictConfig, opening: int = 0) -> optuna.samplers.BaseSampler:
+    """The seeded sampler of a search's ``opening``-th command (:func:`sampler_seed`). TPE
     handles one objective or two (Optuna's multi-objective TPE); NSGA-II keeps Optuna's
     default population."""
-    seed = sampler_seed(int(cfg.search.seed), held)
+    seed = sampler_seed(int(cfg.search.seed), opening)
     if cfg.search.sampler == "random":
         return optuna.samplers.RandomSampler(seed=seed)
     if cfg.search.sampler == "nsga2":

@@ -204,6 +204,18 @@ def pruner_label(cfg: DictConfig) -> str:
     return "no pruner" if pruner == "none" else f"{pruner} pruner"
 
 
+def take_opening(ledger: StudyLedger) -> int:
+    """This command's place among the commands that started on the search (0: the first),
+    counted under the plan lock, so two machines that join at once take different places. A
+    search stored before commands were counted takes its trial count, as its resumes did."""
+    with ledger.plan_lock():
+        opening = ledger.attrs.openings
+        if opening is None:
+            opening = len(ledger.trials())
+        ledger.update(StudyAttrs(openings=opening + 1))
+    return opening
+
+
 def warm_start(ledger: StudyLedger, cfg: DictConfig,
                starts: Sequence[tuple[str, dict[str, Any]]]) -> list[str]:
     """Queue the known configurations (name, resolved settings) a new search evaluates first, as
@@ -241,9 +253,9 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
         # A new front is selected by evidence; a search stored before rules were stored keeps
         # fastest_tied (answers.search_front.front_rule), so it selects as it did.
         ledger.update(StudyAttrs(select=SelectRule.FASTEST_EQUIVALENT.value))
-    held = len(ledger.trials())
-    if held:  # resumed or joined: not the random trials the first command drew
-        ledger.use_sampler(make_sampler(cfg, held))
+    opening = take_opening(ledger)
+    if opening:  # resumed or joined: not the random trials an earlier command drew
+        ledger.use_sampler(make_sampler(cfg, opening))
     requeue_orphans(ledger, stream)
     queued = warm_start(ledger, cfg, starts)
     if queued:
