@@ -37,7 +37,8 @@ id), ppo=start|tuned|zoo (zoo: rl-zoo3's settings for env.id, pip install
 'kraby-study[zoo]'), budget=full|quick|smoke|zoo,
 study=observation|batch_size|n_steps|n_epochs|gamma|clip_range|learning_rate|gae_lambda|
 ent_coef|n_envs, campaign=documented (the nine studies in order, each with the earlier
-winners), search=ppo|gym (the Optuna spaces; optuna env=gym takes gym).
+winners), search=ppo|gym|gym_sde (the Optuna spaces; optuna env=gym takes gym; gym_sde adds
+gSDE's log_std_init and sde_sample_freq).
 A study file may take a setting from a finished study's selected value: ppo.gamma:
 ${winner:gamma}.
 executor=local|ray: trials run in worker processes here, or as Ray actors on a cluster

@@ -11,6 +11,7 @@ from conftest import TINY, load, run_cli
 from optuna.trial import TrialState
 
 from kraby_study.config.compose import compose_config
+from kraby_study.errors import ConfigError
 from kraby_study.plan.space import validate_search
 from kraby_study.records.attributes import StudyAttrs, TrialResult
 from kraby_study.records.stored import Outcome
@@ -89,6 +90,48 @@ def test_default_space_holds_every_documented_value() -> None:
         "default", "with_tip", "with_tip_to_target", "sin_angles"}
     # Documented batch sizes 32..4096 at n_steps 128 x 32 legs are nminibatches 128..1.
     assert {1, 2, 4, 8, 16, 32, 64, 128} <= set(params["ppo.nminibatches"].choices)
+
+
+CLIP_RANGE = "{path: ppo.clip_range, type: float, low: 0.1, high: 0.3}"
+
+
+def test_a_range_added_on_the_command_line_is_searched_and_stored(spaces: Path) -> None:
+    """``+search.params.NAME={...}`` adds a typed range (Hydra alone cannot merge a dict into
+    the typed space); the search samples it and the trial trains with it."""
+    args = ["search=tiny", *TINY, "budget.seeds=1", f"+search.params.clip={CLIP_RANGE}"]
+    assert run_cli("optuna", "--trials", "1", *args) == 0
+    trial = load(spaces / "studies" / "kraby.db", "tiny").trials[0]
+    assert set(trial.params) == {"learning_rate", "nminibatches", "gamma", "clip"}
+    assert 0.1 <= trial.params["clip"] <= 0.3
+    assert trial.user_attrs["settings"]["ppo"]["clip_range"] == trial.params["clip"]
+
+
+def test_gym_sde_is_the_gym_space_and_gsde_s_two_ranges() -> None:
+    base = ["env=gym", "env.id=MountainCarContinuous-v0", "ppo=zoo"]
+    gym = compose_config([*base, "search=gym"]).search.params
+    sde = compose_config([*base, "search=gym_sde"]).search.params
+    assert set(sde) - set(gym) == {"log_std_init", "sde_sample_freq"}
+    assert all(sde[name] == gym[name] for name in gym)
+    added = compose_config([*base, "search=gym", "+search.params.log_std_init="
+                            "{path: ppo.log_std_init, type: float, low: -4.0, high: 0.5}"])
+    assert added.search.params.log_std_init == sde.log_std_init
+
+
+def test_a_range_override_refuses_a_name_or_setting_taken_and_replaces_with_plus_plus() -> None:
+    """In the default space (conf/search/ppo.yaml)."""
+    with pytest.raises(ConfigError, match=r"gamma is already in the space; \+\+search"):
+        compose_config(["+search.params.gamma={path: ppo.gamma, type: float, low: 0.5, "
+                        "high: 0.9}"])
+    twice = compose_config(["+search.params.discount={path: ppo.gamma, type: float, "
+                            "low: 0.5, high: 0.9}"])
+    with pytest.raises(ConfigError, match="gamma and discount both set ppo.gamma: keep one"):
+        validate_search(twice)
+    # ++ replaces the whole range: a float range keeps none of the categorical one's choices.
+    replaced = compose_config(["++search.params.nminibatches={path: ppo.nminibatches, "
+                               "type: int, low: 1, high: 4}"]).search.params.nminibatches
+    assert (replaced.type, replaced.low, replaced.high, replaced.choices) == ("int", 1, 4, None)
+    with pytest.raises(ConfigError, match="Key 'lo' not in 'ParamSpace'"):
+        compose_config([f"+search.params.clip={CLIP_RANGE.replace('low', 'lo')}"])
 
 
 def test_smoke_search_and_the_total_over_invocations(

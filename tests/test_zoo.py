@@ -153,12 +153,14 @@ def test_the_round_trip_gives_every_classic_control_entry_back(env_id: str) -> N
         assert _means_the_same(key, written[key], zoo.SB3_DEFAULTS[key]), key
 
 
+@pytest.mark.parametrize("space", ["gym", "gym_sde"])
 @pytest.mark.parametrize("env_id", CLASSIC)
-def test_the_gym_space_holds_every_classic_control_entry_as_it_is(env_id: str) -> None:
+def test_the_gym_space_holds_every_classic_control_entry_as_it_is(env_id: str,
+                                                                  space: str) -> None:
     """Enqueued first (search.enqueue=[zoo]), rl-zoo3's settings are evaluated as published:
-    every searched value lies in the default gym space, and the trial they make trains the
-    same settings."""
-    cfg = zoo_config(env_id, "budget=zoo", "search=gym")
+    every searched value lies in the default gym space (and in gym_sde, which adds gSDE's two
+    settings), and the trial they make trains the same settings."""
+    cfg = zoo_config(env_id, "budget=zoo", f"search={space}")
     settings = resolved_settings(cfg)
     assert outside_space(cfg, settings) == {}
     params = fitted_params(cfg, settings)

@@ -9,15 +9,16 @@ from importlib.resources import files
 from hydra import compose, initialize_config_module
 from hydra.core.config_search_path import ConfigSearchPath
 from hydra.core.global_hydra import GlobalHydra
+from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.core.plugins import Plugins
 from hydra.errors import HydraException
 from hydra.plugins.search_path_plugin import SearchPathPlugin
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
 from kraby_study.config import winner, zoo
 from kraby_study.config.conf_dirs import CONFIG_MODULE, user_conf_dir
-from kraby_study.config.schema import register_schema
+from kraby_study.config.schema import ParamSpace, register_schema
 from kraby_study.config.validate import validate
 from kraby_study.errors import ConfigError
 
@@ -94,6 +95,49 @@ def ppo_choice(overrides: Sequence[str]) -> str:
     raise ConfigError("conf/config.yaml chooses no ppo config in its defaults")
 
 
+NEW_RANGE = "search.params."
+"""Where an override adds a range to the search space."""
+
+
+def new_ranges(overrides: Sequence[str]) -> tuple[list[str], list[tuple[str, dict, bool]]]:
+    """The overrides apart from those that add a whole range to the search space
+    (``+search.params.NAME={path: ..., type: ...}``, or ``++`` to add or replace), which Hydra
+    cannot merge into the typed space: (the rest, [(NAME, range, replace), ...])."""
+    rest: list[str] = []
+    ranges: list[tuple[str, dict, bool]] = []
+    for text in overrides:
+        key = text.split("=", 1)[0].lstrip("+")
+        name = key.removeprefix(NEW_RANGE)
+        if not text.startswith("+") or name == key or "." in name:
+            rest.append(text)
+            continue
+        try:
+            override = OverridesParser.create().parse_overrides([text])[0]
+            value = override.value()
+        except HydraException:
+            rest.append(text)  # Hydra names the problem
+            continue
+        if not isinstance(value, dict):
+            rest.append(text)
+            continue
+        ranges.append((name, value, override.is_force_add()))
+    return rest, ranges
+
+
+def _add_ranges(cfg: DictConfig, ranges: list[tuple[str, dict, bool]]) -> None:
+    """Put each new range into the composed space, typed as the space's others."""
+    for name, value, replace in ranges:
+        if name in cfg.search.params and not replace:
+            raise ConfigError(f"+{NEW_RANGE}{name}: {name} is already in the space; "
+                              f"++{NEW_RANGE}{name}=... replaces it")
+        try:
+            with open_dict(cfg.search.params):
+                cfg.search.params[name] = OmegaConf.merge(OmegaConf.structured(ParamSpace),
+                                                          value)
+        except OmegaConfBaseException as err:
+            raise ConfigError(f"+{NEW_RANGE}{name}: " + _one_line(err)) from None
+
+
 def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
     """Compose conf/config.yaml with overrides; raise ConfigError with a one-line message.
 
@@ -101,7 +145,7 @@ def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
     installed, :func:`kraby_study.config.winner.winners_from`) and validated; without, it keeps
     its interpolations.
     """
-    overrides = renamed(overrides)
+    overrides, ranges = new_ranges(renamed(overrides))
     if "ppo=zoo" in overrides and "env=gym" not in overrides:
         # Otherwise Hydra's words: "Key 'normalize' not in 'LegEnvConfig'".
         raise ConfigError("ppo=zoo is rl-zoo3's settings for a Gymnasium id: add env=gym "
@@ -127,6 +171,7 @@ def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
     finally:
         GlobalHydra.instance().clear()
     OmegaConf.set_readonly(cfg, False)
+    _add_ranges(cfg, ranges)
     if check:
         winner.resolve(cfg)
         validate(cfg)

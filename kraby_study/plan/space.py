@@ -78,6 +78,9 @@ def validate_search(cfg: DictConfig) -> None:
     if not search.params:
         _fail("search.params is empty: the space needs at least one parameter")
     paths = [str(p.path) for p in search.params.values()]
+    for path in dict.fromkeys(p for p in paths if paths.count(p) > 1):
+        names = [str(n) for n, p in search.params.items() if str(p.path) == path]
+        _fail(f"search.params: {' and '.join(names)} both set {path}: keep one")
     if NMINIBATCHES in paths and "ppo.batch_size" in paths:
         _fail("search both ppo.nminibatches and ppo.batch_size: choose one")
     for name, param in search.params.items():
