@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
-from importlib.resources import files
 
 from hydra import compose, initialize_config_module
 from hydra.core.config_search_path import ConfigSearchPath
@@ -82,19 +81,6 @@ def renamed(overrides: Sequence[str]) -> list[str]:
     return out
 
 
-def ppo_choice(overrides: Sequence[str]) -> str:
-    """The ppo config a command trains with: its last ``ppo=NAME``, else the primary config's
-    default (``defaults: - ppo: ...`` in conf/config.yaml)."""
-    chosen = [o.split("=", 1)[1] for o in overrides if o.startswith("ppo=")]
-    if chosen:
-        return chosen[-1]
-    primary = files(CONFIG_MODULE).joinpath("config.yaml").read_text()
-    for entry in OmegaConf.create(primary).get("defaults", []):
-        if isinstance(entry, DictConfig) and "ppo" in entry:
-            return str(entry["ppo"])
-    raise ConfigError("conf/config.yaml chooses no ppo config in its defaults")
-
-
 NEW_RANGE = "search.params."
 """Where an override adds a range to the search space."""
 
@@ -138,18 +124,9 @@ def _add_ranges(cfg: DictConfig, ranges: list[tuple[str, dict, bool]]) -> None:
             raise ConfigError(f"+{NEW_RANGE}{name}: " + _one_line(err)) from None
 
 
-def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
-    """Compose conf/config.yaml with overrides; raise ConfigError with a one-line message.
-
-    With ``check`` the config is resolved (``${winner:...}`` through the lookup the caller
-    installed, :func:`kraby_study.config.winner.winners_from`) and validated; without, it keeps
-    its interpolations.
-    """
-    overrides, ranges = new_ranges(renamed(overrides))
-    if "ppo=zoo" in overrides and "env=gym" not in overrides:
-        # Otherwise Hydra's words: "Key 'normalize' not in 'LegEnvConfig'".
-        raise ConfigError("ppo=zoo is rl-zoo3's settings for a Gymnasium id: add env=gym "
-                          "env.id=ID")
+def _composed(overrides: Sequence[str], hydra: bool = False) -> DictConfig:
+    """conf/config.yaml composed with ``overrides`` (with Hydra's own config under ``hydra``
+    when asked); ConfigError with a one-line message."""
     register_schema()
     winner.register()
     zoo.register()
@@ -157,7 +134,8 @@ def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
     GlobalHydra.instance().clear()
     try:
         with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3"):
-            cfg = compose(config_name="config", overrides=list(overrides))
+            return compose(config_name="config", overrides=list(overrides),
+                           return_hydra_config=hydra)
     except (HydraException, OmegaConfBaseException, ValueError) as err:
         raise ConfigError(_one_line(err)) from None
     except AssertionError:
@@ -170,6 +148,32 @@ def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
                           "study=NAME)") from None
     finally:
         GlobalHydra.instance().clear()
+
+
+def ppo_choice(overrides: Sequence[str]) -> str:
+    """The ppo config a command trains with, as Hydra chose it: its last ``ppo=NAME``, else
+    the default of the primary config (the working folder's ./conf/config.yaml, if it has
+    one, else the packaged one)."""
+    rest, _ = new_ranges(renamed(overrides))
+    choice = _composed(rest, hydra=True).hydra.runtime.choices.get("ppo")
+    if choice is None:
+        raise ConfigError("the config chooses no ppo config in its defaults")
+    return str(choice)
+
+
+def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
+    """Compose conf/config.yaml with overrides; raise ConfigError with a one-line message.
+
+    With ``check`` the config is resolved (``${winner:...}`` through the lookup the caller
+    installed, :func:`kraby_study.config.winner.winners_from`) and validated; without, it keeps
+    its interpolations.
+    """
+    overrides, ranges = new_ranges(renamed(overrides))
+    if "ppo=zoo" in overrides and "env=gym" not in overrides:
+        # Otherwise Hydra's words: "Key 'normalize' not in 'LegEnvConfig'".
+        raise ConfigError("ppo=zoo is rl-zoo3's settings for a Gymnasium id: add env=gym "
+                          "env.id=ID")
+    cfg = _composed(overrides)
     OmegaConf.set_readonly(cfg, False)
     _add_ranges(cfg, ranges)
     if check:
