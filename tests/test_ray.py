@@ -107,9 +107,16 @@ class Cluster:
     def raylets(self) -> list[int]:
         return [p for p in ray_processes(str(self.folder)) if b"raylet/raylet" in cmdline(p)]
 
+    def client_servers(self) -> list[int]:
+        """The Ray client servers the head starts: they leave its process tree, and their
+        command line names the head's port (``--address=IP:PORT``), not the cluster's folder."""
+        port = f":{self.port}\0".encode()
+        return [p for p in ray_processes("ray.util.client.server")
+                if b"--address=" in cmdline(p) and port in cmdline(p)]
+
     def stop(self) -> None:
         """SIGKILL every process of the cluster and everything they started."""
-        own = ray_processes(str(self.folder))
+        own = ray_processes(str(self.folder)) + self.client_servers()
         kill_all(own + descendants(own))
 
 
@@ -123,6 +130,7 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
     finally:
         made.stop()
         subprocess.run(["rm", "-rf", str(folder)], check=False)
+    assert not made.client_servers()  # nothing of the cluster outlives the test
 
 
 def local_ray_processes(before: set[int]) -> set[int]:
