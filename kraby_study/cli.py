@@ -408,7 +408,7 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     """An Optuna search over conf/search/<space>.yaml, into the same store."""
     from kraby_study.answers.resumed import resumed
     from kraby_study.answers.standing import study_standing
-    from kraby_study.config.compose import ppo_choice
+    from kraby_study.config.compose import composed
     from kraby_study.plan.settings import settings_with_ppo
     from kraby_study.plan.space import objectives, validate_search
     from kraby_study.run.executor import executor_for
@@ -418,13 +418,14 @@ def cmd_optuna(args: argparse.Namespace) -> int:
     if "env=gym" in overrides:
         # The default space searches the leg's observation too; a gym env's space has no env.
         overrides = with_default(overrides, "search", "gym")
-    cfg = checked_outputs(compose_config(overrides))
+    config = composed(overrides)
+    cfg = checked_outputs(config.cfg)
     if cfg.racing.enabled:
         raise ConfigError("racing is for run and confirm: a search races its trials' seeds "
                           "with --pruner wilcoxon")
     cfg = resumed(cfg, str(cfg.search.name))
     if cfg.search.enqueue is None:  # a new search starts from the settings it was given
-        cfg.search.enqueue = [ppo_choice(overrides)]
+        cfg.search.enqueue = [config.ppo]
     validate_search(cfg)
     starts = [(f"ppo={name}", settings_with_ppo(name, overrides))
               for name in cfg.search.enqueue]

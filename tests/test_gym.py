@@ -13,7 +13,7 @@ import pytest
 from conftest import load, run_cli
 
 import kraby_conf
-from kraby_study.config.compose import compose_config, ppo_choice
+from kraby_study.config.compose import compose_config, composed
 from kraby_study.env import adapter_for, normalizer_path
 from kraby_study.env.gym_env import evaluation_seeds
 from kraby_study.env.gym_vec import sub_env_seeds
@@ -396,14 +396,14 @@ def test_a_gym_campaign_race_train_and_ray_run(workdir: Path) -> None:
 def test_the_ppo_config_a_search_starts_from_is_the_one_hydra_chose(workdir: Path) -> None:
     """A working folder's own conf/config.yaml, which Hydra takes as the primary config,
     chooses the default ppo config too."""
-    assert ppo_choice(["env=gym"]) == "start"
+    assert composed(["env=gym"], check=False).ppo == "start"
     packaged = (Path(kraby_conf.__file__).parent / "config.yaml").read_text()
     assert "  - ppo: start\n" in packaged
     (workdir / "conf").mkdir()
     (workdir / "conf" / "config.yaml").write_text(
         packaged.replace("  - ppo: start\n", "  - ppo: tuned\n"))
-    assert ppo_choice(["env=gym"]) == "tuned"
-    assert ppo_choice(["env=gym", "env.id=Pendulum-v1", "ppo=zoo"]) == "zoo"
+    assert composed(["env=gym"], check=False).ppo == "tuned"
+    assert composed(["env=gym", "env.id=Pendulum-v1", "ppo=zoo"]).ppo == "zoo"
 
 
 def test_a_gym_search_starts_from_the_ppo_config_it_trains_with(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 from hydra import compose, initialize_config_module
 from hydra.core.config_search_path import ConfigSearchPath
@@ -124,9 +125,9 @@ def _add_ranges(cfg: DictConfig, ranges: list[tuple[str, dict, bool]]) -> None:
             raise ConfigError(f"+{NEW_RANGE}{name}: " + _one_line(err)) from None
 
 
-def _composed(overrides: Sequence[str], hydra: bool = False) -> DictConfig:
-    """conf/config.yaml composed with ``overrides`` (with Hydra's own config under ``hydra``
-    when asked); ConfigError with a one-line message."""
+def _composed(overrides: Sequence[str]) -> DictConfig:
+    """conf/config.yaml composed with ``overrides``, Hydra's own config under ``hydra``;
+    ConfigError with a one-line message."""
     register_schema()
     winner.register()
     zoo.register()
@@ -135,7 +136,7 @@ def _composed(overrides: Sequence[str], hydra: bool = False) -> DictConfig:
     try:
         with initialize_config_module(config_module=CONFIG_MODULE, version_base="1.3"):
             return compose(config_name="config", overrides=list(overrides),
-                           return_hydra_config=hydra)
+                           return_hydra_config=True)
     except (HydraException, OmegaConfBaseException, ValueError) as err:
         raise ConfigError(_one_line(err)) from None
     except AssertionError:
@@ -150,15 +151,21 @@ def _composed(overrides: Sequence[str], hydra: bool = False) -> DictConfig:
         GlobalHydra.instance().clear()
 
 
-def ppo_choice(overrides: Sequence[str]) -> str:
-    """The ppo config a command trains with, as Hydra chose it: its last ``ppo=NAME``, else
-    the default of the primary config (the working folder's ./conf/config.yaml, if it has
-    one, else the packaged one)."""
-    rest, _ = new_ranges(renamed(overrides))
-    choice = _composed(rest, hydra=True).hydra.runtime.choices.get("ppo")
-    if choice is None:
-        raise ConfigError("the config chooses no ppo config in its defaults")
-    return str(choice)
+@dataclass(frozen=True)
+class Composed:
+    """A composed config and the config group files Hydra chose for it."""
+
+    cfg: DictConfig
+    choices: dict[str, str]
+    """Group -> the file chosen (``ppo`` -> ``zoo``): the last ``group=NAME`` override, else
+    the primary config's default (the working folder's ./conf/config.yaml, if it has one)."""
+
+    @property
+    def ppo(self) -> str:
+        """The ppo config the command trains with."""
+        if "ppo" not in self.choices:
+            raise ConfigError("the config chooses no ppo config in its defaults")
+        return self.choices["ppo"]
 
 
 def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
@@ -168,15 +175,24 @@ def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
     installed, :func:`kraby_study.config.winner.winners_from`) and validated; without, it keeps
     its interpolations.
     """
+    return composed(overrides, check).cfg
+
+
+def composed(overrides: Sequence[str], check: bool = True) -> Composed:
+    """:func:`compose_config`, with the config group files Hydra chose."""
     overrides, ranges = new_ranges(renamed(overrides))
     if "ppo=zoo" in overrides and "env=gym" not in overrides:
         # Otherwise Hydra's words: "Key 'normalize' not in 'LegEnvConfig'".
         raise ConfigError("ppo=zoo is rl-zoo3's settings for a Gymnasium id: add env=gym "
                           "env.id=ID")
     cfg = _composed(overrides)
+    choices = {str(group): str(name) for group, name in cfg.hydra.runtime.choices.items()
+               if name is not None and not str(group).startswith("hydra/")}
     OmegaConf.set_readonly(cfg, False)
+    with open_dict(cfg):
+        del cfg["hydra"]
     _add_ranges(cfg, ranges)
     if check:
         winner.resolve(cfg)
         validate(cfg)
-    return cfg
+    return Composed(cfg, choices)
