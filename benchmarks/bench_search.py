@@ -7,9 +7,9 @@ Run: python benchmarks/bench_search.py --env-id Pendulum-v1 --cpu-budget 1800
 
 For each sampler seed and each sampler, one search (``kraby-study optuna``, evaluation
 objective, rl-zoo3's settings for the env as the fixed ones, ``budget=zoo``) runs until it has
-used ``--cpu-budget`` CPU seconds (``search.cpu_budget``: no trial starts after that, the running
-ones finish, so each search overshoots by less than one trial per worker). Both searches
-evaluate rl-zoo3's settings first, as the default search does when it trains with them
+used ``--cpu-budget`` CPU seconds (``search.cpu_budget``: no trial starts once the ended trials
+and the running ones so far have used it; the running ones finish, so each search overshoots).
+Both searches evaluate rl-zoo3's settings first, as the default search does when it trains with them
 (``search.enqueue`` null: the command's ppo config), then sample; ``--enqueue NAME ...`` names
 other ppo configs, and ``--enqueue`` alone none (a cold start). The search's pick (its best
 complete trial) is then retrained by ``kraby-study confirm --top 1`` on ``--confirm-seeds``

@@ -23,7 +23,8 @@ from kraby_study.run.runner import MAX_WORKER_DEATHS, CommandRun, run_trials
 STEPS = 1000
 
 # A scripted attempt: what the worker says, one step per events() call.
-#   ("progress", steps) | ("checkpoint", (step, value)) | ("result", TrialResult) | ("died", code)
+#   ("progress", (steps, CPU s so far)) | ("checkpoint", (step, value))
+#   | ("result", TrialResult) | ("died", code)
 Attempt = list[tuple[str, Any]]
 
 
@@ -44,7 +45,7 @@ def runs(*attempt: tuple[str, Any]) -> list[Attempt]:
 
 
 def completes(score: float = 1.0) -> list[Attempt]:
-    return runs(("progress", STEPS // 2), ("result", result(score=score)))
+    return runs(("progress", (STEPS // 2, 0.0)), ("result", result(score=score)))
 
 
 class FakeSource:
@@ -62,6 +63,7 @@ class FakeSource:
         self.requeued: list[tuple[int, TrialSpec, str]] = []
         self.checkpoints: list[tuple[int, int, float]] = []
         self.heartbeats: list[list[int]] = []
+        self.cpu: dict[int, float] = {}
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
         if not self.queue:
@@ -74,6 +76,9 @@ class FakeSource:
     def checkpoint(self, number: int, step: int, value: float) -> bool:
         self.checkpoints.append((number, step, value))
         return self.answers.get(number, True)
+
+    def using(self, number: int, cpu: float) -> None:
+        self.cpu[number] = cpu
 
     def record(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
         self.log.append(("record", number))
@@ -192,10 +197,19 @@ def run(pools: Pools, source: FakeSource, workers: int) -> tuple[CommandRun, str
     return summary, stream.getvalue()
 
 
+def test_a_running_trials_cpu_seconds_reach_the_source_with_its_progress(pools: Pools) -> None:
+    pools.script({0: runs(("progress", (100, 1.5)), ("progress", (900, 4.0)),
+                          ("result", result()))})
+    source = FakeSource(1)
+    run(pools, source, workers=1)
+    assert source.cpu == {0: 4.0}  # the latest report
+
+
 def test_every_claimed_trial_is_recorded_once_with_its_result(pools: Pools) -> None:
     scores = {0: 0.5, 1: -1.0, 2: 2.0, 3: 0.0, 4: 7.0}
     expected = {n: result(score=s) for n, s in scores.items()}
-    pools.script({n: runs(("progress", 100), ("progress", 900), ("result", expected[n]))
+    pools.script({n: runs(("progress", (100, 0.0)), ("progress", (900, 0.0)),
+                          ("result", expected[n]))
                    for n in scores})
     source = FakeSource(5)
     summary, _ = run(pools, source, workers=2)
@@ -221,7 +235,7 @@ def test_the_summary_counts_complete_failed_and_pruned(pools: Pools) -> None:
 
 def test_at_most_workers_trials_run_at_once(pools: Pools) -> None:
     # Trials of different lengths, so that workers free up at different times.
-    pools.script({n: runs(*[("progress", 10)] * (n % 3), ("result", result()))
+    pools.script({n: runs(*[("progress", (10, 0.0))] * (n % 3), ("result", result()))
                    for n in range(7)})
     source = FakeSource(7)
     run(pools, source, workers=3)
@@ -239,7 +253,7 @@ def test_at_most_workers_trials_run_at_once(pools: Pools) -> None:
 
 
 def test_heartbeats_name_the_running_trials(pools: Pools) -> None:
-    pools.script({0: runs(("progress", 1), ("progress", 2), ("result", result())),
+    pools.script({0: runs(("progress", (1, 0.0)), ("progress", (2, 0.0)), ("result", result())),
                    1: runs(("result", result()))})
     source = FakeSource(2)
     run(pools, source, workers=2)
@@ -256,8 +270,8 @@ def test_heartbeats_name_the_running_trials(pools: Pools) -> None:
 
 
 def test_a_trial_whose_worker_died_runs_again_under_its_number(pools: Pools) -> None:
-    pools.script({1: [[("progress", 300), ("died", -9)],
-                       [("progress", 500), ("result", result(score=4.0))]]})
+    pools.script({1: [[("progress", (300, 0.0)), ("died", -9)],
+                       [("progress", (500, 0.0)), ("result", result(score=4.0))]]})
     source = FakeSource(3)
     summary, out = run(pools, source, workers=2)
     assert [n for n, _ in pools.only.submitted].count(1) == 2
@@ -272,7 +286,7 @@ def test_a_trial_whose_worker_died_runs_again_under_its_number(pools: Pools) -> 
 def test_a_trial_whose_worker_dies_every_time_is_recorded_as_failed(
         pools: Pools) -> None:
     codes = [-9, 137, -11, 1, 2][:MAX_WORKER_DEATHS]
-    pools.script({0: [[("progress", 10), ("died", code)] for code in codes]})
+    pools.script({0: [[("progress", (10, 0.0)), ("died", code)] for code in codes]})
     source = FakeSource(2)
     summary, _ = run(pools, source, workers=2)
     assert [n for n, _ in pools.only.submitted].count(0) == MAX_WORKER_DEATHS  # not once more
@@ -287,7 +301,7 @@ def test_a_trial_whose_worker_dies_every_time_is_recorded_as_failed(
 def test_a_checkpoint_is_answered_with_what_the_source_said(pools: Pools) -> None:
     pools.script({
         0: runs(("checkpoint", (500, 1.5)), ("result", result())),
-        1: runs(("progress", 200), ("checkpoint", (500, -3.0)),
+        1: runs(("progress", (200, 0.0)), ("checkpoint", (500, -3.0)),
                 ("result", TrialResult(outcome=Outcome.PRUNED, pruned_at=500))),
     })
     source = FakeSource(2, answers={0: True, 1: False})
@@ -299,9 +313,9 @@ def test_a_checkpoint_is_answered_with_what_the_source_said(pools: Pools) -> Non
 
 def test_ctrl_c_gives_the_running_trials_back_and_keeps_what_ended(
         pools: Pools) -> None:
-    long = runs(*[("progress", 10 * i) for i in range(20)], ("result", result()))
+    long = runs(*[("progress", (10 * i, 0.0)) for i in range(20)], ("result", result()))
     # Trial 0 ends on the 2nd events() call and trial 2 takes its worker; trial 1 runs on.
-    pools.script({0: runs(("progress", 10), ("result", result())), 1: long, 2: long},
+    pools.script({0: runs(("progress", (10, 0.0)), ("result", result())), 1: long, 2: long},
            interrupt_at=4)
     source = FakeSource(4)
     summary, out = run(pools, source, workers=2)

@@ -255,6 +255,29 @@ def test_checkpoint_prunes_a_trial_below_the_median_at_equal_steps(tmp_path: Pat
         assert source.checkpoint(bad.number, 512, -0.9) is False
 
 
+def test_a_cpu_budget_counts_what_the_running_trials_have_used(tmp_path: Path) -> None:
+    cfg = compose_config(["budget=smoke", "search.cpu_budget=100", "save_models=false",
+                          f"storage=sqlite:///{tmp_path}/k.db"])
+    with opened(cfg.storage) as store:
+        source = SearchSource(store.define("s", StudyAttrs(kind="search")), cfg)
+        first = source.next_trial()
+        assert first is not None
+        source.using(first[0], 60.0)
+        second = source.next_trial()  # 60 of 100 used
+        assert second is not None
+        source.using(second[0], 45.0)
+        # Nothing has ended, yet the two running trials have used the budget: none starts.
+        assert source.spent() == 105.0 and source.next_trial() is None
+        assert source.used_text() == "105 of 100 CPU s used"
+        # An ended trial counts by its stored CPU time, no longer by its last report.
+        source.record(first[0], first[1], TrialResult(outcome=Outcome.COMPLETE,
+                                                      final_score=-0.1, cpu_time=61.0))
+        assert source.spent() == 106.0 and source.next_trial() is None
+        # A trial given back (Ctrl-C) counts nothing; 61 of 100 used, so the next one starts.
+        source.requeue(second[0], second[1], "interrupted")
+        assert source.spent() == 61.0 and source.next_trial() is not None
+
+
 def _one_done(ledger: StudyLedger, values: tuple[tuple[int, float], ...]) -> StudyLedger:
     """The study with one complete trial that reported these (step, value) checkpoints."""
     done = ledger.ask({})

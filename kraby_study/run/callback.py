@@ -17,6 +17,9 @@ CheckpointHook = Callable[[int, float], bool]
 """Called with (env steps, intermediate value); False stops the run (a pruner's decision)."""
 ProgressHook = Callable[[int], None]
 """Called now and then with the env steps done so far."""
+TrialProgress = Callable[[int, float], None]
+"""A trial's progress: called now and then with the env steps done so far (its seeds
+together) and the CPU seconds the trial has used so far."""
 
 
 class EpisodeRecorder(BaseCallback):

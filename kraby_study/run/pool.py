@@ -33,8 +33,9 @@ class Event:
     """Something a worker said or did: started, progress, checkpoint, result or died.
 
     The payload is the machine's facts (started: :func:`kraby_study.run.provenance.
-    machine_facts`), the step (progress), (step, value) (checkpoint), the TrialResult (result),
-    or (spec, why) (died: why the worker is gone, e.g. ``exit code -9``).
+    machine_facts`), (step, the trial's CPU seconds so far) (progress), (step, value)
+    (checkpoint), the TrialResult (result), or (spec, why) (died: why the worker is gone, e.g.
+    ``exit code -9``).
     """
 
     kind: str

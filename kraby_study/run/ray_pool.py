@@ -70,8 +70,8 @@ class TrialActor:
     def run(self, number: int, spec: TrialSpec) -> None:
         """Train one trial; its messages and result go to the outbox."""
 
-        def progress(step: int) -> None:
-            self._outbox.put(("progress", number, step))
+        def progress(step: int, cpu: float) -> None:
+            self._outbox.put(("progress", number, (step, cpu)))
 
         def checkpoint(step: int, value: float) -> bool:
             self._outbox.put(("checkpoint", number, step, value))

@@ -41,6 +41,9 @@ class TrialSource(Protocol):
     def checkpoint(self, number: int, step: int, value: float) -> bool:
         """Record an intermediate value; False prunes the trial."""
 
+    def using(self, number: int, cpu: float) -> None:
+        """Note the CPU seconds a running trial has used so far."""
+
     def record(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
         """Store a finished trial."""
 
@@ -167,7 +170,9 @@ class _Run:
         self.source.started(event.number, event.payload)
 
     def on_progress(self, event: Event, spec: TrialSpec) -> None:
-        self.progress.step(spec.label, int(event.payload))
+        step, cpu = event.payload
+        self.source.using(event.number, float(cpu))
+        self.progress.step(spec.label, int(step))
 
     def on_checkpoint(self, event: Event, spec: TrialSpec) -> None:
         step, value = event.payload

@@ -78,10 +78,17 @@ class SearchSource(StudySource):
         self.space = distributions(cfg)
         self.recheck, self.recheck_seeds = recheck_plan(cfg)
         self._rechecks: dict[int, Any] = {}  # recheck trial -> the trial it rechecks
+        self._running: dict[int, float] = {}  # running trial -> CPU s it has used so far
 
     def spent(self) -> float:
-        """CPU seconds the search's ended trials have used, every attempt counted."""
-        return spent_cpu(self.ledger.trials())
+        """CPU seconds the search has used: its ended trials', every attempt counted, and what
+        the trials this command runs have used so far (a trial another machine runs counts
+        once it ends)."""
+        return spent_cpu(self.ledger.trials()) + sum(self._running.values())
+
+    def using(self, number: int, cpu: float) -> None:
+        """Note the CPU seconds a running trial has used so far."""
+        self._running[number] = cpu
 
     def over_budget(self) -> bool:
         """Whether the search has used its CPU budget (never without one)."""
@@ -99,8 +106,8 @@ class SearchSource(StudySource):
             return False
         if self.cpu_budget is None or not self.recheck:
             return True
-        return (spent_cpu(trials) + reserve(trials, self.recheck, self.recheck_seeds)
-                < self.cpu_budget)
+        return (spent_cpu(trials) + sum(self._running.values())
+                + reserve(trials, self.recheck, self.recheck_seeds) < self.cpu_budget)
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
         """Ask for the next trial (a queued retry first, then new ones while exploring, then
@@ -174,11 +181,17 @@ class SearchSource(StudySource):
         """Report an intermediate value to the pruner; False stops the trial."""
         return self.ledger.checkpoint(number, step, value)
 
+    def requeue(self, number: int, spec: TrialSpec, reason: str) -> None:
+        """Give back a trial that will not finish in this command, to run again."""
+        self._running.pop(number, None)
+        super().requeue(number, spec, reason)
+
     def record(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
         """Store a finished trial. Under a floor a complete one first gets its constraint
         ``floor``: the floor's measured score minus its own (feasible at 0 or less; 0 while the
         floor is not measured). Optuna's samplers rank feasible trials first. A recheck is
         stored with the seeds of the trial it rechecks (:func:`combined`)."""
+        self._running.pop(number, None)  # its stored cpu_time counts from now on
         if number in self._rechecks:
             result = combined(self._rechecks[number], result)
         floor = search_floor(self.cfg)

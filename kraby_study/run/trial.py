@@ -23,7 +23,7 @@ from kraby_study.records.stored import Failure, Outcome, failure
 from kraby_study.run.curve import Episode, bin_curve, final_score, mean_curve
 
 if TYPE_CHECKING:
-    from kraby_study.run.callback import CheckpointHook, EpisodeRecorder, ProgressHook
+    from kraby_study.run.callback import CheckpointHook, EpisodeRecorder, TrialProgress
 
 
 def _now() -> str:
@@ -194,7 +194,7 @@ def _score(spec: TrialSpec, run: _Seed, seed: int) -> None:
 
 
 def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
-              on_progress: ProgressHook | None = None, shards: int = 1) -> TrialResult:
+              on_progress: TrialProgress | None = None, shards: int = 1) -> TrialResult:
     """Train PPO as the spec says; divergence and errors come back as a failed result.
 
     A spec of several seeds trains seeds seed .. seed + seeds - 1 one after the other. Its
@@ -206,19 +206,26 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
     With ``seed_scores`` (the wilcoxon pruner) they are instead each seed's own score at the
     env steps of its end, every seed's, so a complete trial holds all its seeds for later trials
     to be paired with; a stop after the last seed has nothing left to save and is not taken.
-    ``shards`` sets how many processes step the legs: speed only, the result is the same.
+    ``on_progress`` hears the env steps done and the CPU seconds used so far (a search's CPU
+    budget counts running trials by it). ``shards`` sets how many processes step the legs: speed
+    only, the result is the same.
     """
     from kraby_study.run.callback import EpisodeRecorder
 
     started = _now()
     t0 = time.perf_counter()
     cpu0 = cpu_seconds()
+
+    def progress(steps: int) -> None:
+        if on_progress is not None:
+            on_progress(steps, cpu_seconds() - cpu0)
+
     runs: list[_Seed] = []
     for index in range(spec.seeds):
         within = spec.checkpoint_every if index == 0 and not spec.seed_scores else None
         recorder = EpisodeRecorder(spec.steps, offset=index * spec.steps,
-                                   checkpoint_every=within,
-                                   on_checkpoint=on_checkpoint, on_progress=on_progress)
+                                   checkpoint_every=within, on_checkpoint=on_checkpoint,
+                                   on_progress=progress if on_progress is not None else None)
         run = _learn(spec, spec.seed + index, recorder, shards)
         runs.append(run)
         if run.failure is None and run.pruned_at is None:

@@ -19,11 +19,11 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from kraby_study.plan.spec import TrialSpec
     from kraby_study.records.attributes import TrialResult
-    from kraby_study.run.callback import CheckpointHook, ProgressHook
+    from kraby_study.run.callback import CheckpointHook, TrialProgress
 
 
 def attempt(spec: TrialSpec, shards: int, checkpoint: CheckpointHook | None,
-            progress: ProgressHook) -> TrialResult:
+            progress: TrialProgress) -> TrialResult:
     """Run one trial; an exception (a bug, a bad environment) comes back as a failed result,
     so it never kills the worker or the study."""
     from kraby_study.records.attributes import TrialResult
@@ -59,8 +59,8 @@ def serve(conn: Connection, shards: int) -> None:
             return
         number, spec = message
 
-        def progress(step: int, number: int = number) -> None:
-            conn.send(("progress", number, step))
+        def progress(step: int, cpu: float, number: int = number) -> None:
+            conn.send(("progress", number, (step, cpu)))
 
         def checkpoint(step: int, value: float, number: int = number) -> bool:
             conn.send(("checkpoint", number, step, value))
