@@ -179,3 +179,47 @@ def test_every_search_evaluates_the_enqueued_configs_first(
     else:
         assert all(enqueued in c and sum(a.startswith("search.enqueue=") for a in c) == 1
                    for c in searches)
+
+
+def _replay() -> object:
+    path = Path(__file__).parents[1] / "benchmarks" / "budget_replay.py"
+    spec = importlib.util.spec_from_file_location("budget_replay", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["budget_replay"] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_budget_replay_drops_the_trials_started_once_running_ones_used_the_budget(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from datetime import datetime, timedelta
+
+    from optuna.distributions import FloatDistribution
+    from optuna.trial import FrozenTrial
+
+    url = f"sqlite:///{tmp_path / 'r.db'}"
+    study = optuna.create_study(study_name="s", storage=url, direction="maximize")
+    study.set_user_attr("kraby_cpu_budget", 10.0)
+    zero = datetime(2026, 1, 1)
+    # Two workers: a (0-8 s) and b (0-6 s) start together; at 6 s b has ended (6 CPU s) and a
+    # has used 6 of its 8, so c (6-9 s) and d (8-10 s) start only under the old rule.
+    for start, end in ((0, 8), (0, 6), (6, 9), (8, 10)):
+        study.add_trial(FrozenTrial(
+            number=0, trial_id=0, state=TrialState.COMPLETE, value=1.0, values=None,
+            params={"x": 0.5}, distributions={"x": FloatDistribution(0, 1)},
+            user_attrs={"cpu_time": float(end - start)}, system_attrs={},
+            intermediate_values={}, datetime_start=zero + timedelta(seconds=start),
+            datetime_complete=zero + timedelta(seconds=end)))
+    replay = _replay()
+    spans = replay.spans_of(study)  # type: ignore[attr-defined]
+    assert [(s.start - spans[0].start, s.cpu) for s in replay.kept(spans, 10.0)] == [  # type: ignore[attr-defined]
+        (0.0, 8.0), (0.0, 6.0)]
+    # Had the budget been larger than the 12 CPU s used at 6 s, c would start.
+    assert len(replay.kept(spans, 12.5)) == 3  # type: ignore[attr-defined]
+    assert replay.main([url]) == 0  # type: ignore[attr-defined]
+    out = capsys.readouterr().out
+    assert "| s | 10 | 19 | 14 | 2 |" in out
+    assert out.strip().splitlines()[-1] == (
+        "budget_replay: 1 searches; overshoot of the budget mean 90.0 % -> 40.0 %, "
+        "largest 90.0 % -> 40.0 %; 2 trials fewer")
