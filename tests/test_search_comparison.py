@@ -19,14 +19,19 @@ TINY = ["budget.steps=1024", "budget.seeds=1", "budget.curve_every=128", "search
         "search.params.n_steps.choices=[8,16]", "search.params.n_epochs.high=2"]
 
 
-def _bench() -> object:
-    path = Path(__file__).parents[1] / "benchmarks" / "bench_search.py"
-    spec = importlib.util.spec_from_file_location("bench_search", path)
+def _benchmark(name: str) -> object:
+    """The module of ``benchmarks/NAME.py``."""
+    path = Path(__file__).parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
-    sys.modules["bench_search"] = module
+    sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def _bench() -> object:
+    return _benchmark("bench_search")
 
 
 def _run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, *args: str) -> str:
@@ -181,16 +186,6 @@ def test_every_search_evaluates_the_enqueued_configs_first(
                    for c in searches)
 
 
-def _replay() -> object:
-    path = Path(__file__).parents[1] / "benchmarks" / "budget_replay.py"
-    spec = importlib.util.spec_from_file_location("budget_replay", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["budget_replay"] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_the_budget_replay_drops_the_trials_started_once_running_ones_used_the_budget(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from datetime import datetime, timedelta
@@ -211,7 +206,7 @@ def test_the_budget_replay_drops_the_trials_started_once_running_ones_used_the_b
             user_attrs={"cpu_time": float(end - start)}, system_attrs={},
             intermediate_values={}, datetime_start=zero + timedelta(seconds=start),
             datetime_complete=zero + timedelta(seconds=end)))
-    replay = _replay()
+    replay = _benchmark("budget_replay")
     spans = replay.spans_of(study)  # type: ignore[attr-defined]
     assert [(s.start - spans[0].start, s.cpu) for s in replay.kept(spans, 10.0)] == [  # type: ignore[attr-defined]
         (0.0, 8.0), (0.0, 6.0)]
