@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime
 import importlib.util
 import re
 import sys
@@ -218,3 +219,97 @@ def test_the_budget_replay_drops_the_trials_started_once_running_ones_used_the_b
     assert out.strip().splitlines()[-1] == (
         "budget_replay: 1 searches; overshoot of the budget mean 90.0 % -> 40.0 %, "
         "largest 90.0 % -> 40.0 %; 2 trials fewer")
+
+
+# Published confirmed means (docs/results.md, Pendulum-v1 at 1,200 CPU s, sampler seeds 0-9):
+# TPE without the pruner, and random search.
+UNPRUNED = ["-163.8", "-168.5", "-151.1", "-151.9", "-153.6", "-179.3", "-154.1", "-152.6",
+            "-162.0", "-200.6"]
+RANDOM = ["-627.5", "-191.4", "-154.1", "-151.9", "-148.4", "-192.4", "-162.0", "-159.8",
+          "-158.4", "-301.9"]
+
+
+def test_paired_picks_tests_the_published_differences_with_the_tie_dropped(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    paired = _benchmark("paired_picks")
+    assert paired.main(["--seeds", *map(str, range(10)),  # type: ignore[attr-defined]
+                        "--first-means", *UNPRUNED, "--second-means", *RANDOM,
+                        "--margin", "38.5"]) == 0
+    out = capsys.readouterr().out
+    assert "| 3 | -151.9 | -151.9 | 0 |" in out
+    assert "| 0 | -163.8 | -627.5 | +463.7 |" in out
+    assert "Wilcoxon signed-rank p 0.000977 (n 10)" in out  # 1 / 1024: every shifted one above
+    assert out.strip().splitlines()[-1] == (
+        "paired_picks: first - second +61.0 (median +7.6; 95 % t CI [-42.6, 164.7]); "
+        "Wilcoxon p 0.0195 (greater, n 9, 1 zero)")
+
+
+def test_paired_picks_reads_stored_confirms_to_the_published_precision(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    url = f"sqlite:///{tmp_path / 'p.db'}"
+    # Arm a's pick at seed 0 confirms 0.04 below arm b's: a tie at the published precision.
+    scores = {("a", 0): [10.0, 12.0], ("b", 0): [10.04, 12.04], ("a", 1): [5.0, 7.0],
+              ("b", 1): [1.0, 2.0]}
+    for (arm, seed), values in scores.items():
+        study = optuna.create_study(study_name=f"{arm}-s{seed}-confirm", storage=url)
+        for fresh, value in enumerate(values):
+            study.add_trial(optuna.trial.create_trial(
+                value=value, user_attrs={"seed": 1000 + fresh, "final_score": value,
+                                         "cpu_time": 1.0}))
+    paired = _benchmark("paired_picks")
+    assert paired.main(["--seeds", "0", "1", "--first", "a", "--second", "b",  # type: ignore[attr-defined]
+                        "--storage", url]) == 0
+    out = capsys.readouterr().out
+    assert "| 0 | 11.0 | 11.0 | 0 |" in out and "| 1 | 6.0 | 1.5 | +4.5 |" in out
+    assert out.strip().endswith("Wilcoxon p 0.5 (greater, n 1, 1 zero)")
+
+
+def test_paired_picks_refuses_means_that_do_not_match_the_seeds(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    paired = _benchmark("paired_picks")
+    with pytest.raises(SystemExit) as stop:
+        paired.main(["--seeds", "0", "1", "--first-means", "1", "--second-means",  # type: ignore[attr-defined]
+                     "1", "2"])
+    assert stop.value.code == 2
+    assert "--first-means needs one mean per seed (2)" in capsys.readouterr().err
+
+
+def test_the_pruner_replay_judges_each_trial_against_those_complete_and_kept_by_then(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Five unpruned trials of 100 env steps (pruner from step 50, 2 complete trials first),
+    started at the given seconds, each taking 10 s."""
+    url = f"sqlite:///{tmp_path / 'r.db'}"
+    study = optuna.create_study(study_name="np", storage=url, direction="maximize")
+    study.set_user_attr("kraby_definition", {
+        "steps": 100, "seeds": 1,
+        "search": {"pruner": "none", "pruner_startup_trials": 2, "warmup": 0.5,
+                   "checkpoints": 4}})
+    zero = datetime.datetime(2026, 11, 29, 12, 0, 0)
+    trials = [(0, {25: 1.0, 50: 5.0, 75: 6.0}, 10.0),
+              (0, {25: 1.0, 50: 4.0, 75: 5.0}, 8.0),
+              (20, {25: 0.0, 50: 1.0, 75: 1.0}, 9.0),   # below the median of t0, t1: stopped
+              (1, {25: 0.0, 50: 0.0, 75: 0.0}, -1.0),   # nothing complete by its checkpoints
+              (40, {25: 3.0, 50: 3.0, 75: 3.0}, 7.0)]   # stopped only if t2 is left out
+    for start, values, value in trials:
+        study.add_trial(optuna.trial.FrozenTrial(
+            number=0, trial_id=0, state=TrialState.COMPLETE, value=value,
+            datetime_start=zero + datetime.timedelta(seconds=start),
+            datetime_complete=zero + datetime.timedelta(seconds=start + 10), params={},
+            distributions={}, user_attrs={}, system_attrs={}, intermediate_values=values))
+    replay = _benchmark("pruner_replay")
+    assert replay.main([url, "np", "--good", "9"]) == 0  # type: ignore[attr-defined]
+    out = capsys.readouterr().out
+    assert "| np | 5 | 2: t2 (50), t4 (50) | 1 | no (t0) |" in out
+    assert out.strip().splitlines()[-1] == (
+        "pruner_replay: 1 searches; the median pruner stops 2 of 5 complete trials; 1 of them "
+        "ended at 9 or better; 0 picks among them")
+
+
+def test_the_pruner_replay_refuses_a_search_that_ran_with_a_pruner(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'r.db'}"
+    study = optuna.create_study(study_name="pruned", storage=url)
+    study.set_user_attr("kraby_definition", {"steps": 100, "seeds": 1,
+                                             "search": {"pruner": "median"}})
+    with pytest.raises(SystemExit) as stop:
+        _benchmark("pruner_replay").main([url, "pruned"])  # type: ignore[attr-defined]
+    assert stop.value.code == 2

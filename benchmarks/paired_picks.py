@@ -1,0 +1,109 @@
+"""Benchmark analysis: two searches' confirmed picks, paired by sampler seed, tested.
+
+Run: python benchmarks/paired_picks.py --seeds 0 1 2 3 4
+         (--first NAME | --first-means M ...) (--second NAME | --second-means M ...)
+         [--storage URL] [--alternative greater|less]
+
+Each arm is either the stored confirms of ``bench_search.py`` (``--first mccnp-tpe`` reads
+the studies ``mccnp-tpe-s0-confirm``, ``mccnp-tpe-s1-confirm``, ... in ``--storage``: the mean
+of each pick's fresh seeds) or a list of confirmed means as published, one per sampler seed
+(``--first-means 73.2 49.4 64.7``), for an arm whose store is gone. A mean read from a store is
+taken to 0.1, the precision the results publish, so two searches that picked the same setting
+differ by exactly 0 whichever way their means were obtained.
+
+Per sampler seed, the first arm's mean minus the second's; then the differences' median, mean
+with its 95 % Student-t interval over the sampler seeds, and the exact one-sided Wilcoxon
+signed-rank p (scipy, zero differences dropped) that the first arm does better
+(``--alternative greater``, the default) or worse (``less``). With ``--margin M`` it also tests
+that the first arm is not worse by more than M (the same test on the differences plus M).
+
+The last line reads ``paired_picks: first - second D (median m; 95 % t CI [lo, hi]); Wilcoxon
+p P (n N, Z zero)``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import sys
+from pathlib import Path
+
+from scipy import stats
+
+sys.path.insert(0, str(Path(__file__).parent))
+from bench_search import read_confirm, t_interval  # noqa: E402
+
+
+def arm_means(storage: str, name: str, seeds: list[int]) -> list[float]:
+    """The confirmed mean of arm NAME's pick at each sampler seed, to 0.1."""
+    means = []
+    for seed in seeds:
+        scores, _ = read_confirm(storage, f"{name}-s{seed}-confirm")
+        if not scores:
+            raise SystemExit(f"paired_picks: {name}-s{seed}-confirm has no complete run")
+        means.append(round(statistics.fmean(scores), 1))
+    return means
+
+
+def signed(value: float) -> str:
+    """A difference to 0.1 with its sign; 0 when it rounds to none."""
+    text = f"{value:+.1f}"
+    return "0" if text in ("+0.0", "-0.0") else text
+
+
+def signed_rank(differences: list[float], alternative: str) -> tuple[float, int]:
+    """Exact one-sided Wilcoxon signed-rank p of the differences, zeros dropped, and how many
+    were left (p 1 when none is)."""
+    left = [d for d in differences if d != 0]
+    if not left:
+        return 1.0, 0
+    return float(stats.wilcoxon(left, alternative=alternative, method="exact").pvalue), len(left)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", required=True, help="sampler seeds")
+    for arm in ("first", "second"):
+        group = parser.add_mutually_exclusive_group(required=True)
+        group.add_argument(f"--{arm}", help="stored arm: its studies' names before -sN-confirm")
+        group.add_argument(f"--{arm}-means", type=float, nargs="+",
+                           help="published confirmed means, one per sampler seed")
+    parser.add_argument("--storage", default="sqlite:///bench_search.db")
+    parser.add_argument("--alternative", choices=["greater", "less"], default="greater",
+                        help="greater: the first arm does better; less: worse")
+    parser.add_argument("--margin", type=float, default=None,
+                        help="also test: the first arm not worse by more than this")
+    args = parser.parse_args(argv)
+    if len(set(args.seeds)) != len(args.seeds):
+        parser.error("--seeds must not repeat a seed")
+    for arm in ("first", "second"):
+        given = getattr(args, f"{arm}_means")
+        if given is not None and len(given) != len(args.seeds):
+            parser.error(f"--{arm}-means needs one mean per seed ({len(args.seeds)})")
+    if args.margin is not None and not args.margin > 0:
+        parser.error("--margin must be positive")
+    first = args.first_means or arm_means(args.storage, args.first, args.seeds)
+    second = args.second_means or arm_means(args.storage, args.second, args.seeds)
+    differences = [round(a - b, 1) for a, b in zip(first, second, strict=True)]
+
+    print("| sampler seed | first | second | first - second |")
+    print("|---:|---:|---:|---:|")
+    for seed, a, b, d in zip(args.seeds, first, second, differences, strict=True):
+        print(f"| {seed} | {a:.1f} | {b:.1f} | {signed(d)} |")
+    if args.margin is not None:
+        p_margin, n_margin = signed_rank([d + args.margin for d in differences], "greater")
+        print(f"Not worse by more than {args.margin:g}: exact one-sided Wilcoxon signed-rank "
+              f"p {p_margin:.3g} (n {n_margin})")
+    p, n = signed_rank(differences, args.alternative)
+    low, high = t_interval(differences)
+    mean, median = statistics.fmean(differences), statistics.median(differences)
+    interval = "n/a" if math.isnan(low) else f"[{low:.1f}, {high:.1f}]"
+    print(f"paired_picks: first - second {signed(mean)} (median {signed(median)}"
+          f"; 95 % t CI {interval}); Wilcoxon p {p:.3g} ({args.alternative}, n {n}, "
+          f"{len(differences) - n} zero)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

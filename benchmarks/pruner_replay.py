@@ -1,0 +1,132 @@
+"""Replay the median pruner on stored searches that ran without one.
+
+Run: python benchmarks/pruner_replay.py URL STUDY [STUDY ...] [--good X]
+
+A search run with ``search.pruner=none`` trains every trial to its end and still stores its
+intermediate values (the mean training reward at each checkpoint). This script asks what the
+default median pruner would have stopped: Optuna's own ``MedianPruner``, built as a search
+builds it (``search.pruner_startup_trials`` complete trials first, no stop before
+``search.warmup`` of the first seed), judges each complete trial at each of its checkpoints
+against the trials complete by then. When a checkpoint was reached is read as the trial's
+start plus its elapsed time in proportion to its env steps. A trial the replay stops is
+taken out of the trials later ones are judged against, as a live pruner would have. What the
+search would have sampled with the CPU a stop saves is not known, so it is not replayed: the
+script says how often the pruner stops a setting that ends well, not what the search would
+have picked.
+
+Per search: complete trials, how many the replay stops (and at which env step), how many of
+those ended at ``--good`` or better, and whether the search's pick (its best trial) is among
+them. The last line reads ``pruner_replay: N searches; the median pruner stops S of C complete
+trials; G of them ended at X or better; P picks among them``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+from dataclasses import dataclass
+
+import optuna
+from omegaconf import OmegaConf
+from optuna.trial import FrozenTrial, TrialState
+
+from kraby_study.plan.space import warmup_steps
+
+optuna.logging.set_verbosity(optuna.logging.WARNING)
+
+
+@dataclass(frozen=True)
+class Ran:
+    """A complete trial as it ran: when it started and ended, its env steps (all its seeds),
+    the values it reported at its checkpoints, and its final value."""
+
+    number: int
+    start: datetime.datetime
+    end: datetime.datetime
+    steps: int
+    checkpoints: dict[int, float]
+    value: float
+
+    def reached(self, step: int) -> datetime.datetime:
+        """When it reached ``step`` env steps (its elapsed time in proportion)."""
+        return self.start + (self.end - self.start) * (step / self.steps)
+
+
+def stopped_at(ran: list[Ran], startup: int, warmup: int) -> dict[int, int]:
+    """Each trial the median pruner stops and the step at which it does, judged in the order
+    the trials started against those complete (and not stopped) before each checkpoint."""
+    pruner = optuna.pruners.MedianPruner(n_startup_trials=startup, n_warmup_steps=warmup)
+    stops: dict[int, int] = {}
+    for trial in sorted(ran, key=lambda r: r.start):
+        for step in sorted(trial.checkpoints):
+            moment = trial.reached(step)
+            study = optuna.create_study(direction="maximize")
+            for other in ran:
+                if other is not trial and other.number not in stops and other.end <= moment:
+                    study.add_trial(optuna.trial.create_trial(
+                        value=other.value, intermediate_values=other.checkpoints))
+            running = FrozenTrial(
+                number=len(study.trials), state=TrialState.RUNNING, value=None,
+                datetime_start=trial.start, datetime_complete=None, params={},
+                distributions={}, user_attrs={}, system_attrs={},
+                intermediate_values={s: v for s, v in trial.checkpoints.items() if s <= step},
+                trial_id=len(study.trials))
+            if pruner.prune(study, running):
+                stops[trial.number] = step
+                break
+    return stops
+
+
+def ran_of(study: optuna.Study, steps: int) -> list[Ran]:
+    """The study's complete trials as they ran; ``steps``: a trial's env steps, all seeds."""
+    out = []
+    for t in study.trials:
+        if t.state != TrialState.COMPLETE or not t.intermediate_values:
+            continue
+        assert t.datetime_start is not None and t.datetime_complete is not None
+        out.append(Ran(t.number, t.datetime_start, t.datetime_complete,
+                       steps, dict(t.intermediate_values), float(t.value)))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("storage")
+    parser.add_argument("studies", nargs="+")
+    parser.add_argument("--good", type=float, default=None,
+                        help="a final value counted as ending well (default: the pick's)")
+    args = parser.parse_args(argv)
+    totals = [0, 0, 0, 0]
+    print("| search | complete | stopped (at env step) | of them ended well | pick stopped |")
+    print("|---|---:|---|---:|---|")
+    for name in args.studies:
+        try:
+            study = optuna.load_study(study_name=name, storage=args.storage)
+        except KeyError:
+            parser.error(f"no search {name!r} in {args.storage}")
+        definition = study.user_attrs["kraby_definition"]
+        if definition["search"]["pruner"] != "none":
+            parser.error(f"{name} ran with the {definition['search']['pruner']} pruner: "
+                         "replay searches run with search.pruner=none")
+        cfg = OmegaConf.create({"search": definition["search"],
+                                "budget": {"steps": definition["steps"]}})
+        ran = ran_of(study, int(definition["steps"]) * int(definition["seeds"]))
+        stops = stopped_at(ran, int(definition["search"]["pruner_startup_trials"]),
+                           warmup_steps(cfg))
+        pick = max(ran, key=lambda r: r.value)
+        good = pick.value if args.good is None else args.good
+        ended_well = sum(1 for r in ran if r.number in stops and r.value >= good)
+        steps = ", ".join(f"t{n} ({s:,})" for n, s in sorted(stops.items()))
+        print(f"| {name} | {len(ran)} | {len(stops)}{': ' + steps if steps else ''} | "
+              f"{ended_well} | {'yes' if pick.number in stops else 'no'} (t{pick.number}) |")
+        for i, count in enumerate((len(ran), len(stops), ended_well, pick.number in stops)):
+            totals[i] += int(count)
+    threshold = "the pick's score" if args.good is None else f"{args.good:g}"
+    print(f"pruner_replay: {len(args.studies)} searches; the median pruner stops {totals[1]} of "
+          f"{totals[0]} complete trials; {totals[2]} of them ended at {threshold} or better; "
+          f"{totals[3]} picks among them")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
