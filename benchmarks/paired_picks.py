@@ -29,6 +29,7 @@ import statistics
 import sys
 from pathlib import Path
 
+import optuna
 from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -39,9 +40,13 @@ def arm_means(storage: str, name: str, seeds: list[int]) -> list[float]:
     """The confirmed mean of arm NAME's pick at each sampler seed, to 0.1."""
     means = []
     for seed in seeds:
-        scores, _ = read_confirm(storage, f"{name}-s{seed}-confirm")
-        if not scores:
-            raise SystemExit(f"paired_picks: {name}-s{seed}-confirm has no complete run")
+        confirm = f"{name}-s{seed}-confirm"
+        scores, _ = read_confirm(storage, confirm)
+        runs = optuna.load_study(study_name=confirm, storage=storage).trials
+        unended = sum(1 for t in runs if not t.state.is_finished())
+        if unended or not scores:
+            raise SystemExit(f"paired_picks: {confirm} is not finished ({len(scores)} of "
+                             f"{len(runs)} runs complete)")
         means.append(round(statistics.fmean(scores), 1))
     return means
 

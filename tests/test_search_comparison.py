@@ -313,3 +313,15 @@ def test_the_pruner_replay_refuses_a_search_that_ran_with_a_pruner(tmp_path: Pat
     with pytest.raises(SystemExit) as stop:
         _benchmark("pruner_replay").main([url, "pruned"])  # type: ignore[attr-defined]
     assert stop.value.code == 2
+
+
+def test_paired_picks_refuses_a_confirm_still_running(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'p.db'}"
+    for arm in ("a", "b"):
+        study = optuna.create_study(study_name=f"{arm}-s0-confirm", storage=url)
+        study.add_trial(optuna.trial.create_trial(
+            value=1.0, user_attrs={"seed": 1000, "final_score": 1.0, "cpu_time": 1.0}))
+    optuna.load_study(study_name="b-s0-confirm", storage=url).ask()  # a run still training
+    with pytest.raises(SystemExit, match=r"b-s0-confirm is not finished \(1 of 2 runs"):
+        _benchmark("paired_picks").main(  # type: ignore[attr-defined]
+            ["--seeds", "0", "--first", "a", "--second", "b", "--storage", url])
