@@ -134,13 +134,25 @@ def after_start(study: optuna.Study, trials: list[optuna.trial.FrozenTrial]) -> 
 
 
 def read_confirm(storage: str, name: str) -> tuple[list[float], float]:
-    """A one-arm confirm's scores by fresh seed (in seed order) and its mean CPU s per run."""
+    """A one-arm confirm's scores by fresh seed (in seed order) and its mean CPU s per run;
+    the benchmark stops if a run of it has not ended (a confirm still training)."""
     study = optuna.load_study(study_name=name, storage=storage)
     runs = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
+    if any(not t.state.is_finished() for t in study.trials):
+        sys.exit(f"{name} is not finished ({len(runs)} of {len(study.trials)} runs complete)")
     runs.sort(key=lambda t: int(t.user_attrs["seed"]))
     scores = [float(t.user_attrs["final_score"]) for t in runs]
     cpu = statistics.fmean(float(t.user_attrs["cpu_time"]) for t in runs) if runs else math.nan
     return scores, cpu
+
+
+def signed_rank(differences: list[float], alternative: str) -> tuple[float, int]:
+    """Exact one-sided Wilcoxon signed-rank p of the differences, zeros dropped, and how many
+    were left (p 1 when none is)."""
+    left = [d for d in differences if d != 0]
+    if not left:
+        return 1.0, 0
+    return float(stats.wilcoxon(left, alternative=alternative, method="exact").pvalue), len(left)
 
 
 def t_interval(values: list[float]) -> tuple[float, float]:
@@ -230,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
     diffs = [by[(default, s)].mean - by[(other, s)].mean for s in args.sampler_seeds]
     low, high = t_interval(diffs)
     if len(diffs) >= 2 and any(d != 0 for d in diffs):
-        p = stats.wilcoxon(diffs, alternative="less").pvalue
+        p, _ = signed_rank(diffs, "less")
         print(f"Wilcoxon signed-rank (exact, one-sided, {default} worse), n={len(diffs)} "
               f"sampler seeds: p = {p:.3g}")
     cpu = {name: statistics.fmean(a.cpu for a in arms if a.sampler == name)

@@ -29,11 +29,8 @@ import statistics
 import sys
 from pathlib import Path
 
-import optuna
-from scipy import stats
-
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_search import read_confirm, t_interval  # noqa: E402
+from bench_search import read_confirm, signed_rank, t_interval  # noqa: E402
 
 
 def arm_means(storage: str, name: str, seeds: list[int]) -> list[float]:
@@ -41,12 +38,12 @@ def arm_means(storage: str, name: str, seeds: list[int]) -> list[float]:
     means = []
     for seed in seeds:
         confirm = f"{name}-s{seed}-confirm"
-        scores, _ = read_confirm(storage, confirm)
-        runs = optuna.load_study(study_name=confirm, storage=storage).trials
-        unended = sum(1 for t in runs if not t.state.is_finished())
-        if unended or not scores:
-            raise SystemExit(f"paired_picks: {confirm} is not finished ({len(scores)} of "
-                             f"{len(runs)} runs complete)")
+        try:
+            scores, _ = read_confirm(storage, confirm)  # stops on a confirm still training
+        except KeyError:
+            raise SystemExit(f"paired_picks: no study {confirm!r} in {storage}") from None
+        if not scores:
+            raise SystemExit(f"paired_picks: {confirm} has no complete run")
         means.append(round(statistics.fmean(scores), 1))
     return means
 
@@ -55,15 +52,6 @@ def signed(value: float) -> str:
     """A difference to 0.1 with its sign; 0 when it rounds to none."""
     text = f"{value:+.1f}"
     return "0" if text in ("+0.0", "-0.0") else text
-
-
-def signed_rank(differences: list[float], alternative: str) -> tuple[float, int]:
-    """Exact one-sided Wilcoxon signed-rank p of the differences, zeros dropped, and how many
-    were left (p 1 when none is)."""
-    left = [d for d in differences if d != 0]
-    if not left:
-        return 1.0, 0
-    return float(stats.wilcoxon(left, alternative=alternative, method="exact").pvalue), len(left)
 
 
 def main(argv: list[str] | None = None) -> int:

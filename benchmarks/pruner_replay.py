@@ -28,9 +28,9 @@ from dataclasses import dataclass
 
 import optuna
 from omegaconf import OmegaConf
-from optuna.trial import FrozenTrial, TrialState
+from optuna.trial import TrialState, create_trial
 
-from kraby_study.plan.space import warmup_steps
+from kraby_study.run.sampling import make_pruner
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
@@ -52,10 +52,9 @@ class Ran:
         return self.start + (self.end - self.start) * (step / self.steps)
 
 
-def stopped_at(ran: list[Ran], startup: int, warmup: int) -> dict[int, int]:
-    """Each trial the median pruner stops and the step at which it does, judged in the order
-    the trials started against those complete (and not stopped) before each checkpoint."""
-    pruner = optuna.pruners.MedianPruner(n_startup_trials=startup, n_warmup_steps=warmup)
+def stopped_at(ran: list[Ran], pruner: optuna.pruners.BasePruner) -> dict[int, int]:
+    """Each trial the pruner stops and the step at which it does, judged in the order the
+    trials started against those complete (and not stopped) before each checkpoint."""
     stops: dict[int, int] = {}
     for trial in sorted(ran, key=lambda r: r.start):
         for step in sorted(trial.checkpoints):
@@ -63,14 +62,10 @@ def stopped_at(ran: list[Ran], startup: int, warmup: int) -> dict[int, int]:
             study = optuna.create_study(direction="maximize")
             for other in ran:
                 if other is not trial and other.number not in stops and other.end <= moment:
-                    study.add_trial(optuna.trial.create_trial(
-                        value=other.value, intermediate_values=other.checkpoints))
-            running = FrozenTrial(
-                number=len(study.trials), state=TrialState.RUNNING, value=None,
-                datetime_start=trial.start, datetime_complete=None, params={},
-                distributions={}, user_attrs={}, system_attrs={},
-                intermediate_values={s: v for s, v in trial.checkpoints.items() if s <= step},
-                trial_id=len(study.trials))
+                    study.add_trial(create_trial(value=other.value,
+                                                 intermediate_values=other.checkpoints))
+            running = create_trial(state=TrialState.RUNNING, intermediate_values={
+                s: v for s, v in trial.checkpoints.items() if s <= step})
             if pruner.prune(study, running):
                 stops[trial.number] = step
                 break
@@ -96,10 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--good", type=float, default=None,
                         help="a final value counted as ending well (default: the pick's)")
     args = parser.parse_args(argv)
-    totals = [0, 0, 0, 0]
-    print("| search | complete | stopped (at env step) | of them ended well | pick stopped |")
-    print("|---|---:|---|---:|---|")
-    for name in args.studies:
+    searches = []
+    for name in args.studies:  # every one checked before any is replayed
         try:
             study = optuna.load_study(study_name=name, storage=args.storage)
         except KeyError:
@@ -108,11 +101,19 @@ def main(argv: list[str] | None = None) -> int:
         if definition["search"]["pruner"] != "none":
             parser.error(f"{name} ran with the {definition['search']['pruner']} pruner: "
                          "replay searches run with search.pruner=none")
-        cfg = OmegaConf.create({"search": definition["search"],
-                                "budget": {"steps": definition["steps"]}})
         ran = ran_of(study, int(definition["steps"]) * int(definition["seeds"]))
-        stops = stopped_at(ran, int(definition["search"]["pruner_startup_trials"]),
-                           warmup_steps(cfg))
+        if not ran:
+            parser.error(f"{name} has no complete trial")
+        searches.append((name, definition, ran))
+    totals = [0, 0, 0, 0]
+    print("| search | complete | stopped (at env step) | of them ended well | pick stopped |")
+    print("|---|---:|---|---:|---|")
+    for name, definition, ran in searches:
+        # The median pruner the search would have built, had it run with one.
+        cfg = OmegaConf.create({"search": {**definition["search"], "pruner": "median"},
+                                "budget": {"steps": definition["steps"],
+                                           "seeds": definition["seeds"]}})
+        stops = stopped_at(ran, make_pruner(cfg))
         pick = max(ran, key=lambda r: r.value)
         good = pick.value if args.good is None else args.good
         ended_well = sum(1 for r in ran if r.number in stops and r.value >= good)
