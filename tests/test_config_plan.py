@@ -145,6 +145,9 @@ def test_train_plan_is_one_run_named_by_its_settings() -> None:
     (["env.delta=2"], "delta"),
     (["env.observation=camera"], "observation"),
     (["storage=mysql://u@h/db"], "sqlite and postgresql"),
+    (["hydra.run.dir=out"], "hydra.run.dir=out: Hydra's own settings do nothing here"),
+    (["+hydra.job.chdir=true"], "+hydra.job.chdir=true: Hydra's own settings"),
+    (["hydra/launcher=basic"], "hydra/launcher=basic: Hydra's own settings"),
 ])
 def test_bad_config_is_refused_in_one_line(overrides: list[str], expected: str) -> None:
     with pytest.raises(ConfigError) as err:

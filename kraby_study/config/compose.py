@@ -73,6 +73,18 @@ RENAMED = {"physics_processes": "shards"}
 """Old setting names still accepted on the command line (see the README's changelog)."""
 
 
+def refuse_hydra_settings(overrides: Sequence[str]) -> None:
+    """Refuse an override of Hydra's own config (``hydra.run.dir=x``, ``hydra/launcher=...``):
+    commands compose their config without Hydra's app, so no run folder, launcher or job
+    logging of Hydra's exists to set, and the override would otherwise do nothing."""
+    for override in overrides:
+        key = override.split("=", 1)[0].lstrip("+~")
+        if key == "hydra" or key.startswith(("hydra.", "hydra/")):
+            raise ConfigError(f"{override}: Hydra's own settings do nothing here (no run "
+                              "folder, launcher or job log of Hydra's); results go to the "
+                              "store (storage=URL), reports and figures to out=DIR")
+
+
 def renamed(overrides: Sequence[str]) -> list[str]:
     """The overrides with old setting names replaced by their new ones."""
     out = []
@@ -180,6 +192,7 @@ def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
 
 def composed(overrides: Sequence[str], check: bool = True) -> Composed:
     """:func:`compose_config`, with the config group files Hydra chose."""
+    refuse_hydra_settings(overrides)
     overrides, ranges = new_ranges(renamed(overrides))
     if "ppo=zoo" in overrides and "env=gym" not in overrides:
         # Otherwise Hydra's words: "Key 'normalize' not in 'LegEnvConfig'".

@@ -84,7 +84,11 @@ class SearchSource(StudySource):
         """CPU seconds the search has used: its ended trials', every attempt counted, and what
         the trials this command runs have used so far (a trial another machine runs counts
         once it ends)."""
-        return spent_cpu(self.ledger.trials()) + sum(self._running.values())
+        return spent_cpu(self.ledger.trials()) + self._running_cpu()
+
+    def _running_cpu(self) -> float:
+        """CPU seconds the trials this command runs have used so far."""
+        return sum(self._running.values())
 
     def using(self, number: int, cpu: float) -> None:
         """Note the CPU seconds a running trial has used so far."""
@@ -106,8 +110,8 @@ class SearchSource(StudySource):
             return False
         if self.cpu_budget is None or not self.recheck:
             return True
-        return (spent_cpu(trials) + sum(self._running.values())
-                + reserve(trials, self.recheck, self.recheck_seeds) < self.cpu_budget)
+        held = reserve(trials, self.recheck, self.recheck_seeds)
+        return spent_cpu(trials) + self._running_cpu() + held < self.cpu_budget
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
         """Ask for the next trial (a queued retry first, then new ones while exploring, then

@@ -23,7 +23,12 @@ from kraby_study.records.stored import Failure, Outcome, failure
 from kraby_study.run.curve import Episode, bin_curve, final_score, mean_curve
 
 if TYPE_CHECKING:
-    from kraby_study.run.callback import CheckpointHook, EpisodeRecorder, TrialProgress
+    from kraby_study.run.callback import (
+        CheckpointHook,
+        EpisodeRecorder,
+        ProgressHook,
+        TrialProgress,
+    )
 
 
 def _now() -> str:
@@ -216,16 +221,14 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
     t0 = time.perf_counter()
     cpu0 = cpu_seconds()
 
-    def progress(steps: int) -> None:
-        if on_progress is not None:
-            on_progress(steps, cpu_seconds() - cpu0)
+    progress = None if on_progress is None else _with_cpu(on_progress, cpu0)
 
     runs: list[_Seed] = []
     for index in range(spec.seeds):
         within = spec.checkpoint_every if index == 0 and not spec.seed_scores else None
         recorder = EpisodeRecorder(spec.steps, offset=index * spec.steps,
                                    checkpoint_every=within, on_checkpoint=on_checkpoint,
-                                   on_progress=progress if on_progress is not None else None)
+                                   on_progress=progress)
         run = _learn(spec, spec.seed + index, recorder, shards)
         runs.append(run)
         if run.failure is None and run.pruned_at is None:
@@ -235,6 +238,16 @@ def run_trial(spec: TrialSpec, on_checkpoint: CheckpointHook | None = None,
         if on_checkpoint is not None and _stopped_after(spec, runs, on_checkpoint):
             break
     return _result(spec, runs, started, time.perf_counter() - t0, cpu_seconds() - cpu0)
+
+
+def _with_cpu(on_progress: TrialProgress, cpu0: float) -> ProgressHook:
+    """The recorder's progress hook: the env steps done, with the CPU seconds used since
+    ``cpu0``."""
+
+    def progress(steps: int) -> None:
+        on_progress(steps, cpu_seconds() - cpu0)
+
+    return progress
 
 
 def _stopped_after(spec: TrialSpec, runs: list[_Seed], on_checkpoint: CheckpointHook) -> bool:
