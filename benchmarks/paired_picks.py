@@ -17,6 +17,12 @@ signed-rank p (scipy, zero differences dropped) that the first arm does better
 (``--alternative greater``, the default) or worse (``less``). With ``--margin M`` it also tests
 that the first arm is not worse by more than M (the same test on the differences plus M).
 
+With both arms stored it also prints what the same work cost in each arm's search: when the
+two searches of a sampler seed began with the same trial 0 (the same settings and seeds,
+scored alike to the bit, as with ``--enqueue zoo``), its CPU seconds in each, and the first
+over the second. A CPU budget buys more trials where a CPU second does more work, so a ratio
+far from 1 says the pair's arms did not get equal budgets in work.
+
 The last line reads ``paired_picks: first - second D (median m; 95 % t CI [lo, hi]); Wilcoxon
 p P (n N, Z zero)``.
 """
@@ -30,6 +36,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
+import optuna  # noqa: E402
 from bench_search import read_confirm, signed_rank, t_interval  # noqa: E402
 
 
@@ -46,6 +53,49 @@ def arm_means(storage: str, name: str, seeds: list[int]) -> list[float]:
             raise SystemExit(f"paired_picks: {confirm} has no complete run")
         means.append(round(statistics.fmean(scores), 1))
     return means
+
+
+def first_trial(storage: str, name: str, seed: int) -> optuna.trial.FrozenTrial | None:
+    """Trial 0 of arm NAME's search at this sampler seed, if it is stored and complete."""
+    try:
+        study = optuna.load_study(study_name=f"{name}-s{seed}", storage=storage)
+    except KeyError:  # only the confirm is stored
+        return None
+    trials = [t for t in study.get_trials(deepcopy=False) if t.number == 0]
+    if not trials or trials[0].state != optuna.trial.TrialState.COMPLETE:
+        return None
+    return trials[0]
+
+
+def same_work(a: optuna.trial.FrozenTrial, b: optuna.trial.FrozenTrial) -> bool:
+    """Whether two trials ran the same work: the same settings and seed, scored alike."""
+    keys = ("settings", "seed", "scores")
+    return all(a.user_attrs.get(k) == b.user_attrs.get(k) is not None for k in keys)
+
+
+def work_rates(storage: str, first: str, second: str,
+               seeds: list[int]) -> list[tuple[int, float, float]]:
+    """(sampler seed, first's CPU s, second's CPU s) of each pair whose searches' trial 0 is
+    the same work."""
+    rows = []
+    for seed in seeds:
+        a, b = first_trial(storage, first, seed), first_trial(storage, second, seed)
+        if a is not None and b is not None and same_work(a, b):
+            rows.append((seed, float(a.user_attrs["cpu_time"]),
+                         float(b.user_attrs["cpu_time"])))
+    return rows
+
+
+def print_work_rates(rows: list[tuple[int, float, float]]) -> None:
+    """The same work's CPU s in each arm, and the first over the second."""
+    if not rows:
+        print("Trial 0 is not the same work in any pair's two searches")
+        return
+    pairs = ", ".join(f"seed {seed} {a:.0f} / {b:.0f}" for seed, a, b in rows)
+    ratios = [a / b for _, a, b in rows]
+    print(f"The same work (trial 0) in each pair's searches, CPU s first / second: {pairs}; "
+          f"first over second: geometric mean {statistics.geometric_mean(ratios):.2f} "
+          f"({min(ratios):.2f} to {max(ratios):.2f}, {len(rows)} pair{'s' * (len(rows) > 1)})")
 
 
 def signed(value: float) -> str:
@@ -84,6 +134,8 @@ def main(argv: list[str] | None = None) -> int:
     print("|---:|---:|---:|---:|")
     for seed, a, b, d in zip(args.seeds, first, second, differences, strict=True):
         print(f"| {seed} | {a:.1f} | {b:.1f} | {signed(d)} |")
+    if args.first and args.second:
+        print_work_rates(work_rates(args.storage, args.first, args.second, args.seeds))
     if args.margin is not None:
         p_margin, n_margin = signed_rank([d + args.margin for d in differences], "greater")
         print(f"Not worse by more than {args.margin:g}: exact one-sided Wilcoxon signed-rank "

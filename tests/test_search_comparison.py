@@ -261,7 +261,27 @@ def test_paired_picks_reads_stored_confirms_to_the_published_precision(
                         "--storage", url]) == 0
     out = capsys.readouterr().out
     assert "| 0 | 11.0 | 11.0 | 0 |" in out and "| 1 | 6.0 | 1.5 | +4.5 |" in out
+    assert "Trial 0 is not the same work in any pair's two searches" in out  # no search stored
     assert out.strip().endswith("Wilcoxon p 0.5 (greater, n 1, 1 zero)")
+
+
+def test_paired_picks_shows_what_the_same_work_cost_in_each_arm(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    url = f"sqlite:///{tmp_path / 'p.db'}"
+    same = {"settings": {"gamma": 0.99}, "seed": 0, "scores": [1.5, 2.5]}
+    first_trials = {("a", 0): (same, 30.0), ("b", 0): (same, 20.0),  # the same work
+                    ("a", 1): (same, 30.0), ("b", 1): ({**same, "scores": [1.5, 2.4]}, 10.0)}
+    for (arm, seed), (attrs, cpu) in first_trials.items():
+        study = optuna.create_study(study_name=f"{arm}-s{seed}", storage=url)
+        study.add_trial(optuna.trial.create_trial(value=2.0, user_attrs={**attrs, "cpu_time": cpu}))
+        confirm = optuna.create_study(study_name=f"{arm}-s{seed}-confirm", storage=url)
+        confirm.add_trial(optuna.trial.create_trial(
+            value=2.0, user_attrs={"seed": 1000, "final_score": 2.0, "cpu_time": cpu}))
+    assert _benchmark("paired_picks").main(  # type: ignore[attr-defined]
+        ["--seeds", "0", "1", "--first", "a", "--second", "b", "--storage", url]) == 0
+    assert ("The same work (trial 0) in each pair's searches, CPU s first / second: seed 0 30 / "
+            "20; first over second: geometric mean 1.50 (1.50 to 1.50, 1 pair)"
+            ) in capsys.readouterr().out
 
 
 def test_paired_picks_refuses_means_that_do_not_match_the_seeds(
