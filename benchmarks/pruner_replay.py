@@ -17,7 +17,7 @@ have picked.
 Per search: complete trials, how many the replay stops (and at which env step), how many of
 those ended at ``--good`` or better, and whether the search's pick (its best trial) is among
 them. The last line reads ``pruner_replay: N searches; the median pruner stops S of C complete
-trials; G of them ended at X or better; P picks among them``.
+trials; G of them ended at X or better; P of the N picks among them`` (``1 search`` for one).
 """
 
 from __future__ import annotations
@@ -123,9 +123,10 @@ def main(argv: list[str] | None = None) -> int:
         for i, count in enumerate((len(ran), len(stops), ended_well, pick.number in stops)):
             totals[i] += int(count)
     threshold = "the pick's score" if args.good is None else f"{args.good:g}"
-    print(f"pruner_replay: {len(args.studies)} searches; the median pruner stops {totals[1]} of "
-          f"{totals[0]} complete trials; {totals[2]} of them ended at {threshold} or better; "
-          f"{totals[3]} picks among them")
+    n = len(args.studies)
+    print(f"pruner_replay: {n} search{'' if n == 1 else 'es'}; the median pruner stops "
+          f"{totals[1]} of {totals[0]} complete trials; {totals[2]} of them ended at {threshold} "
+          f"or better; {totals[3]} of the {n} pick{'' if n == 1 else 's'} among them")
     return 0
 
 

@@ -321,8 +321,8 @@ def test_the_pruner_replay_judges_each_trial_against_those_complete_and_kept_by_
     out = capsys.readouterr().out
     assert "| np | 5 | 2: t2 (50), t4 (50) | 1 | no (t0) |" in out
     assert out.strip().splitlines()[-1] == (
-        "pruner_replay: 1 searches; the median pruner stops 2 of 5 complete trials; 1 of them "
-        "ended at 9 or better; 0 picks among them")
+        "pruner_replay: 1 search; the median pruner stops 2 of 5 complete trials; 1 of them "
+        "ended at 9 or better; 0 of the 1 pick among them")
 
 
 def test_the_pruner_replay_refuses_a_search_that_ran_with_a_pruner(tmp_path: Path) -> None:
