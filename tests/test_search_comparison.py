@@ -335,6 +335,42 @@ def test_the_pruner_replay_refuses_a_search_that_ran_with_a_pruner(tmp_path: Pat
     assert stop.value.code == 2
 
 
+def test_the_cost_replay_stops_trials_dearer_per_step_than_the_first_complete_one(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Trials of 2 seeds x 100 env steps, 4 checkpoints: the first at 25 env steps."""
+    url = f"sqlite:///{tmp_path / 'c.db'}"
+    study = optuna.create_study(study_name="s", storage=url, direction="maximize")
+    study.set_user_attr("kraby_definition", {"steps": 100, "seeds": 2,
+                                             "search": {"checkpoints": 4}})
+    # (state, value, CPU s, env steps, rechecked trial): CPU s per step 0.01 for t0.
+    trials = [("COMPLETE", 5.0, 2.0, 200, None),
+              ("COMPLETE", 8.0, 4.0, 200, None),    # 2 x t0's: under the cap
+              ("COMPLETE", 9.0, 10.0, 200, None),   # 5 x: stopped, 0.05 x 25 = 1.25 CPU s
+              ("PRUNED", None, 2.0, 50, None),      # 4 x, past the first checkpoint: stopped
+              ("PRUNED", None, 2.0, 20, None),      # 10 x, but pruned before it: not
+              ("COMPLETE", 7.0, 20.0, 200, 0)]      # a recheck reports no checkpoint: not
+    for state, value, cpu, steps, of in trials:
+        attrs = {"cpu_time": cpu, "env_steps": steps,
+                 **({} if of is None else {"recheck_of": of})}
+        study.add_trial(optuna.trial.create_trial(
+            state=TrialState[state], value=value, user_attrs=attrs))
+    replay = _benchmark("cost_replay")
+    assert replay.main([url, "s", "--cap", "3", "--good", "8"]) == 0  # type: ignore[attr-defined]
+    out = capsys.readouterr().out
+    assert "| s | 0.01 | 2: t2 (5.0), t3 (4.0) | 12, 2 | 40 | 1 | yes (t2) |" in out
+    assert out.strip().splitlines()[-1] == (
+        "cost_replay: 1 search at cap 3; it stops 2 of 6 trials; they used 12 of the 40 CPU s "
+        "the search used, 2 up to their first checkpoint; 1 of them ended at 8 or better; 1 of "
+        "the 1 pick among them")
+
+
+def test_the_cost_replay_refuses_a_cap_that_is_not_positive(tmp_path: Path) -> None:
+    with pytest.raises(SystemExit) as stop:
+        _benchmark("cost_replay").main(  # type: ignore[attr-defined]
+            [f"sqlite:///{tmp_path / 'c.db'}", "s", "--cap", "0"])
+    assert stop.value.code == 2
+
+
 def test_paired_picks_refuses_a_confirm_still_running(tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'p.db'}"
     for arm in ("a", "b"):

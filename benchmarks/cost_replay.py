@@ -1,0 +1,151 @@
+"""Replay a cost cap on stored searches: would stopping dear trials early free the budget?
+
+Run: python benchmarks/cost_replay.py URL STUDY [STUDY ...] --cap C [--good X]
+
+A search's samplers do not see what a trial costs, and a CPU budget can go to a few dear
+trials. A cost cap would stop a trial at a checkpoint once its CPU seconds per env step pass C
+times those of the search's first complete trial (with ``ppo=zoo``, rl-zoo3's settings); TPE,
+which ranks pruned trials below complete ones, would learn where such trials lie, and random
+search would not. This script asks, before any such cap is built, what one would have done
+to stored searches. A trial's CPU seconds per env step are read as its whole
+run's (its stored CPU seconds over its env steps, its evaluations included), and the
+reference is the search's first complete trial by number, as the search reads it once that
+trial has ended. A trial above the cap is taken as stopped at its first checkpoint (a quarter
+of its first seed with 4 checkpoints), having used its rate times those env steps. Pruned
+trials count too, when they ran past that checkpoint; a recheck reports no checkpoint, so no
+cap stops it. What the search would have sampled with the CPU seconds a stop saves is not
+known, so it is not replayed: the script says how much of a budget the cap frees and whether it
+stops a setting that ends well, not what the search would have picked.
+
+Per search: the reference's CPU s per env step, the trials the cap stops (and their rates as
+multiples of the reference), the CPU seconds they used and would have used, how many of them
+ended at ``--good`` or better, and whether the search's pick (its best complete trial) is
+among them. The last line reads ``cost_replay: N searches at cap C; it stops S of T trials;
+they used U of the V CPU s the searches used, W up to their first checkpoint; G of them ended
+at X or better; P of the N picks among them`` (``1 search`` for one).
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+
+import optuna
+from omegaconf import OmegaConf
+from optuna.trial import TrialState
+
+from kraby_study.plan.space import checkpoint_every
+from kraby_study.records.attributes import TrialAttrs
+from kraby_study.records.stored import spent_cpu
+
+optuna.logging.set_verbosity(optuna.logging.WARNING)
+
+
+@dataclass(frozen=True)
+class Stop:
+    """A trial the cap stops: its number, rate as a multiple of the reference's, the CPU
+    seconds it used, those it would have used up to its first checkpoint, and its value (None
+    for a pruned one)."""
+
+    number: int
+    times: float
+    used: float
+    capped: float
+    value: float | None
+
+
+def first_pace(trials: list[optuna.trial.FrozenTrial]) -> float | None:
+    """CPU seconds per env step of a search's first complete trial (by number; a recheck is
+    not one), or None while none has both measured."""
+    for trial in sorted(trials, key=lambda t: t.number):
+        attrs = TrialAttrs.of(trial)
+        if (trial.state == TrialState.COMPLETE and attrs.recheck_of is None
+                and attrs.cpu_time and attrs.env_steps):
+            return float(attrs.cpu_time) / int(attrs.env_steps)
+    return None
+
+
+def stops(trials: list[optuna.trial.FrozenTrial], cap: float, first: int) -> list[Stop]:
+    """The ended trials a cap of ``cap`` stops at their first checkpoint (``first`` env
+    steps): those whose CPU s per env step pass ``cap`` times the first complete trial's."""
+    reference = first_pace(trials)
+    if reference is None:
+        return []
+    out = []
+    for trial in trials:
+        attrs = TrialAttrs.of(trial)
+        if (trial.state not in (TrialState.COMPLETE, TrialState.PRUNED)
+                or attrs.recheck_of is not None or not attrs.cpu_time or not attrs.env_steps
+                or int(attrs.env_steps) <= first):
+            continue
+        rate = float(attrs.cpu_time) / int(attrs.env_steps)
+        if rate > cap * reference:
+            value = float(trial.value) if trial.state == TrialState.COMPLETE else None
+            out.append(Stop(trial.number, rate / reference, float(attrs.cpu_time),
+                            rate * first, value))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("storage")
+    parser.add_argument("studies", nargs="+")
+    parser.add_argument("--cap", type=float, required=True,
+                        help="the cap: a multiple of the first complete trial's CPU s per step")
+    parser.add_argument("--good", type=float, default=None,
+                        help="a final value counted as ending well (default: the pick's)")
+    args = parser.parse_args(argv)
+    if not args.cap > 0:
+        parser.error(f"--cap must be positive, got {args.cap:g}")
+    searches = []
+    for name in args.studies:  # every one checked before any is replayed
+        try:
+            study = optuna.load_study(study_name=name, storage=args.storage)
+        except KeyError:
+            parser.error(f"no search {name!r} in {args.storage}")
+        definition = study.user_attrs["kraby_definition"]
+        trials = [t for t in study.trials if t.state != TrialState.WAITING]
+        if first_pace(trials) is None:
+            parser.error(f"{name} has no complete trial with its CPU seconds and env steps")
+        first = checkpoint_every(OmegaConf.create({"budget": {"steps": definition["steps"]},
+                                                   "search": definition["search"]}))
+        searches.append((name, trials, first))
+    totals = {"trials": 0, "stops": 0, "cpu": 0.0, "used": 0.0, "capped": 0.0, "well": 0,
+              "picks": 0}
+    print("| search | reference CPU s per step | stopped (x reference) | their CPU s: used, "
+          "to the first checkpoint | of the search's CPU s | ended well | pick stopped |")
+    print("|---|---:|---|---|---:|---:|---|")
+    for name, trials, first in searches:
+        stopped = stops(trials, args.cap, first)
+        complete = [t for t in trials if t.state == TrialState.COMPLETE]
+        pick = max(complete, key=lambda t: float(t.value))  # type: ignore[arg-type]
+        good = float(pick.value) if args.good is None else args.good  # type: ignore[arg-type]
+        well = sum(1 for s in stopped if s.value is not None and s.value >= good)
+        used, capped = sum(s.used for s in stopped), sum(s.capped for s in stopped)
+        cpu = spent_cpu(trials)
+        listed = ", ".join(f"t{s.number} ({s.times:.1f})" for s in stopped)
+        picked = any(s.number == pick.number for s in stopped)
+        print(f"| {name} | {first_pace(trials):.3g} | {len(stopped)}"
+              f"{': ' + listed if listed else ''} | {used:,.0f}, {capped:,.0f} | {cpu:,.0f} | "
+              f"{well} | {'yes' if picked else 'no'} (t{pick.number}) |")
+        totals["trials"] += sum(1 for t in trials
+                                if t.state in (TrialState.COMPLETE, TrialState.PRUNED))
+        totals["stops"] += len(stopped)
+        totals["cpu"] += cpu
+        totals["used"] += used
+        totals["capped"] += capped
+        totals["well"] += well
+        totals["picks"] += int(picked)
+    threshold = "the pick's score" if args.good is None else f"{args.good:g}"
+    n = len(searches)
+    print(f"cost_replay: {n} search{'' if n == 1 else 'es'} at cap {args.cap:g}; it stops "
+          f"{totals['stops']} of {totals['trials']} trials; they used {totals['used']:,.0f} of "
+          f"the {totals['cpu']:,.0f} CPU s the search{'' if n == 1 else 'es'} used, "
+          f"{totals['capped']:,.0f} up to their first "
+          f"checkpoint; {totals['well']} of them ended at {threshold} or better; "
+          f"{totals['picks']} of the {n} pick{'' if n == 1 else 's'} among them")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
