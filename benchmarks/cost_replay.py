@@ -36,7 +36,7 @@ from optuna.trial import TrialState
 
 from kraby_study.plan.space import checkpoint_every
 from kraby_study.records.attributes import TrialAttrs
-from kraby_study.records.stored import spent_cpu
+from kraby_study.records.stored import counted, spent_cpu
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
@@ -65,12 +65,11 @@ def first_pace(trials: list[optuna.trial.FrozenTrial]) -> float | None:
     return None
 
 
-def stops(trials: list[optuna.trial.FrozenTrial], cap: float, first: int) -> list[Stop]:
+def stops(trials: list[optuna.trial.FrozenTrial], cap: float, first: int,
+          reference: float) -> list[Stop]:
     """The ended trials a cap of ``cap`` stops at their first checkpoint (``first`` env
-    steps): those whose CPU s per env step pass ``cap`` times the first complete trial's."""
-    reference = first_pace(trials)
-    if reference is None:
-        return []
+    steps): those whose CPU s per env step pass ``cap`` times ``reference``, the first
+    complete trial's."""
     out = []
     for trial in trials:
         attrs = TrialAttrs.of(trial)
@@ -105,19 +104,22 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"no search {name!r} in {args.storage}")
         definition = study.user_attrs["kraby_definition"]
         trials = [t for t in study.trials if t.state != TrialState.WAITING]
-        if first_pace(trials) is None:
+        reference = first_pace(trials)
+        if reference is None:
             parser.error(f"{name} has no complete trial with its CPU seconds and env steps")
         first = checkpoint_every(OmegaConf.create({"budget": {"steps": definition["steps"]},
                                                    "search": definition["search"]}))
-        searches.append((name, trials, first))
+        searches.append((name, trials, first, reference))
     totals = {"trials": 0, "stops": 0, "cpu": 0.0, "used": 0.0, "capped": 0.0, "well": 0,
               "picks": 0}
     print("| search | reference CPU s per step | stopped (x reference) | their CPU s: used, "
           "to the first checkpoint | of the search's CPU s | ended well | pick stopped |")
     print("|---|---:|---|---|---:|---:|---|")
-    for name, trials, first in searches:
-        stopped = stops(trials, args.cap, first)
-        complete = [t for t in trials if t.state == TrialState.COMPLETE]
+    for name, trials, first, reference in searches:
+        stopped = stops(trials, args.cap, first, reference)
+        # The pick as the search makes it: each trial by its latest attempt (a rechecked one
+        # by all its seeds); every attempt's CPU seconds count towards the search's.
+        complete = [t for t in counted(trials) if t.state == TrialState.COMPLETE]
         pick = max(complete, key=lambda t: float(t.value))  # type: ignore[arg-type]
         good = float(pick.value) if args.good is None else args.good  # type: ignore[arg-type]
         well = sum(1 for s in stopped if s.value is not None and s.value >= good)
@@ -125,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
         cpu = spent_cpu(trials)
         listed = ", ".join(f"t{s.number} ({s.times:.1f})" for s in stopped)
         picked = any(s.number == pick.number for s in stopped)
-        print(f"| {name} | {first_pace(trials):.3g} | {len(stopped)}"
+        print(f"| {name} | {reference:.3g} | {len(stopped)}"
               f"{': ' + listed if listed else ''} | {used:,.0f}, {capped:,.0f} | {cpu:,.0f} | "
               f"{well} | {'yes' if picked else 'no'} (t{pick.number}) |")
         totals["trials"] += sum(1 for t in trials
