@@ -686,7 +686,7 @@ def build_parser() -> argparse.ArgumentParser:
             help="run seeds in rounds; a value leaves once shown worse than the best by more "
             "than compare.margin, or shown equivalent to it (stored with the race; margin 0: "
             "only values shown worse leave) "
-            "(as racing.enabled=true; racing.min_seeds, default 3, racing.alpha, default "
+            "(as racing.enabled=true; racing.min_seeds, default 4, racing.alpha, default "
             "0.05, and racing.paired, default false, tune it); budget.seeds (confirm: --seeds) "
             "is the most any value gets")
     parsers["confirm"].add_argument(

@@ -324,9 +324,10 @@ def test_two_commands_on_postgresql_share_one_campaign(workdir: Path) -> None:
         assert all(count >= 1 for count in ran), ran
 
 
-RACED_SCORES = {0: [0.0, 0.001], 1: [1.0, 1.001]}
-"""A raced stage's runs, by value index and seed index: value 1 far ahead after round 2, so
-the look after it drops value 0 and the race is over with one value left (4 of 6 runs)."""
+RACED_SCORES = {0: [0.0, 0.001, 0.002, 0.0015], 1: [1.0, 1.001, 1.002, 1.0015]}
+"""A raced stage's runs, by value index and seed index: value 1 far ahead after round 4 (the
+first look an answer allows), so the look after it drops value 0 and the race is over with one
+value left (8 of 10 runs)."""
 
 
 def raced_stage(cfg: DictConfig, plan: StudyPlan) -> tuple[CommandRun, Tally]:
@@ -365,14 +366,14 @@ def test_a_raced_campaign_goes_on_and_selects_among_each_stages_survivors(
         workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     write_conf(workdir)
     url = sqlite_url(workdir / "raced.db")
-    overrides = ["campaign=tri", *TINY, "budget.seeds=3", "racing.enabled=true",
-                 "racing.min_seeds=2", f"storage={url}"]
+    overrides = ["campaign=tri", *TINY, "budget.seeds=5", "racing.enabled=true",
+                 f"storage={url}"]
     campaign = campaign_of(compose_config(overrides), overrides)
     # A raced stage ends with fewer runs than values x seeds: it is finished, not "left".
     assert run_campaign(campaign, raced_stage, sys.stdout) == 0
     out = capsys.readouterr().out
     assert "3/3 stages finished" in out and "run(s) left" not in out
-    assert "stage 1/3 tri-s_gamma: 4/4 complete, 0 failed; selected gamma=0.99" in out
+    assert "stage 1/3 tri-s_gamma: 8/8 complete, 0 failed; selected gamma=0.99" in out
     # Each stage selects its survivor (the second value), and the next stage trains with it.
     with opened(url, create=False, writer=False) as store:
         for name, value in (("tri-s_gamma", 0.99), ("tri-s_clip", 0.3), ("tri-s_ent", 0.05)):
@@ -384,11 +385,12 @@ def test_a_raced_campaign_goes_on_and_selects_among_each_stages_survivors(
         rows = list(csv.DictReader(handle))
     assert [r["selected"] for r in rows] == ["0.99", "0.3", "0.05"]
     # The race began at the default compare.margin, 0.2, and says so in score units.
-    rule = ("racing from round 2 of 3: closed Holm-Welch step-down at each look, alpha 0.05 "
-            "spent equally over 2 looks (0.025 each); a value leaves once shown worse by more "
-            "than the margin (0.2 x the look's best |mean|) or shown equivalent to the best "
+    rule = ("racing from round 4 of 5: the answers' step-down on the IQM at each look, alpha "
+            "0.05 spent equally over 2 looks (0.025 each); a value leaves once shown worse by "
+            "more than the margin (0.2 x the look's best |IQM|) or shown equivalent to the best "
             "within it")
     for row, dropped in zip(rows, ("0.5", "0.1", "0"), strict=True):
         assert (f"; raced ({rule}), selected among the values it did not drop; dropped: "
-                f"{dropped} after round 2; raced: 4 of 6 runs (67 %)") in row["notes"], row["notes"]
+                f"{dropped} after round 4; raced: 8 of 10 runs (80 %)") in row["notes"], \
+            row["notes"]
         assert "margin " in row["notes"] and "in score units" in row["notes"]

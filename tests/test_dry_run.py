@@ -85,11 +85,12 @@ def test_optuna_and_confirm_dry_runs(workdir: Path, finished: Path,
     assert ("ppo_search: 6 trials (search.trials, each 2 seeds x 1,024 env steps), 2,048 env "
             "steps each, 12,288 in all") in out
     assert "x 2 workers, measured over 4 trials" in out
-    assert run_cli("confirm", "--study-name", "clip_range", "--top", "2", "--seeds", "3",
+    # A race needs 4 seeds a value before its first look.
+    assert run_cli("confirm", "--study-name", "clip_range", "--top", "2", "--seeds", "4",
                    "--storage", url, "ppo.n_envs=4",  # the baseline's: 32 legs hold no episode
                    "--baseline", "ppo=tuned", "--cfg", "job", "--racing") == 0
     out = capsys.readouterr().out
-    assert "clip_range-confirm: at most 9 trials (3 configurations x 3 seeds)" in out
+    assert "clip_range-confirm: at most 12 trials (3 configurations x 4 seeds)" in out
     assert file_digest(finished) == before
     _nothing_written(workdir)
 

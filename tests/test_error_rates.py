@@ -86,7 +86,8 @@ def test_step_down_on_a_hand_worked_case() -> None:
     assert result.p_adjusted[0] == pytest.approx(adjusted0)
     assert result.p_adjusted[1] == pytest.approx(min(1.0, adjusted1))
     assert math.isnan(result.p_adjusted[2])
-    assert adjusted0 < 0.05 and result.worse == [0] and result.tied == [1]
+    # The tie of earlier releases reads these p; no value is answered worse at 3 seeds.
+    assert adjusted0 < 0.05 and result.tied == [1] and result.worse == []
     # The same samples each round give the same answer: a function of the samples only.
     assert compare_with_best(final) == result
 
@@ -162,15 +163,17 @@ def _bench_error_rates(monkeypatch: pytest.MonkeyPatch) -> object:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("ns", [[2, 2], [3, 3], [2, 2, 2]])
-def test_the_bound_holds_at_two_and_three_seeds_with_unequal_spreads(ns: list[int]) -> None:
-    # Equal means, sd 1 against 10: Welch-Satterthwaite's df gave 0.063 at 2 x 2 and 0.056 at
-    # 2 x 3; min(n) - 1 below 4 seeds holds alpha.
+def test_the_tie_holds_at_two_and_three_seeds_with_unequal_spreads(ns: list[int]) -> None:
+    # The tie of earlier releases (fastest_tied reads it): equal means, sd 1 against 10.
+    # Welch-Satterthwaite's df gave 0.063 at 2 x 2 and 0.056 at 2 x 3; min(n) - 1 below 4 seeds
+    # holds alpha. A value not tied with the best is a false call here.
     simulations = 4000
     rng = np.random.default_rng(35)
     sds = [1.0] * (len(ns) - 1) + [10.0]
-    false_calls = sum(bool(compare_with_best({g: rng.normal(0, sds[g], n)
-                                              for g, n in enumerate(ns)}).worse)
-                      for _ in range(simulations))
+    false_calls = 0
+    for _ in range(simulations):
+        result = compare_with_best({g: rng.normal(0, sds[g], n) for g, n in enumerate(ns)})
+        false_calls += len(result.tied) < len(ns) - 1
     se = math.sqrt(0.05 * 0.95 / simulations)
     assert false_calls / simulations <= 0.05 + 3 * se
 
@@ -228,29 +231,14 @@ def _spread_rates_of(bench: object, k: int, n: int, noise: str, wide: str
     return _spread_rates[key]
 
 
-BEYOND_ALPHA = {
-    # (values, seeds, noise, wide, answer) where the Welch t-tests of the contrast do not hold
-    # alpha, measured here above the tolerance. No test of the mean tried holds there at 3 to
-    # 10 seeds (docs/statistics.md, "Unequal spreads with skew"): a sample of the wide value
-    # that drew no failure, or none of the lognormal's long upper tail, looks like a normal
-    # sample of a higher (failing) or lower (right-skewed) mean with a small spread.
-    (2, 5, "failing seed", "tested", "equivalent"), (2, 10, "failing seed", "tested", "equivalent"),
-    (4, 10, "failing seed", "tested", "equivalent"), (2, 10, "failing seed", "best", "worse"),
-    (2, 5, "right-skewed", "tested", "worse"), (2, 10, "right-skewed", "tested", "worse"),
-    (4, 5, "right-skewed", "tested", "worse"), (4, 10, "right-skewed", "tested", "worse"),
-    (2, 3, "right-skewed", "best", "equivalent"), (2, 5, "right-skewed", "best", "equivalent"),
-    (2, 10, "right-skewed", "best", "equivalent"), (4, 5, "right-skewed", "best", "equivalent"),
-    (4, 10, "right-skewed", "best", "equivalent"),
-}
-SPREAD_CELLS = [
-    pytest.param(*cell, marks=pytest.mark.xfail(
-        strict=True, reason="beyond alpha: docs/statistics.md, unequal spreads with skew"))
-    if cell in BEYOND_ALPHA else cell
-    for cell in ((k, n, noise, wide, answer)
-                 for noise in ("normal", "failing seed", "right-skewed")
-                 for wide in ("tested", "best")
-                 for k, n in ((2, 3), (2, 5), (2, 10), (4, 3), (4, 5), (4, 10))
-                 for answer in ("equivalent", "worse"))]
+SPREAD_CELLS = [(k, n, noise, wide, answer)
+                for noise in ("normal", "failing seed", "right-skewed")
+                for wide in ("tested", "best")
+                for k, n in ((2, 3), (2, 4), (2, 5), (2, 8), (2, 10), (4, 3), (4, 5), (4, 10))
+                for answer in ("equivalent", "worse")]
+"""The benchmark's unequal-spread cells at 3, 5 and 10 seeds and at the answers' thresholds, 4
+and 8 seeds. The Welch t-tests of means of earlier releases failed 13 of them (up to 0.217);
+the IQM's tests hold every one."""
 
 
 @pytest.mark.slow
@@ -258,28 +246,27 @@ SPREAD_CELLS = [
 def test_each_wrong_answer_with_unequal_spreads(bench: object, k: int, n: int, noise: str,
                                                 wide: str, answer: str) -> None:
     # The benchmark's unequal-spread cells, smaller: sd 0.25 against 1 (the margin), the others
-    # exactly the margin below the best, the wide values the tested ones or the best. A false
-    # "equivalent" or a false "worse" at most alpha to within 3 Monte-Carlo SE; where it is
-    # not (BEYOND_ALPHA), the test is expected to fail, and passing there fails it (strict).
+    # exactly the margin below the best (their IQMs), the wide values the tested ones or the
+    # best. A false "equivalent" or a false "worse" at most alpha to within 3 Monte-Carlo SE.
     equivalent, worse = _spread_rates_of(bench, k, n, noise, wide)
     assert (equivalent if answer == "equivalent" else worse) <= SPREAD_TOLERANCE
 
 
 def test_the_candidates_rules_reproduce_compare(monkeypatch: pytest.MonkeyPatch) -> None:
-    # bench_skewed_spreads.py puts other tests of the contrast into compare's rules; fed
-    # Welch's p-values, its rules must give compare's answers, or its comparison of tests is
-    # not one of tests alone. Random families: 2 to 5 values, 3 to 10 seeds, sds 0.05 to 2.
+    # bench_skewed_spreads.py puts other tests of the contrast into compare's rules; fed the
+    # project's own p-values, its rules must give compare's answers, or its comparison of tests
+    # is not one of tests alone. Random families: 2 to 5 values, 3 to 10 seeds, sds 0.05 to 2.
     _bench_error_rates(monkeypatch)
     candidates = _benchmark(monkeypatch, "bench_skewed_spreads")
     rng = np.random.default_rng(40)
     answered = np.zeros(2, dtype=int)
-    for _ in range(400):
+    for _ in range(800):
         k, n = int(rng.integers(2, 6)), int(rng.integers(3, 11))
         x = -5.0 + rng.normal(size=(k, n)) * rng.uniform(0.05, 2.0, size=(k, 1))
         x[1:] -= rng.uniform(0.0, 2.5, size=(k - 1, 1))
         result = compare({g: x[g] for g in range(k)}, 0.2)
         worse, equivalent = candidates.answers(  # type: ignore[attr-defined]
-            list(x), 0.2, candidates.welch, rng)  # type: ignore[attr-defined]
+            list(x), 0.2, candidates.project, rng)  # type: ignore[attr-defined]
         assert (worse, equivalent) == (set(result.worse), set(result.equivalent))
         answered += [bool(worse), bool(equivalent)]
     # Both answers are given often enough for the comparison to mean something.

@@ -49,44 +49,61 @@ from kraby_study.store.store import opened
 
 
 def test_the_looks_share_alpha_equally() -> None:
-    rules = RaceRules(seeds=10, min_seeds=3, alpha=0.05)
-    assert rules.looks == 8
-    assert rules.look_alpha == pytest.approx(0.00625)
-    assert RaceRules(seeds=3, min_seeds=3).looks == 1
+    rules = RaceRules(seeds=10, alpha=0.05)
+    # The first look comes at round 4: no value is answered worse or equivalent below 4 seeds.
+    assert rules.min_seeds == 4 and rules.looks == 7
+    assert rules.look_alpha == pytest.approx(0.05 / 7)
+    assert RaceRules(seeds=4).looks == 1
+    # A race stored with min_seeds 3 keeps the share it began with (its look at 3 answers nothing).
+    assert RaceRules(seeds=10, min_seeds=3).look_alpha == pytest.approx(0.00625)
 
 
 def test_a_value_far_below_the_others_is_dropped_after_round_min_seeds() -> None:
-    # Three values whose scores differ by 100 sd: after round 3 the step-down's p of the worst
-    # is about 1e-5 (Welch t about 120 on 4 df), far below 0.05 / 4 looks.
+    # Three values whose scores differ by 100 sd: after round 4 no resample of the bootstrap
+    # reverses the worst's IQM contrast, so its p is the floor 1 / 2000 (Yuen's is far below
+    # it); the step-down takes 2 x that over the others, Holm 3 x that: 0.003 < 0.05 / 3 looks.
     runs = {0: dict(enumerate([0.0, 0.1, -0.1, 0.05, 0.0])),
             1: dict(enumerate([0.02, -0.08, 0.1, 0.0, -0.05])),
-            2: dict(enumerate([-10.0, -10.1, -9.9, -10.0, -10.05]))}
-    state = race([0, 1, 2], runs, RaceRules(seeds=6, min_seeds=3))
-    assert list(state.dropped) == [2] and state.dropped[2].round == 3
-    look = compare_with_best({v: [runs[v][i] for i in range(3)] for v in runs}, alpha=0.0125)
-    assert state.dropped[2].p == pytest.approx(look.p_adjusted[2]) and look.p_adjusted[2] < 1e-3
-    # Rounds 4 and 5 are decided (every value left has them); round 6 is not run yet.
+            2: dict(enumerate([-10.0, -10.1, -9.9, -10.05, -10.0]))}
+    rules = RaceRules(seeds=6)
+    state = race([0, 1, 2], runs, rules)
+    assert list(state.dropped) == [2] and state.dropped[2].round == 4
+    first = {v: [runs[v][i] for i in range(4)] for v in runs}
+    for v in (0, 1):
+        yuen = scipy.stats.ttest_ind(first[v], first[2], trim=0.25, alternative="greater")
+        assert yuen.pvalue < 1 / 2000
+    assert state.dropped[2].p == pytest.approx(3 * 2 / 2000)
+    # The race's p is the report's at that look.
+    look = compare_with_best(first, alpha=rules.look_alpha)
+    assert look.worse == [2] and state.dropped[2].p == pytest.approx(look.p_worse[2])
+    # Round 5 is decided (every value left has it); round 6 is not run yet.
     assert state.rounds == 5 and not state.over and state.survivors == [0, 1]
-    assert state.wanted(0, 5) and not state.wanted(2, 3)
+    assert state.wanted(0, 5) and not state.wanted(2, 4)
 
 
 def test_before_round_min_seeds_nothing_is_dropped() -> None:
-    runs = {0: {0: 0.0, 1: 0.1}, 1: {0: -10.0, 1: -10.1}}
-    state = race([0, 1], runs, RaceRules(seeds=5, min_seeds=3))
-    assert state.rounds == 2 and not state.dropped
+    # 100 sd apart: a look after round 4 drops value 1 (the last line), but min_seeds 5 takes
+    # none yet.
+    runs = {0: dict(enumerate([0.0, 0.1, -0.1, 0.05])),
+            1: dict(enumerate([-10.0, -10.1, -9.9, -10.05]))}
+    state = race([0, 1], runs, RaceRules(seeds=6, min_seeds=5))
+    assert state.rounds == 4 and not state.dropped
+    assert 1 in race([0, 1], runs, RaceRules(seeds=6, min_seeds=4)).dropped
 
 
 def test_a_round_is_decided_only_when_every_value_left_has_ended_it() -> None:
-    runs = {0: {0: 0.0, 1: 0.1, 2: -0.1}, 1: {0: 0.0, 1: 0.1, 2: -0.1}, 2: {0: -10.0, 1: -10.1}}
-    state = race([0, 1, 2], runs, RaceRules(seeds=5, min_seeds=3))
-    assert state.rounds == 2 and not state.dropped
+    runs = {0: dict(enumerate([0.0, 0.1, -0.1, 0.05])), 1: dict(enumerate([0.0, 0.1, -0.1, 0.05])),
+            2: dict(enumerate([-10.0, -10.1, -9.9]))}
+    state = race([0, 1, 2], runs, RaceRules(seeds=5))
+    assert state.rounds == 3 and not state.dropped
 
 
 def test_the_race_ends_when_one_value_is_left() -> None:
-    runs = {0: dict(enumerate([0.0, 0.1, -0.1])), 1: dict(enumerate([-10.0, -10.1, -9.9]))}
-    state = race([0, 1], runs, RaceRules(seeds=10, min_seeds=3))
-    assert state.dropped[1].round == 3 and state.over
-    assert not state.wanted(0, 3)  # the winner needs no more seeds
+    runs = {0: dict(enumerate([0.0, 0.1, -0.1, 0.05])),
+            1: dict(enumerate([-10.0, -10.1, -9.9, -10.05]))}
+    state = race([0, 1], runs, RaceRules(seeds=10))
+    assert state.dropped[1].round == 4 and state.over
+    assert not state.wanted(0, 4)  # the winner needs no more seeds
 
 
 def test_drops_follow_the_step_down_round_by_round() -> None:
@@ -95,11 +112,11 @@ def test_drops_follow_the_step_down_round_by_round() -> None:
     rng = np.random.default_rng(3)
     x = rng.normal(size=(6, 10))
     x[0] += 4.0
-    rules = RaceRules(seeds=10, min_seeds=3)
+    rules = RaceRules(seeds=10)
     runs = {v: dict(enumerate(x[v])) for v in range(6)}
     state = race(list(range(6)), runs, rules)
     alive, expected = list(range(6)), {}
-    for r in range(3, 11):
+    for r in range(rules.min_seeds, 11):
         if len(alive) <= 1:
             break
         look = compare_with_best({v: list(x[v, :r]) for v in alive}, alpha=rules.look_alpha)
@@ -111,18 +128,18 @@ def test_drops_follow_the_step_down_round_by_round() -> None:
 
 
 def test_identical_values_are_never_dropped() -> None:
-    runs = {v: dict(enumerate([0.5, 0.7, 0.6, 0.55])) for v in range(4)}
-    state = race(list(range(4)), runs, RaceRules(seeds=4, min_seeds=2))
-    assert not state.dropped and state.over and state.rounds == 4
+    runs = {v: dict(enumerate([0.5, 0.7, 0.6, 0.55, 0.65])) for v in range(4)}
+    state = race(list(range(4)), runs, RaceRules(seeds=5))
+    assert not state.dropped and state.over and state.rounds == 5
 
 
 def test_failed_runs_count_as_ended_without_a_score() -> None:
     nan = math.nan
-    runs = {0: dict(enumerate([0.0, 0.1, -0.1])), 1: dict(enumerate([nan, nan, nan])),
-            2: dict(enumerate([-10.0, -10.1, -9.9]))}
-    state = race([0, 1, 2], runs, RaceRules(seeds=5, min_seeds=3))
-    # Round 3 is decided; value 1 has no score, so it is never tested (never dropped).
-    assert state.rounds == 3 and 1 not in state.dropped and 2 in state.dropped
+    runs = {0: dict(enumerate([0.0, 0.1, -0.1, 0.05])), 1: dict(enumerate([nan] * 4)),
+            2: dict(enumerate([-10.0, -10.1, -9.9, -10.05]))}
+    state = race([0, 1, 2], runs, RaceRules(seeds=5))
+    # Round 4 is decided; value 1 has no score, so it is never tested (never dropped).
+    assert state.rounds == 4 and 1 not in state.dropped and 2 in state.dropped
 
 
 def test_the_paired_p_is_scipys_paired_t_test_on_the_common_seeds() -> None:
@@ -143,41 +160,84 @@ def test_the_paired_p_is_scipys_paired_t_test_on_the_common_seeds() -> None:
     assert q[0, 1] == 0.0 and q[1, 0] == 1.0
 
 
+def _yuen_dependent_p(a: list[float], b: list[float]) -> float:
+    """Yuen's test for dependent trimmed means (Wilcox 2017, sec. 5.9.5), the p of "IQM of a >
+    IQM of b": the IQM difference over the standard error of the winsorised pairs, on h - 1
+    df, h the seeds a 25 % trim keeps."""
+    n = len(a)
+    h = n - 2 * (n // 4)
+    wa, wb = (np.asarray(scipy.stats.mstats.winsorize(np.array(x), limits=(0.25, 0.25)))
+              for x in (a, b))
+    se = math.sqrt((n - 1) * np.var(wa - wb, ddof=1) / (h * (h - 1)))
+    t = (scipy.stats.trim_mean(a, 0.25) - scipy.stats.trim_mean(b, 0.25)) / se
+    return float(scipy.stats.t.sf(t, h - 1))
+
+
 def test_a_paired_race_drops_a_value_a_seed_effect_hides_from_welch() -> None:
-    """Seed i moves every value by the same 10 sd; value 2 is worse by 1 on every seed. Welch
-    sees two spread-out samples and keeps it; the paired look sees a difference of -1 on every
-    seed, with a little noise, and drops it after round 3."""
+    """Seed i moves every value by the same 10 sd; value 2 is worse by 1 on every seed. The
+    unpaired look sees two spread-out samples and keeps it; the paired look sees a difference
+    of -1 on every seed, with a little noise, and drops it after round 4."""
     seed_effect = [0.0, 10.0, -10.0, 5.0, -5.0, 2.0]
     noise = {0: [0.01, -0.02, 0.0, 0.02, -0.01, 0.0], 1: [-0.01, 0.0, 0.02, -0.02, 0.01, 0.0],
              2: [0.0, 0.01, -0.01, 0.0, 0.02, -0.02]}
     runs = {v: {i: seed_effect[i] + noise[v][i] - (1.0 if v == 2 else 0.0) for i in range(6)}
             for v in range(3)}
-    welch = race([0, 1, 2], runs, RaceRules(seeds=6, min_seeds=3))
-    paired = race([0, 1, 2], runs, RaceRules(seeds=6, min_seeds=3, paired=True))
+    rules = RaceRules(seeds=6)
+    welch = race([0, 1, 2], runs, rules)
+    paired = race([0, 1, 2], runs, RaceRules(seeds=6, paired=True))
     assert not welch.dropped
-    assert list(paired.dropped) == [2] and paired.dropped[2].round == 3
-    look = compare_with_best({v: [runs[v][i] for i in range(3)] for v in runs},
-                             alpha=RaceRules(seeds=6, min_seeds=3).look_alpha, paired=True)
-    assert look.worse == [2] and paired.dropped[2].p == pytest.approx(look.p_adjusted[2])
+    # An unpaired p is at least Yuen's, which the seed effect keeps above 0.3.
+    for r in range(rules.min_seeds, 7):
+        x = {v: [runs[v][i] for i in range(r)] for v in runs}
+        for v in (0, 1):
+            assert scipy.stats.ttest_ind(x[v], x[2], trim=0.25,
+                                         alternative="greater").pvalue > 0.3
+    assert list(paired.dropped) == [2] and paired.dropped[2].round == 4
+    # No resample of the common seeds reverses the contrast (bootstrap p 1 / 2000); the pair's
+    # p is the larger, Yuen's, and the step-down's is 3 (Holm) x 2 (others) x the smaller.
+    first = {v: [runs[v][i] for i in range(4)] for v in runs}
+    yuen = min(_yuen_dependent_p(first[v], first[2]) for v in (0, 1))
+    assert yuen > 1 / 2000
+    assert paired.dropped[2].p == pytest.approx(6 * yuen, rel=1e-9)
+    assert paired.dropped[2].p < rules.look_alpha
+    look = compare_with_best(first, alpha=rules.look_alpha, paired=True)
+    assert look.worse == [2] and paired.dropped[2].p == pytest.approx(look.p_worse[2])
 
 
 def test_a_paired_look_pairs_only_the_seeds_both_values_ended() -> None:
     nan = math.nan
-    runs = {0: dict(enumerate([0.0, 0.1, -0.1, 0.05])), 1: dict(enumerate([nan, nan, nan, nan])),
-            2: dict(enumerate([-10.0, -9.9, -10.1, nan]))}
-    state = race([0, 1, 2], runs, RaceRules(seeds=5, min_seeds=3, paired=True))
-    # Value 1 never scored, so it is never tested; value 2 is paired with 0 on seeds 0-2.
-    assert state.rounds == 4 and 1 not in state.dropped and state.dropped[2].round == 3
+    runs = {0: dict(enumerate([0.0, 0.1, -0.1, 0.05, 0.02])), 1: dict(enumerate([nan] * 5)),
+            2: dict(enumerate([-10.0, -9.9, nan, -10.1, -10.05]))}
+    rules = RaceRules(seeds=6, paired=True)
+    state = race([0, 1, 2], runs, rules)
+    # Value 1 never scored, so it is never tested. Value 2 failed seed 2: after round 4 it
+    # shares 3 seeds with 0, too few for an answer; after round 5 it shares 0, 1, 3 and 4.
+    assert state.rounds == 5 and 1 not in state.dropped and state.dropped[2].round == 5
+    common = [0, 1, 3, 4]
+    look = compare_with_best({v: [runs[v][i] for i in common] for v in (0, 2)},
+                             alpha=rules.look_alpha, paired=True)
+    assert state.dropped[2].p == pytest.approx(look.p_worse[2])
+    # 100 sd apart, the bootstrap is at its floor and Yuen's p decides, Holm x 2 for 2 values.
+    assert state.dropped[2].p == pytest.approx(2 * _yuen_dependent_p(
+        [runs[0][i] for i in common], [runs[2][i] for i in common]), rel=1e-9)
 
 
 def test_the_rules_store_pairing_and_a_race_stored_before_it_replays_unpaired() -> None:
-    rules = RaceRules(seeds=10, round_seeds=tuple(range(10)), min_seeds=3, paired=True)
+    rules = RaceRules(seeds=10, round_seeds=tuple(range(10)), paired=True)
     assert RaceRules.of({"racing": rules.stored()}) == rules
-    assert "paired t-tests" in rules.describe()
+    assert "paired by seed" in rules.describe()
     old = {"seeds": 10, "min_seeds": 3, "alpha": 0.05, "round_seeds": list(range(10))}
     unpaired = RaceRules.of({"racing": old})
     assert unpaired is not None and not unpaired.paired and unpaired.stored() == old
-    assert "Holm-Welch" in unpaired.describe()
+    assert "step-down on the IQM" in unpaired.describe()
+    assert "paired" not in unpaired.describe()
+    # Its min_seeds 3 predates the rule of no answer below 4 seeds: it still replays, its look
+    # after round 3 drops nothing, however far apart, and the one after round 4 does.
+    runs = {0: dict(enumerate([0.0, 0.1, -0.1, 0.05])),
+            1: dict(enumerate([-10.0, -10.1, -9.9, -10.05]))}
+    three = race([0, 1], {v: {i: runs[v][i] for i in range(3)} for v in runs}, unpaired)
+    assert three.rounds == 3 and not three.dropped and not three.over
+    assert race([0, 1], runs, unpaired).dropped[1].round == 4
 
 
 @pytest.mark.parametrize(("extra", "paired"), [([], False), (["racing.paired=true"], True)])
@@ -268,17 +328,18 @@ def test_a_raced_sweep_drops_what_the_procedure_says_and_never_runs_its_later_se
     for i, (_, seed) in enumerate(submitted):
         assert all(s >= seed - 1 for _, s in submitted[i:])
     assert sorted(submitted[:4]) == [(v, 0) for v in (0.1, 0.2, 0.3, 0.4)]
-    # 0.3 is 100 sd below the rest: dropped after round 3, so it ran 3 seeds (one ahead at most
-    # with two workers); the three others run all six.
+    # 0.3 is 100 sd below the rest: dropped after round 4, the first look, so it ran 4 seeds
+    # (one ahead at most with two workers); the three others run all six.
     ran_03 = sorted(s for v, s in submitted if v == 0.3)
-    assert ran_03 == [0, 1, 2] if workers == 1 else ran_03[:3] == [0, 1, 2] and len(ran_03) <= 4
+    assert ran_03 == [0, 1, 2, 3] if workers == 1 else (ran_03[:4] == [0, 1, 2, 3]
+                                                        and len(ran_03) <= 5)
     for value in (0.1, 0.2, 0.4):
         assert sorted(s for v, s in submitted if v == value) == list(range(6))
     assert len(submitted) == len(set(submitted)) == len(trials)
     assert all(outcome(t) == Outcome.COMPLETE for t in trials)
     # Stored: per value its seeds, its drop round and p; the race is over.
     by_value = {v["value"]: v for v in stored["values"]}
-    assert by_value[0.3]["dropped_at"] == 3 and 0 < by_value[0.3]["p"] < 0.05 / 4
+    assert by_value[0.3]["dropped_at"] == 4 and 0 < by_value[0.3]["p"] < 0.05 / 3
     assert all(by_value[v]["dropped_at"] is None for v in (0.1, 0.2, 0.4))
     assert by_value[0.1]["seeds"] == 6 and by_value[0.3]["seeds"] == len(ran_03)
     assert stored["over"] and stored["rounds"] == 6
@@ -290,7 +351,7 @@ def test_a_raced_sweep_drops_what_the_procedure_says_and_never_runs_its_later_se
         ledger = store.load("fake")
         definition = ledger.attrs.definition
         replay = race_of(definition, ledger.trials(), definition["values"])
-    assert replay is not None and {v: d.round for v, d in replay.dropped.items()} == {2: 3}
+    assert replay is not None and {v: d.round for v, d in replay.dropped.items()} == {2: 4}
 
 
 def test_a_race_run_again_runs_nothing(workdir: Path) -> None:
@@ -301,7 +362,7 @@ def test_a_race_run_again_runs_nothing(workdir: Path) -> None:
         out = io.StringIO()
         run_plan(store, plan, executor, 1, out, live=False)
     assert executor.pools[0].submitted == []
-    assert "0 to run" in out.getvalue() and "race fake: 21 of 24 runs (88 %)" in out.getvalue()
+    assert "0 to run" in out.getvalue() and "race fake: 22 of 24 runs (92 %)" in out.getvalue()
 
 
 def test_a_dropped_values_queued_retry_is_withdrawn(workdir: Path) -> None:
@@ -310,8 +371,8 @@ def test_a_dropped_values_queued_retry_is_withdrawn(workdir: Path) -> None:
     with opened(sqlite_url(workdir / "r.db")) as store:
         ledger = store.define(plan.name, StudyAttrs(kind="sweep", definition=plan.definition,
                                                     fingerprint=plan.fingerprint))
-        # Seed 3 of 0.3 queued ahead (as a round's tail would, then given back).
-        spec = next(s for s in plan.specs if s.value == 0.3 and s.seed == 3)
+        # Seed 4 of 0.3 queued ahead (as a round's tail would, then given back).
+        spec = next(s for s in plan.specs if s.value == 0.3 and s.seed == 4)
         ledger.queue({"clip_range": 0.3}, TrialAttrs(key=spec.key, seed=spec.seed))
         run_plan(store, plan, ScoreExecutor(), 1, io.StringIO(), live=False)
         trials = store.load("fake").trials()
@@ -323,7 +384,8 @@ def test_a_dropped_values_queued_retry_is_withdrawn(workdir: Path) -> None:
 # Commands ---------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize(("args", "message"), [
-    (["racing.min_seeds=1"], "racing.min_seeds must be at least 2"),
+    (["racing.min_seeds=3"], "racing.min_seeds must be at least 4 (no value is answered worse or "
+                             "equivalent with fewer seeds), got 3"),
     (["budget.seeds=3", "racing.min_seeds=4"],
      "racing.min_seeds (4) must not exceed budget.seeds (3)"),
     (["racing.alpha=0"], "racing.alpha must be in (0, 0.5]"),
@@ -345,20 +407,19 @@ def test_racing_on_a_search_or_a_train_run_is_refused(
     assert "--pruner wilcoxon" in err and len(err.strip().splitlines()) == 1
     assert run_cli("train", "racing.enabled=true", *TINY) == 2
     assert "racing is for run and confirm" in capsys.readouterr().err
-    assert run_cli("confirm", "--racing", "--baseline", "ppo=tuned", "--seeds", "2", *TINY) == 2
-    assert "racing.min_seeds (3) must not exceed confirm.seeds (2)" in capsys.readouterr().err
+    assert run_cli("confirm", "--racing", "--baseline", "ppo=tuned", "--seeds", "3", *TINY) == 2
+    assert "racing.min_seeds (4) must not exceed confirm.seeds (3)" in capsys.readouterr().err
     assert not (workdir / "studies").exists()
 
 
 def test_a_raced_study_is_never_mixed_with_the_same_study_run_fixed(
         workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     write_study_file(workdir, "mix", "ppo.clip_range", "[0.1, 0.3]")
-    assert run_cli("run", "study=mix", *TINY, "budget.seeds=2") == 0
+    assert run_cli("run", "study=mix", *TINY, "budget.seeds=4") == 0
     db = workdir / "studies" / "kraby.db"
     before = file_digest(db)
     capsys.readouterr()
-    assert run_cli("run", "study=mix", *TINY, "budget.seeds=2", "--racing",
-                   "racing.min_seeds=2") == 2
+    assert run_cli("run", "study=mix", *TINY, "budget.seeds=4", "--racing") == 2
     err = capsys.readouterr().err
     assert "defined differently" in err and "racing" in err
     assert len(err.strip().splitlines()) == 1 and file_digest(db) == before
@@ -368,7 +429,7 @@ def test_a_raced_study_is_never_mixed_with_the_same_study_run_fixed(
 def test_a_race_is_never_resumed_with_another_test_or_margin(
         workdir: Path, capsys: pytest.CaptureFixture[str], changed: str) -> None:
     write_study_file(workdir, "pair", "ppo.clip_range", "[0.1, 0.3]")
-    raced = ["run", "study=pair", *TINY, "budget.seeds=2", "--racing", "racing.min_seeds=2"]
+    raced = ["run", "study=pair", *TINY, "budget.seeds=4", "--racing"]
     assert run_cli(*raced) == 0
     db = workdir / "studies" / "kraby.db"
     before = file_digest(db)
@@ -404,7 +465,7 @@ def test_a_race_resumes_after_sigkill(workdir: Path) -> None:
     db = sqlite_url(workdir / "k.db")
     write_study_file(workdir, "rk", "ppo.clip_range", "[0.1, 0.2, 0.3]")
     args = ["run", "study=rk", "workers=2", f"storage={db}", *tiny_with_steps(2048),
-            "budget.seeds=4", "--racing", "racing.min_seeds=2"]
+            "budget.seeds=4", "--racing"]
     proc = spawn_cli(*args, cwd=workdir)
     wait_for(lambda: has_study(db, "rk") and sum(
         t.state == TrialState.COMPLETE for t in load(db, "rk").get_trials()) >= 3, proc=proc)
@@ -425,7 +486,7 @@ def test_two_commands_race_one_study_on_postgresql(workdir: Path) -> None:
     write_study_file(workdir, "rp", "ppo.clip_range", "[0.1, 0.2, 0.3]")
     with fresh_database() as url:
         args = ["run", "study=rp", "workers=1", f"storage={url}", *tiny_with_steps(1024),
-                "budget.seeds=4", "--racing", "racing.min_seeds=2", *FAST_HEARTBEAT]
+                "budget.seeds=4", "--racing", *FAST_HEARTBEAT]
         procs = [spawn_cli(*args, cwd=workdir) for _ in range(2)]
         outs = [p.communicate(timeout=600)[0] for p in procs]
         for proc, out in zip(procs, outs, strict=True):
@@ -445,14 +506,14 @@ def test_a_raced_campaign_races_every_stage(workdir: Path) -> None:
     folder.mkdir(parents=True)
     (folder / "trio.yaml").write_text("# @package campaign\n" + yaml.safe_dump({
         "name": "trio", "stages": [{"study": "c1"}, {"study": "c2"}, {"study": "c3"}]}))
-    assert run_cli("run", "campaign=trio", *TINY, "budget.seeds=3", "--racing",
-                   "racing.min_seeds=2") == 0
+    assert run_cli("run", "campaign=trio", *TINY, "budget.seeds=4", "--racing") == 0
     db = sqlite_url(workdir / "studies" / "kraby.db")
     for stage in ("trio-c1", "trio-c2", "trio-c3"):
         attrs = StudyAttrs.of(load(db, stage).user_attrs)
-        # The race stores the margin it began with, compare.margin's default.
-        assert attrs.definition["racing"] == {"seeds": 3, "min_seeds": 2, "alpha": 0.05,
-                                              "round_seeds": [0, 1, 2], "margin": 0.2}
+        # The race stores the margin it began with, compare.margin's default, and
+        # racing.min_seeds's default, the first round with an answer.
+        assert attrs.definition["racing"] == {"seeds": 4, "min_seeds": 4, "alpha": 0.05,
+                                              "round_seeds": [0, 1, 2, 3], "margin": 0.2}
         _race_consistent(db, stage)
 
 
@@ -465,7 +526,7 @@ def test_a_race_holds_its_family_wise_error_under_the_global_null(values: int, s
     of the variance): any drop is false. Over 1,000 races the share with a drop stays within
     alpha plus 3 Monte-Carlo standard errors, unpaired and paired."""
     rng = np.random.default_rng(20261125 + values)
-    rules = RaceRules(seeds=seeds, min_seeds=3, alpha=0.05, paired=paired)
+    rules = RaceRules(seeds=seeds, alpha=0.05, paired=paired)
     sims = 1000
     false = 0
     for _ in range(sims):
@@ -479,9 +540,9 @@ def test_a_race_holds_its_family_wise_error_under_the_global_null(values: int, s
 def test_the_replay_races_a_stored_fixed_sweep_at_a_margin(
         workdir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``bench_racing.py --store`` on a complete fixed sweep: 0.2 is within 0.01 of 0.1 with
-    tight seeds, so at the default margin (0.2 x |-1.0|) the look after round 3 settles it
-    and drops 0.3 (1.0 below); the race is then over after 9 of 18 runs and selects 0.1,
-    within the margin of the fixed best. At margin 0 it only drops 0.3."""
+    tight seeds, so at the default margin (0.2 x |-1.0|) the first look, after round 4,
+    settles it and drops 0.3 (1.0 below); the race is then over after 12 of 18 runs and selects
+    0.1, within the margin of the fixed best. At margin 0 it only drops 0.3."""
     import importlib.util
 
     from synthetic import Run, add_sweep
@@ -505,10 +566,10 @@ def test_the_replay_races_a_stored_fixed_sweep_at_a_margin(
             for v, xs in finals.items() for s, x in enumerate(xs)])
     finally:
         store.close()
-    (replay,) = bench.replay_store(url, min_seeds=3, alpha=0.05)
-    assert (replay.fixed_runs, replay.raced_runs) == (18, 9)
-    assert replay.settled == ["0.2@3"] and replay.dropped == ["0.3@3"]
+    (replay,) = bench.replay_store(url, min_seeds=4, alpha=0.05)
+    assert (replay.fixed_runs, replay.raced_runs) == (18, 12)
+    assert replay.settled == ["0.2@4"] and replay.dropped == ["0.3@4"]
     assert replay.raced_selection == "0.1" and replay.within
     assert replay.margin == pytest.approx(0.2 * 1.0, rel=0.02)
-    (old,) = bench.replay_store(url, min_seeds=3, alpha=0.05, margin=0.0)
-    assert old.settled == [] and old.dropped == ["0.3@3"] and old.raced_runs == 15
+    (old,) = bench.replay_store(url, min_seeds=4, alpha=0.05, margin=0.0)
+    assert old.settled == [] and old.dropped == ["0.3@4"] and old.raced_runs == 16

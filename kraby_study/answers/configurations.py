@@ -4,9 +4,12 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from kraby_study.answers.search_front import search_front
 from kraby_study.answers.selected import searched_env_keys
 from kraby_study.decision.front import spread
+from kraby_study.decision.robust import iqm
 from kraby_study.errors import StoreError
 from kraby_study.plan.confirm import Arm, ConfirmedStudy
 from kraby_study.records.attributes import StudyKind
@@ -18,7 +21,8 @@ from kraby_study.store.ledger import StudyLedger
 
 def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
     """The ``top`` best configurations of a search (distinct complete trials, best first) or
-    of a sweep (values by mean final score), with the seeds its trials used. Of a
+    of a sweep (values by IQM final score, as the answers rank them), with the seeds its
+    trials used. Of a
     two-objective search, up to ``top`` trials of its front spread along it
     (:func:`kraby_study.decision.front.spread`: the best score, the cheapest, the rest in cost
     order).
@@ -113,7 +117,8 @@ def _search_arms(name: str, done: list[Any]) -> list[Arm]:
 
 
 def _sweep_arms(name: str, parameter: str, planned: list[Any], done: list[Any]) -> list[Arm]:
-    """A sweep's values with complete seeds, best mean final score first."""
+    """A sweep's values with complete seeds, best IQM final score first (the mean below 4
+    seeds)."""
     short = param_name(parameter)
     groups: dict[Any, list[Any]] = {}
     values: dict[Any, Any] = {}
@@ -122,7 +127,8 @@ def _sweep_arms(name: str, parameter: str, planned: list[Any], done: list[Any]) 
         groups.setdefault(value_key(value), []).append(trial)
         values.setdefault(value_key(value), value)
     means = {k: sum(float(t.value) for t in g) / len(g) for k, g in groups.items()}
-    order = sorted(groups, key=lambda k: -means[k])
+    ranks = {k: float(iqm(np.array([float(t.value) for t in g]))) for k, g in groups.items()}
+    order = sorted(groups, key=lambda k: -ranks[k])
     return [Arm(label=f"{short}={value_label(values[k])}",
                 settings=groups[k][0].user_attrs["settings"],
                 origin=f"{parameter} = {value_label(values[k])} in sweep {name!r} (mean final "

@@ -1,8 +1,9 @@
 """The settings a stored study selected: a sweep's value under its rule, a search's best trial.
 
-"Best" is the statistics' word: the highest mean final score (a sweep's value) or the highest
-score (a search's trial). "Selected" is what a study's rule picks
-(:mod:`kraby_study.decision.selection`): under ``final_score`` the best value, under
+"Best" is the statistics' word: the highest interquartile mean (IQM) of the final scores (a
+sweep's value; below 4 seeds the IQM is the mean) or the highest score (a search's trial).
+"Selected" is what a study's rule picks (:mod:`kraby_study.decision.selection`): under
+``final_score`` the best value, under
 ``fastest_equivalent`` the fastest value shown equivalent to it. Every function takes the command's
 :class:`kraby_study.decision.comparison.CompareOptions` (margin, ``report.min_seeds`` and
 ``compare.select``, a rule read instead of the stored one); the defaults without one.

@@ -152,7 +152,7 @@ class Sweep:
 
     @property
     def best(self) -> int | None:
-        """Index of the best value (highest mean final score), if any run is complete."""
+        """Index of the best value (highest IQM final score), if any run is complete."""
         marked = self.summary.index[self.summary["mark"] == "best"]
         return int(marked[0]) if len(marked) else None
 

@@ -270,13 +270,14 @@ class RacingConfig:
     enabled: bool = False
     """Run seeds in rounds: a value leaves once shown worse than the best (by more than
     compare.margin) or shown equivalent to it."""
-    min_seeds: int = 3
-    """Seeds every value gets before a value can be dropped (2 .. the most seeds)."""
+    min_seeds: int = 4
+    """Seeds every value gets before a value can be dropped (4 .. the most seeds: no answer is
+    given below 4 seeds)."""
     alpha: float = 0.05
     """Family-wise error of every drop of the race together, in (0, 0.5]."""
     paired: bool = False
-    """Compare values by paired t-tests on the seeds they share (seeds as blocks) instead of
-    Welch's unpaired tests; pays where a seed moves every value's score alike."""
+    """Compare values on the seeds they share (seeds as blocks) instead of each value's seeds
+    apart; pays where a seed moves every value's score alike."""
 
 
 @dataclass

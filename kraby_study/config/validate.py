@@ -16,6 +16,7 @@ from kraby_study.env import adapter_for, check_scheme
 from kraby_study.errors import ConfigError
 from kraby_study.records.attributes import SelectRule
 from kraby_study.records.definition import EVAL_SETS, FINAL_FRACTION, REWARDS
+from kraby_study.records.values import ANSWER_FROM
 from kraby_study.store.url import check_url
 
 
@@ -256,13 +257,14 @@ def validate(cfg: DictConfig) -> None:
 
 def validate_racing(racing: DictConfig, seeds: int | None = None,
                     where: str = "budget.seeds") -> None:
-    """A race's settings hold together: alpha in (0, 0.5], min_seeds at least 2 and, when
-    racing with ``seeds`` the most seeds a value gets (named ``where``), at most that."""
+    """A race's settings hold together: alpha in (0, 0.5], min_seeds at least
+    :data:`~kraby_study.decision.robust.ANSWER_FROM` (no answer below) and, when racing with
+    ``seeds`` the most seeds a value gets (named ``where``), at most that."""
     alpha = float(racing.alpha)
     _require(0 < alpha <= 0.5, f"racing.alpha must be in (0, 0.5], got {racing.alpha}")
-    _require(int(racing.min_seeds) >= 2,
-             f"racing.min_seeds must be at least 2 (a test needs two seeds), got "
-             f"{racing.min_seeds}")
+    _require(int(racing.min_seeds) >= ANSWER_FROM,
+             f"racing.min_seeds must be at least {ANSWER_FROM} (no value is answered worse or "
+             f"equivalent with fewer seeds), got {racing.min_seeds}")
     if racing.enabled and seeds is not None:
         _require(int(racing.min_seeds) <= seeds,
                  f"racing.min_seeds ({racing.min_seeds}) must not exceed {where} ({seeds}), "

@@ -5,7 +5,8 @@ docs/statistics.md says what each one means and why it was chosen.
 
 - :mod:`comparison`: the best value and every other value's answer at the margin (best,
   equivalent, worse, undecided), one comparison per study that the verdict, the tables, the
-  selection rules and campaigns read.
+  selection rules and campaigns read; :mod:`robust`: the tests of each interquartile-mean
+  contrast those answers read.
 - :mod:`selection`: the study's rule (``final_score``, ``fastest_equivalent``, ...) that picks
   the selected value from that comparison; :mod:`front`: the same for a two-objective search's
   front; :mod:`race`: which values a raced study drops, round by round.

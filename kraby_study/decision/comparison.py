@@ -2,55 +2,58 @@
 campaigns, ``best``, ``${winner:...}``, races and the front all read its :class:`Comparison`.
 
 Each value of the family (the values with ``min_seeds`` complete seeds) gets one of four
-answers, for a margin delta >= 0 in score units, the smallest difference in mean final score
-that matters (``compare.margin``, a fraction of the best value's |mean|):
+answers about its **interquartile mean** (IQM, the 25 % trimmed mean of its seeds' final
+scores), for a margin delta >= 0 in score units, the smallest difference that matters
+(``compare.margin``, a fraction of the best value's |IQM|):
 
-- **best**: the highest mean (the first in order on equal means).
-- **worse**: shown worse than the highest true mean by more than delta.
-- **equivalent**: shown within delta of the highest true mean of the others.
-- **undecided**: neither.
+- **best**: the highest IQM (the first in order on equal IQMs).
+- **worse**: shown worse than the highest true IQM by more than delta.
+- **equivalent**: shown within delta of the highest true IQM of the others.
+- **undecided**: neither; every value with fewer than
+  :data:`~kraby_study.decision.robust.ANSWER_FROM` seeds, where no answer holds its error rate.
+
+The IQM and not the mean: when a setting's seeds sometimes fail, no test of a mean holds its
+level at a few seeds (a sample that drew no failure shows none), and the measured rates of
+the earlier releases' Welch tests of means reached 0.23 there. The IQM moves little with
+failures a value has at most a quarter of the time, and the failures are counted apart
+(:mod:`kraby_study.decision.failed_seeds`). The tests of each IQM contrast are in
+:mod:`kraby_study.decision.robust`.
 
 **Worse: a closed step-down** (Marcus, Peritz and Gabriel 1976) of the hypotheses
-H_g: "value g is within delta of the highest true mean" (at delta = 0: "g is *a* best"). The
+H_g: "value g is within delta of the highest true IQM" (at delta = 0: "g is *a* best"). The
 local test of an intersection H_S (every value in S within delta of every other) rejects when
-some g in S is beaten by some other value j by more than delta in a one-sided t-test of
-mu_j - mu_g > delta at level alpha / (|S| (k - 1)): under H_S no j exceeds any g in S by more
+some g in S is beaten by some other value j by more than delta in a one-sided test of
+T_j - T_g > delta at level alpha / (|S| (k - 1)): under H_S no j exceeds any g in S by more
 than delta, so the Bonferroni inequality over those |S| (k - 1) tests holds its level. The
-closure is Holm's (1979) step-down on pi_g = min(1, (k - 1) min_j p(mu_j - mu_g > delta)), and g
-is worse when its adjusted p is < alpha. At delta = 0 this is the procedure of earlier releases
-unchanged: whatever the true means, a value with the highest true mean is called worse with
-probability at most alpha, and under the global null any call at all has probability at most
-alpha. Hsu's multiple comparisons with the best (Hsu 1996, ch. 4) control the claim "this value
-is not the strict best", which is true under ties, not "worse than the best"; they are not
-used for this answer.
+closure is Holm's (1979) step-down on pi_g = min(1, (k - 1) min_j p(T_j - T_g > delta)), and g
+is worse when its adjusted p is < alpha. Hsu's multiple comparisons with the best (Hsu 1996,
+ch. 4) control the claim "this value is not the strict best", which is true under ties, not
+"worse than the best"; they are not used for this answer.
 
 **Equivalent: multiple comparisons with the best with a margin** (Edwards and Hsu 1983; Hsu
 1996, ch. 4), in the Bonferroni form of Nelson and Matejcik (1995): g is equivalent when, for
-every other value j, the one-sided test of mu_j - mu_g < delta rejects at level
-alpha / (k - 1), i.e. the MCB lower bound of mu_g - max_(j != g) mu_j is above -delta. A false
-"equivalent" on g needs the test against the value with the highest true mean to err, so over
-the at most k - 1 values truly worse by delta or more the chance of any false "equivalent" is
-at most alpha, whichever value the data make the best: choosing the best from the data costs no
-further multiplicity. At delta = 0 no value is equivalent.
+every other value j, the one-sided test of T_j - T_g < delta rejects at level
+alpha / (k - 1). A false "equivalent" on g needs the test against the value with the highest
+true IQM to err, so over the at most k - 1 values truly worse by delta or more the chance of
+any false "equivalent" is at most alpha, whichever value the data make the best: choosing the
+best from the data costs no further multiplicity. At delta = 0 no value is equivalent.
 
 Each kind of wrong answer has probability at most alpha; a wrong answer of either kind at most
-2 alpha (Bonferroni). Both are measured in ``benchmarks/bench_error_rates.py``, as far as the
-t approximation holds: it does not with skewed scores whose spreads differ. With spreads 1:4
-and a failing seed or lognormal (sigma 1) scores, values truly on the margin were answered
-equivalent up to 0.217 of the time and worse up to 0.168 at 3 to 10 seeds, and no other test of
-the mean measured (``benchmarks/bench_skewed_spreads.py``: bootstrap-t, Yuen's, a stricter
-level, refusing on unequal spreads or visible skew) holds there either; docs/statistics.md,
-"Unequal spreads with skew". Reports say so (:func:`answers_name`).
+2 alpha (Bonferroni). Both are measured in ``benchmarks/bench_error_rates.py``, on normal,
+heavy-tailed, skewed and failing-seed scores, with spreads 1:4 among them: from
+:data:`~kraby_study.decision.robust.ANSWER_FROM` seeds every cell is within alpha and its
+Monte-Carlo error.
 
-The tests are one-sided Welch t-tests, or paired t-tests on the seeds two values share
-(``paired``; seeds as blocks, as in Nelson and Matejcik's common random numbers). Welch's
-degrees of freedom are Welch-Satterthwaite's between values of equal n from
-:data:`SATTERTHWAITE_FROM` seeds on, and the conservative min(n_i, n_j) - 1 otherwise
-(:func:`welch_df`). The margin is a fraction f of the reference's |mean| (reported in score
-units as f x |mean of the best|), so "j above g by more than the margin" is the contrast
-(1 - f sign(mu_j)) mu_j - mu_g > 0, and every test against the margin is a t-test of that
-contrast, whose standard error counts the noise of the mean that sets the margin
-(:func:`margin_weights`).
+The margin is a fraction f of the reference's |IQM| (reported in score units as f x |IQM of the
+best|), so "j above g by more than the margin" is the contrast (1 - f sign(T_j)) T_j - T_g > 0,
+and every test against the margin is a test of that contrast (:func:`margin_weights`).
+
+**Tied** (:attr:`Comparison.tied`, :attr:`Comparison.p_adjusted`) is not one of the four
+answers: the earlier releases' closed step-down at margin 0 over one-sided Welch t-tests of
+means (or paired t-tests on the seeds two values share, ``paired``), kept for the
+``fastest_tied`` rule so that stored studies select as before. Welch's degrees of freedom are
+Welch-Satterthwaite's between values of equal n from :data:`SATTERTHWAITE_FROM` seeds on, and
+the conservative min(n_i, n_j) - 1 otherwise (:func:`welch_df`).
 
 Values with fewer than ``min_seeds`` complete seeds are left out of the family: they are
 never best, equivalent, undecided or worse.
@@ -68,7 +71,8 @@ from typing import Generic, TypeVar
 import numpy as np
 import scipy  # submodules load on first use: `list` loads none for a rule that needs no test
 
-from kraby_study.records.values import best_group
+from kraby_study.decision.robust import ANSWER_FROM, iqm, iqm_pairs
+from kraby_study.decision.robust import NAME as TESTS_NAME
 
 ALPHA = 0.05
 MIN_SEEDS = 2
@@ -88,13 +92,10 @@ difference."""
 PROCEDURE = ("closed Holm step-down over one-sided Welch t-tests with Welch-Satterthwaite "
              f"degrees of freedom between values of equal n from {SATTERTHWAITE_FROM} seeds, "
              "min(n) - 1 otherwise (each value as a best)")
+"""The test of :attr:`Comparison.tied` (margin 0, means), the ``fastest_tied`` rule's."""
 PROCEDURE_SHORT = "closed Holm-Welch step-down"
 EQUIVALENCE = ("multiple comparisons with the best with a margin (Edwards and Hsu 1983), "
                "Bonferroni form (Nelson and Matejcik 1995)")
-
-NOT_HELD = "not with skewed scores of unequal spreads"
-"""Where the bound on each kind of wrong answer was measured not to hold (docs/statistics.md,
-"Unequal spreads with skew")."""
 
 K = TypeVar("K", bound=Hashable)
 
@@ -109,14 +110,16 @@ class Answer(StrEnum):
 
 
 def procedure_name(alpha: float = ALPHA) -> str:
-    """How reports name the test of "worse", e.g. 'closed Holm-Welch step-down, alpha 0.05'."""
+    """How reports name the test of "tied", e.g. 'closed Holm-Welch step-down, alpha 0.05'."""
     return f"{PROCEDURE_SHORT}, alpha {alpha:g}"
 
 
 def answers_name(alpha: float = ALPHA) -> str:
     """How reports name the four answers' procedure."""
-    return (f"worse: {procedure_name(alpha)} against the margin; equivalent: {EQUIVALENCE}; "
-            f"each kind of wrong answer at most {alpha:g}, {NOT_HELD}")
+    return (f"answers on the interquartile mean (IQM) of the seeds; worse: closed Holm "
+            f"step-down against the margin, alpha {alpha:g}; equivalent: {EQUIVALENCE}; "
+            f"tests: {TESTS_NAME}; each kind of wrong answer at most {alpha:g}, measured on "
+            "skewed scores of unequal spreads too")
 
 
 def _clean(values: Sequence[float]) -> np.ndarray:
@@ -324,15 +327,16 @@ def holm(pvalues: Sequence[float]) -> list[float]:
 
 
 def margin_weights(means: np.ndarray, fraction: float) -> np.ndarray:
-    """The weights w_j = 1 - fraction x sign(mean_j) of :func:`welch_pairs` for a margin that
-    is ``fraction`` of the reference's |mean|: "mu_g within f |mu_j| of mu_j" is
+    """The weights w_j = 1 - fraction x sign(mean_j) of :func:`welch_pairs` and
+    :func:`~kraby_study.decision.robust.iqm_pairs` for a margin that is ``fraction`` of the
+    reference's |location| (its IQM in the answers): "mu_g within f |mu_j| of mu_j" is
     mu_g - w_j mu_j >= 0 (the sign read from the sample; the leg's scores are all negative, so
     w = 1 + f there)."""
     return 1.0 - float(fraction) * np.sign(np.asarray(means, dtype=float))
 
 
 def margin_units(fraction: float, best_mean: float) -> float:
-    """The margin in score units: ``fraction`` of the best value's |mean| (0 for a NaN mean)."""
+    """The margin in score units: ``fraction`` of the best value's |IQM| (0 for a NaN)."""
     return float(fraction) * abs(best_mean) if math.isfinite(best_mean) else 0.0
 
 
@@ -341,15 +345,17 @@ class Comparison(Generic[K]):
     """The result of :func:`compare` on the current samples: every verdict reads it."""
 
     best: K | None
-    """The value with the highest mean among those with enough seeds; None if none has."""
+    """The value with the highest IQM among those with enough seeds; None if none has."""
     p_adjusted: dict[K, float]
-    """Holm-adjusted p of "this value is a best" (the step-down at margin 0) for every value
-    in the family, NaN for the best itself; < alpha: not a best."""
+    """Holm-adjusted p of "this value's mean is a best" (the Welch step-down at margin 0 of the
+    earlier releases, :data:`PROCEDURE`) for every value in the family, NaN for the best
+    itself; < alpha: not a best. What :attr:`tied` reads, not an answer."""
     worse: list[K]
     """Values shown worse than the best by more than the margin, in the given order."""
     tied: list[K]
-    """Values other than the best not shown worse at margin 0 (adjusted p >= alpha): what
-    earlier releases called tied, and what ``fastest_tied`` reads; in the given order."""
+    """Values other than the best not shown worse at margin 0 by :attr:`p_adjusted` (adjusted p
+    >= alpha): what earlier releases called tied, and what ``fastest_tied`` reads; in the
+    given order."""
     left_out: dict[K, int] = field(default_factory=dict)
     """Values with some but fewer than ``min_seeds`` complete seeds: their count of seeds."""
     alpha: float = ALPHA
@@ -357,21 +363,28 @@ class Comparison(Generic[K]):
     fraction: float = 0.0
     """The margin as a fraction of the best's |mean| (``compare.margin``)."""
     margin: float = 0.0
-    """The margin in score units: ``fraction`` x |mean of the best|."""
+    """The margin in score units: ``fraction`` x |IQM of the best|."""
     answers: dict[K, Answer] = field(default_factory=dict)
     """Every value of the family's answer, in the given order."""
     p_worse: dict[K, float] = field(default_factory=dict)
-    """Holm-adjusted p of "within the margin of the highest mean" (NaN for the best); equal
-    to ``p_adjusted`` at margin 0."""
+    """Holm-adjusted p of "within the margin of the highest IQM" (NaN for the best; 1 where no
+    pair of the value is tested, below :data:`~kraby_study.decision.robust.ANSWER_FROM`
+    seeds)."""
     p_equivalent: dict[K, float] = field(default_factory=dict)
-    """Bonferroni p of "more than the margin below the highest mean of the others": (k - 1)
-    x the largest p over the others (NaN for the best; 1 at margin 0)."""
+    """Bonferroni p of "more than the margin below the highest IQM of the others": (k - 1)
+    x the largest p over the others (NaN for the best; 1 at margin 0 and where a pair is not
+    tested)."""
     resolvable: dict[K, float] = field(default_factory=dict)
-    """Per value other than the best, the smallest margin at which a value truly equal to the
-    best is shown equivalent with probability about :data:`POWER`:
-    (t(1 - alpha / (k - 1)) + t(POWER)) x the standard error of its difference with the best."""
+    """Per value other than the best, about the smallest margin at which a value truly equal to
+    the best is shown equivalent with probability :data:`POWER`:
+    (t(1 - alpha / (k - 1)) + t(POWER)) x Yuen's standard error of its IQM contrast with the
+    best, with Yuen's degrees of freedom (absent where untested)."""
     family: list[K] = field(default_factory=list)
     """The values with enough seeds, in the given order."""
+    unanswered: list[K] = field(default_factory=list)
+    """Values of the family other than the best that no test reaches: fewer than
+    :data:`~kraby_study.decision.robust.ANSWER_FROM` seeds, on their side or the best's.
+    Undecided by rule, whatever their scores; in the given order."""
 
     @property
     def equivalent(self) -> list[K]:
@@ -403,6 +416,15 @@ class Comparison(Generic[K]):
             return "margin 0 (no value can be shown equivalent)"
         return (f"margin {self.margin:.3g} in score units ({self.fraction:g} x the best's "
                 f"|mean| {abs(self.margin / self.fraction):.4g})")
+
+    def unanswered_text(self) -> str | None:
+        """Why some values are undecided whatever their scores; None when every value could
+        be answered."""
+        if not self.unanswered:
+            return None
+        return (f"{len(self.unanswered)} of {len(self.family) - 1} values compared with fewer "
+                f"than {ANSWER_FROM} seeds (or against a best with fewer): undecided by rule, "
+                f"since no test holds its error rate there on skewed scores")
 
     def resolution_text(self) -> str | None:
         """A warning when the margin is below the seeds' resolution; None otherwise."""
@@ -458,12 +480,23 @@ def evidence(scores: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS
     return need, family, left_out
 
 
+def best_by_iqm(samples: Mapping[K, np.ndarray]) -> K | None:
+    """The value with the highest IQM (the first such in order; NaN never wins); None if no
+    value has a sample."""
+    best: K | None = None
+    top = -math.inf
+    for g, x in samples.items():
+        if len(x) and (location := float(iqm(np.asarray(x, dtype=float)))) > top:
+            best, top = g, location
+    return best
+
+
 def best_with_evidence(scores: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS
                        ) -> K | None:
-    """The value with the highest mean among those with ``min_seeds`` complete seeds (the
+    """The value with the highest IQM among those with ``min_seeds`` complete seeds (the
     best of :func:`compare`, without its tests); None if none has them."""
     _, family, _ = evidence(scores, min_seeds)
-    return best_group({g: list(x) for g, x in family.items()})
+    return best_by_iqm(family)
 
 
 def _step_down(matrix: np.ndarray) -> list[float]:
@@ -485,13 +518,13 @@ def compare(scores: Mapping[K, Sequence[float]], margin: float = MARGIN, alpha: 
 
     Args:
         scores: Final scores of the complete seeds by value, in the study's order (NaN ignored).
-        margin: The margin as a fraction of the best value's |mean| (0: the answers of earlier
-            releases, no value equivalent).
+        margin: The margin as a fraction of the best value's |IQM| (0: no value equivalent).
         alpha: The error rate of each kind of wrong answer.
         min_seeds: Fewest complete seeds a value needs to be in the family (at least 2).
         paired: The samples are aligned by seed (position i of every sample is the same seed,
-            NaN where that run has no score) and each pair of values is compared by a paired
-            t-test on their common seeds instead of Welch's.
+            NaN where that run has no score) and each pair of values is compared on their
+            common seeds (paired t-tests for :attr:`Comparison.tied`; the common seeds
+            resampled together, and Yuen's test for dependent trimmed means, for the answers).
         tests: False: only the best, the family and the values left out, no test (``list``
             and the rules that need none stay clear of scipy.stats).
 
@@ -499,45 +532,44 @@ def compare(scores: Mapping[K, Sequence[float]], margin: float = MARGIN, alpha: 
         The :class:`Comparison`.
     """
     need, family, left_out = evidence(scores, min_seeds)
-    best = best_group({g: list(x) for g, x in family.items()})
+    best = best_by_iqm(family)
     fraction = float(margin)
     if best is None or not tests:
         return Comparison(best, {}, [], [], left_out, alpha, need, fraction,
                           family=list(family))
     groups = list(family)
     k = len(groups)
-    means = np.array([np.mean(family[g]) for g in groups])
-    weights = margin_weights(means, fraction)
+    locations = np.array([float(iqm(family[g])) for g in groups])
+    delta = margin_units(fraction, float(locations[groups.index(best)]))
+    weights = margin_weights(locations, fraction) if delta > 0 else None
     if paired:
         aligned = [np.asarray(scores[g], dtype=float).ravel() for g in groups]
         if len({len(x) for x in aligned}) > 1:
             raise ValueError("paired samples must be aligned by seed: equal lengths")
-        tests = paired_pairs(aligned)
-        shifted = paired_pairs(aligned, weights) if fraction > 0 else tests
+        means = paired_pairs(aligned)
+        robust = iqm_pairs(aligned, weights, alpha, paired=True)
     else:
-        tests = welch_pairs([family[g] for g in groups])
-        shifted = welch_pairs([family[g] for g in groups], weights) if fraction > 0 else tests
-    delta = margin_units(fraction, float(np.mean(family[best])))
-    # With a margin, "j beats g by more than f |mu_j|" is the contrast w_j mu_j - mu_g > 0:
-    # its standard error counts the reference mean's noise in the margin, which a margin read
-    # off the sample and then held fixed would leave out (an equivalence error of 0.059 at
-    # 2 values x 10 seeds, normal data, alpha 0.05).
-    at_zero = _step_down(tests.greater(0.0))
-    at_margin = _step_down(shifted.greater(0.0)) if delta > 0 else at_zero
+        means = welch_pairs([family[g] for g in groups])
+        robust = iqm_pairs([family[g] for g in groups], weights, alpha)
+    # With a margin, "j beats g by more than f |T_j|" is the contrast w_j T_j - T_g > 0 (the
+    # weights): its tests count the reference's noise in the margin, which a margin read off
+    # the sample and then held fixed would leave out (an equivalence error of 0.059 at
+    # 2 values x 10 seeds, normal data, alpha 0.05, with the t-tests of earlier releases).
+    at_zero = _step_down(means.greater(0.0))
+    at_margin = _step_down(robust.greater)
     b = groups.index(best)
     others = max(k - 1, 1)
     if delta > 0:
         # An untested pair (NaN) cannot show g within the margin of j.
-        below = shifted.less(0.0)
-        below = np.where(np.isnan(below), 1.0, below)
+        below = np.where(np.isnan(robust.less), 1.0, robust.less)
         np.fill_diagonal(below, 0.0)
         equivalent = np.minimum(1.0, others * np.max(below, axis=0))
     else:
         equivalent = np.ones(k)
     with np.errstate(invalid="ignore"):
-        quantiles = (scipy.special.stdtrit(shifted.df[b], 1 - alpha / others)
-                     + scipy.special.stdtrit(shifted.df[b], POWER))
-    resolvable = np.where(shifted.tested[b], quantiles * shifted.se[b], math.nan)
+        quantiles = (scipy.special.stdtrit(robust.df[b], 1 - alpha / others)
+                     + scipy.special.stdtrit(robust.df[b], POWER))
+    resolvable = np.where(robust.tested[b], quantiles * robust.se[b], math.nan)
     p_adjusted, p_worse, p_equivalent, answers, resolved = {}, {}, {}, {}, {}
     for i, g in enumerate(groups):
         if g == best:
@@ -546,17 +578,21 @@ def compare(scores: Mapping[K, Sequence[float]], margin: float = MARGIN, alpha: 
             continue
         p_adjusted[g], p_worse[g] = at_zero[i], at_margin[i]
         p_equivalent[g] = float(equivalent[i])
-        resolved[g] = float(resolvable[i])
+        if robust.tested[b, i]:
+            resolved[g] = float(resolvable[i])
         answers[g] = (Answer.WORSE if p_worse[g] < alpha else
                       Answer.EQUIVALENT if p_equivalent[g] < alpha else Answer.UNDECIDED)
     worse = [g for g in groups if answers[g] == Answer.WORSE]
     tied = [g for g in groups if g != best and not p_adjusted[g] < alpha]
+    unanswered = [g for i, g in enumerate(groups)
+                  if answers[g] == Answer.UNDECIDED and not robust.tested[b, i]]
     return Comparison(best, p_adjusted, worse, tied, left_out, alpha, need, fraction, delta,
-                      answers, p_worse, p_equivalent, resolved, groups)
+                      answers, p_worse, p_equivalent, resolved, groups, unanswered)
 
 
 def compare_with_best(scores: Mapping[K, Sequence[float]], alpha: float = ALPHA,
                       min_seeds: int = MIN_SEEDS, paired: bool = False) -> Comparison[K]:
-    """:func:`compare` at margin 0: which values are worse than the best (the closed step-down
-    of earlier releases), none equivalent."""
+    """:func:`compare` at margin 0: which values are worse than the best IQM (the answers'
+    step-down at margin 0) and which are tied by the Welch step-down of earlier releases; none
+    equivalent."""
     return compare(scores, 0.0, alpha, min_seeds, paired)

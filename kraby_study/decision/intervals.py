@@ -55,6 +55,8 @@ def iqm_interval_name(level: float = LEVEL) -> str:
 
 
 IQM_INTERVAL_NAME = iqm_interval_name()
+SHORT_IQM_INTERVAL_NAME = "95 % trimmed-t interval (Tukey-McLaughlin)"
+"""The interval of an IQM in figure legends."""
 
 
 def t_interval(mean: np.ndarray | pd.Series | float, sd: np.ndarray | pd.Series | float,

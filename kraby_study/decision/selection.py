@@ -1,8 +1,9 @@
 """Which value of a finished sweep is selected: the rules a campaign carries forward.
 
-"Best" is the highest mean final score only; "selected" is what a rule picks. Every rule is a
-named :class:`Rule` that reads one :class:`kraby_study.decision.comparison.Comparison` (the report's
-answers, the same object its table column shows) and the values' mean AUC and training time:
+"Best" is the highest IQM final score only (the interquartile mean; the mean below 4 seeds);
+"selected" is what a rule picks. Every rule is a named :class:`Rule` that reads one
+:class:`kraby_study.decision.comparison.Comparison` (the report's answers, the same object its
+table column shows) and the values' mean AUC and training time:
 
 - ``final_score``: the best value.
 - ``auc``: the highest mean AUC over the seeds with a curve (the most sample-efficient).
@@ -11,7 +12,7 @@ answers, the same object its table column shows) and the values' mean AUC and tr
   value is not worth its time when a faster one is shown as good within the margin, and a
   value needs evidence to be selected, so spread cannot buy a place.
 - ``fastest_tied``: among the best and the values not shown worse at margin 0 (the closed
-  Holm-Welch step-down, alpha 0.05), the lowest mean training time. The rule of earlier
+  Holm-Welch step-down of means, alpha 0.05), the lowest mean training time. The rule of earlier
   releases, kept so stored studies select as before: a noisy, cheap, truly worse value enters
   by its spread.
 
@@ -101,7 +102,7 @@ class Rule:
 
 _TIME = "mean training time (wall-clock seconds; CPU seconds on a confirm study)"
 RULES: dict[SelectRule, Rule] = {r.name: r for r in (
-    Rule(SelectRule.FINAL_SCORE, "highest mean final score (the best)", _final_score, False),
+    Rule(SelectRule.FINAL_SCORE, "highest IQM final score (the best)", _final_score, False),
     Rule(SelectRule.AUC, "highest mean AUC (sample efficiency)", _auc, False),
     Rule(SelectRule.FASTEST_EQUIVALENT,
          f"lowest {_TIME} among the best and the values shown equivalent to it (within the "

@@ -94,13 +94,16 @@ class RaceRules:
     """Most seeds any value gets."""
     round_seeds: tuple[int, ...] = ()
     """The seed of each round, first round first (``seed``, ``seed + 1``, ... in a sweep)."""
-    min_seeds: int = 3
-    """Seeds every value gets before the first look (at least 2)."""
+    min_seeds: int = 4
+    """Seeds every value gets before the first look (a new race: at least
+    :data:`~kraby_study.decision.robust.ANSWER_FROM`; a stored one may hold 3, whose first look
+    answers nothing)."""
     alpha: float = 0.05
     """Family-wise error rate over every look of the race."""
     paired: bool = False
-    """Each look compares values by paired t-tests on their common seeds (seeds as blocks);
-    False: Welch's unpaired tests, the report's own."""
+    """Each look compares values on their common seeds (seeds as blocks: the common seeds
+    resampled together, Yuen's test for dependent trimmed means); False: each value's seeds
+    apart, the report's own tests."""
     margin: float = 0.0
     """``compare.margin`` when the race began: a value shown within it of the look's best
     leaves as equivalent, one shown below the best by more than it as worse; 0: only values
@@ -119,10 +122,10 @@ class RaceRules:
     def describe(self) -> str:
         """How reports name the rule, e.g. 'racing from round 3 of 10, alpha 0.05 spent
         over 8 looks (0.00625 each)'."""
-        test = ("closed Holm step-down over paired t-tests (seeds as blocks)" if self.paired
-                else "closed Holm-Welch step-down")
+        test = ("the answers' step-down on the IQM, paired by seed (seeds as blocks)"
+                if self.paired else "the answers' step-down on the IQM")
         leaves = (f"; a value leaves once shown worse by more than the margin ({self.margin:g} x "
-                  "the look's best |mean|) or shown equivalent to the best within it"
+                  "the look's best |IQM|) or shown equivalent to the best within it"
                   if self.margin > 0 else "")
         return (f"racing from round {self.min_seeds} of {self.seeds}: {test} at each look, "
                 f"alpha {self.alpha:g} spent equally over {self.looks} looks "

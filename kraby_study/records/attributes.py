@@ -55,7 +55,7 @@ class SelectRule(StrEnum):
     :mod:`kraby_study.decision.selection` for each rule's statistics."""
 
     FINAL_SCORE = "final_score"
-    """The highest mean final score."""
+    """The best: the highest IQM of the final scores (the mean below 4 seeds)."""
     AUC = "auc"
     """The highest mean AUC (sample efficiency)."""
     FASTEST_TIED = "fastest_tied"

@@ -9,6 +9,12 @@ from typing import Any, TypeVar
 
 from kraby_study.records.stored import Outcome, StoredTrial, T, outcome, parse_sweep_key
 
+ANSWER_FROM = 4
+"""Fewest complete seeds a value (and the best) needs for any answer at a margin, worse or
+equivalent: at 3 seeds the interquartile mean is the mean, and no test measured holds its error
+rate there on skewed scores of unequal spreads (``kraby_study.decision.robust``; a false
+"equivalent" of 0.10 at 2 values x 3 seeds). A race's first look comes no sooner."""
+
 # Values and the best one --------------------------------------------------------------------------
 
 

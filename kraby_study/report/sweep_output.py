@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from kraby_study.answers.sweep_evidence import Sweep, arms_frame
-from kraby_study.decision.comparison import ALPHA, answers_name
+from kraby_study.decision.comparison import ALPHA, ANSWER_FROM, answers_name
 from kraby_study.decision.coverage import coverage_note
 from kraby_study.decision.failed_seeds import definition_text
 from kraby_study.decision.intervals import (
@@ -107,8 +107,8 @@ def _steps(value: float) -> str:
     return f"{value:,.0f}" if np.isfinite(value) else "-"
 
 
-SUMMARY_COLUMNS = ["seeds", "mean final score [95 % CI]", "answer", "p_worse", "p_equivalent",
-                   "failed seeds [95 % CI of the rate]"]
+SUMMARY_COLUMNS = ["seeds", "IQM final score [95 % CI]", "mean", "answer", "p_worse",
+                   "p_equivalent", "failed seeds [95 % CI of the rate]"]
 """The compact table's columns after the value's (summary.csv holds every other number)."""
 ANSWER_COLUMNS = ("answer", "p_worse", "p_equivalent")
 """The columns a single-run study's table leaves out: its one value is trivially the best."""
@@ -126,11 +126,11 @@ def row_mark(answer: str) -> str:
     return answer if answer in ("best", "equivalent") else ""
 
 
-def _mean_cell(row: pd.Series) -> str:
-    """'1.001 [0.9902, 1.011]': the mean final score and its interval, 4 digits each."""
-    text = number(row["final_mean"])
-    if np.isfinite(row["final_mean"]) and np.isfinite(row["final_low"]):
-        text += f" {_interval(row['final_low'], row['final_high'])}"
+def _iqm_cell(row: pd.Series) -> str:
+    """'1.001 [0.9902, 1.011]': the IQM final score and its interval, 4 digits each."""
+    text = number(row["iqm"])
+    if np.isfinite(row["iqm"]) and np.isfinite(row["iqm_low"]):
+        text += f" {_interval(row['iqm_low'], row['iqm_high'])}"
     return text
 
 
@@ -139,16 +139,18 @@ def _p_cell(p: float) -> str:
 
 
 def summary_table(sweep: Sweep) -> Table:
-    """The compact summary: per value its complete seeds, mean final score with its interval,
-    answer, p_worse, p_equivalent and failed seeds (a single-run study, one value, has no
-    answer to show); every other number is in summary.csv."""
+    """The compact summary: per value its complete seeds, IQM final score with its interval
+    (what the answers are about), mean, answer, p_worse, p_equivalent and failed seeds (a
+    single-run study, one value, has no answer to show); every other number is in
+    summary.csv."""
     compared = bool(sweep.parameter)
     rows = []
     for vi, row in sweep.summary.iterrows():
         answers = [_answer_cell(sweep, int(vi), row), _p_cell(row["p_worse"]),
                    _p_cell(row["p_equivalent"])]
-        rows.append([str(row["value"]), str(row["complete"]), _mean_cell(row),
-                     *(answers if compared else []), _failed_seeds(row)])
+        rows.append([str(row["value"]), str(row["complete"]), _iqm_cell(row),
+                     number(row["final_mean"]), *(answers if compared else []),
+                     _failed_seeds(row)])
     header = SUMMARY_COLUMNS if compared else [c for c in SUMMARY_COLUMNS
                                                if c not in ANSWER_COLUMNS]
     return Table([sweep.name, *header], rows,
@@ -192,14 +194,17 @@ def methods(bootstrap: int, min_seeds: int = 2, raced: bool = False,
     of the bootstrap-t interval of a mean); ``raced``: what a dropped value's row shows;
     ``failed_seed``: what a failed seed is."""
     items = [
-        f"Mean final score [95 % CI], and every interval of a mean (training time, AUC): "
+        f"IQM final score [95 % CI]: the interquartile mean of the complete seeds' final "
+        f"scores (the mean of the middle half; the mean below 4 seeds), {iqm_interval_name()}. "
+        f"Every interval of a mean (training time, AUC; the mean final score in summary.csv): "
         f"{interval_name(bootstrap)}. n, seeds: a value's complete seeds.",
-        f"Best: the highest mean final score among the values with at least report.min_seeds "
+        f"Best: the highest IQM final score among the values with at least report.min_seeds "
         f"= {min_seeds} complete seeds (a value with fewer is left out of every answer). "
-        "Answers against the best: equivalent, shown within the margin of the best "
-        "(compare.margin, a fraction of the best's |mean|; the verdict gives it in score "
+        "Answers against the best, about the IQM: equivalent, shown within the margin of the "
+        "best (compare.margin, a fraction of the best's |IQM|; the verdict gives it in score "
         "units); worse, shown below the best by more than the margin (or dropped by a race); "
-        f"undecided, neither. Tests: {answers_name(ALPHA)}.",
+        f"undecided, neither, and every value compared with fewer than {ANSWER_FROM} seeds "
+        f"(no test holds its error rate there). Tests: {answers_name(ALPHA)}.",
         f"p_worse: the adjusted p of the step-down against the margin (< {ALPHA:g}: worse). "
         f"p_equivalent: the Bonferroni p of the comparison with the best (< {ALPHA:g}: "
         "equivalent; 1 at margin 0).",
@@ -212,7 +217,7 @@ def methods(bootstrap: int, min_seeds: int = 2, raced: bool = False,
         "IQR at n for normal data, comparable across n; needs 2 seeds). Each counts only "
         "values with at least report.min_seeds complete seeds.",
         f"Learning-curve bands: {BAND_NAME}, at every n.",
-        f"summary.csv also holds: the run counts; the IQM with its {iqm_interval_name()}; the "
+        "summary.csv also holds: the run counts; the mean final score with its interval; the "
         "final IQR, raw and rescaled; AUC; steps and seconds to threshold and the seeds that "
         f"reached it; training time; p_vs_best, the {TEST_NAME}; p_holm and mark (best, tie), "
         f"the margin-0 question of earlier releases that the rule fastest_tied reads: "
@@ -298,12 +303,17 @@ def resolution_text(sweep: Sweep) -> str | None:
     compared = sweep.comparison
     if compared is None or compared.fraction <= 0:
         return None
+    unanswered = compared.unanswered_text()
     warning = compared.resolution_text()
     if warning:
-        return f"Warning: {warning}."
+        return f"Warning: {warning}." + (f" {unanswered[0].upper()}{unanswered[1:]}."
+                                         if unanswered else "")
+    if unanswered:
+        return f"{unanswered[0].upper()}{unanswered[1:]}."
     if math.isfinite(compared.resolution):
         return (f"These seeds resolve a margin of about {compared.resolution:.3g} (median over "
-                "the values of (t + t_0.8) x the standard error of the contrast with the best).")
+                "the values of (t + t_0.8) x Yuen's standard error of the IQM contrast with the "
+                "best).")
     return None
 
 
@@ -318,6 +328,16 @@ def _mean_text(row: pd.Series) -> str:
         return text + f" (95 % CI {_interval(row['final_low'], row['final_high'])}, " \
                       f"n={row['complete']})"
     return text + f" (n={row['complete']})"
+
+
+def _iqm_text(row: pd.Series) -> str:
+    """'IQM final score 1.001 (95 % CI [0.9902, 1.011], n=8; mean 0.998)'."""
+    text = f"IQM final score {number(row['iqm'])}"
+    mean = f"mean {number(row['final_mean'])}"
+    if np.isfinite(row["iqm_low"]):
+        return text + f" (95 % CI {_interval(row['iqm_low'], row['iqm_high'])}, " \
+                      f"n={row['complete']}; {mean})"
+    return text + f" (n={row['complete']}; {mean})"
 
 
 def _auc_text(row: pd.Series) -> str:
@@ -357,16 +377,16 @@ def _single_lines(sweep: Sweep, row: pd.Series) -> list[str]:
 
 
 def verdict_lines(sweep: Sweep) -> list[str]:
-    """The verdict block, at most six short lines: the best value's mean final score with its
-    interval, every other value's answer (the margin once), the failed seeds, and the value
-    the rule selects."""
+    """The verdict block, at most six short lines: the best value's IQM final score with its
+    interval and its mean, every other value's answer (the margin once), the failed seeds, and
+    the value the rule selects."""
     best = sweep.verdict.best
     if best is None:
         return ["No run is complete yet, so no value can be compared."]
     row = sweep.summary.iloc[best]
     if not sweep.parameter:
         return _single_lines(sweep, row)
-    lines = [f"Best: {_label(sweep, best)}, {_mean_text(row)}.", *answer_lines(sweep)]
+    lines = [f"Best: {_label(sweep, best)}, {_iqm_text(row)}.", *answer_lines(sweep)]
     failing = failed_seeds_line(sweep)
     chosen = selection_text(sweep)
     return lines + [text for text in (failing, chosen) if text]
@@ -435,7 +455,7 @@ def winner_text(sweep: Sweep) -> str | None:
         return f"{owner} winner {winner} cannot be checked yet: no confirmed run is complete."
     row = sweep.summary.iloc[best]
     label = _label(sweep, best)
-    fresh = f"the best mean final score on {row['complete']} fresh seeds"
+    fresh = f"the best IQM final score on {row['complete']} fresh seeds"
     if winner == label:
         return f"{owner} winner {winner} is the confirmed winner: it has {fresh}."
     text = f"{owner} winner {winner} is not the confirmed winner: {label} has {fresh}."

@@ -22,7 +22,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from kraby_study.answers.sweep_evidence import Sweep
-from kraby_study.decision.intervals import SHORT_INTERVAL_NAME
+from kraby_study.decision.intervals import SHORT_INTERVAL_NAME, SHORT_IQM_INTERVAL_NAME
 from kraby_study.records.stored import Outcome
 from kraby_study.report.style import (
     BEST_COLOUR,
@@ -164,7 +164,7 @@ def _mean_mark(ax: Axes, sweep: Sweep, vi: int, mean: float, low: float, high: f
 def _seeds_and_means(ax: Axes, sweep: Sweep, column: str, mean: str, low: str,
                      high: str, points: pd.DataFrame | None = None) -> None:
     """Every complete seed's ``column`` (from ``points``, by default the complete runs) as a
-    point, and the summary's mean with its interval beside them."""
+    point, and the summary's ``mean`` (or other location) with its interval beside them."""
     if points is None:
         points = sweep.trials[sweep.trials["outcome"] == Outcome.COMPLETE]
     _seed_points(ax, sweep, points, column)
@@ -181,11 +181,17 @@ def _failed_marks(ax: Axes, sweep: Sweep) -> bool:
     return bool(failed.any())
 
 
-def _legend_entries(extra: list[Line2D | Patch]) -> list[Line2D | Patch]:
+MEAN_MARK = f"mean, {SHORT_INTERVAL_NAME}"
+IQM_MARK = f"IQM, {SHORT_IQM_INTERVAL_NAME}"
+"""The final-score figure's mark: the answers are about the IQM."""
+
+
+def _legend_entries(extra: list[Line2D | Patch], mark: str = MEAN_MARK
+                    ) -> list[Line2D | Patch]:
     return [Line2D([], [], marker="o", linestyle="", color=MUTED, alpha=0.55, markersize=5,
                    label="one seed"),
             Line2D([], [], marker="o", linestyle="-", color=MUTED, markeredgecolor="black",
-                   markersize=7, label=_two_lines(f"mean, {SHORT_INTERVAL_NAME}")), *extra]
+                   markersize=7, label=_two_lines(mark)), *extra]
 
 
 def _two_lines(label: str) -> str:
@@ -235,20 +241,20 @@ def _shade_answers(ax: Axes, answers: pd.Series) -> None:
 
 
 def final_score(sweep: Sweep, path: Path) -> Path:
-    """Final score of each seed against the value; each value's column shaded by its answer
-    against the best (best, equivalent, undecided; worse unshaded), the answer written above
-    it."""
+    """Final score of each seed against the value, with each value's IQM (what the answers are
+    about) and its interval; each value's column shaded by its answer against the best (best,
+    equivalent, undecided; worse unshaded), the answer written above it."""
     several = len(sweep.values) > 1
     fig, (ax,) = new_figure(SINGLE if several else (SINGLE[0] * 0.6, SINGLE[1]))
     _shade_answers(ax, _answers(sweep))
-    _seeds_and_means(ax, sweep, "final_score", "final_mean", "final_low", "final_high")
+    _seeds_and_means(ax, sweep, "final_score", "iqm", "iqm_low", "iqm_high")
     _value_axis(ax, sweep)
     ax.set_ylabel("final score (mean evaluation return,\ndeterministic policy)"
                   if sweep.by_evaluation else
                   "final score (mean episode reward,\nlast 10 % of training)")
     if _failed_marks(ax, sweep):
         ax.margins(y=0.15)
-    fig.legend(handles=_legend_entries([]), loc="outside lower center",
+    fig.legend(handles=_legend_entries([], IQM_MARK), loc="outside lower center",
                ncols=2 if several else 1, frameon=False)
     fig.suptitle(_title(sweep, "final score"))
     return save(fig, path)
