@@ -3,10 +3,10 @@
 - Family-wise error under the global null (every value drawn from one distribution, so any
   "worse than the best" is false) over a grid of shapes, values x seeds, with unequal n and
   unequal variances (among them 2 or 3 values of 2 to 4 seeds with sd 1 against 10): the
-  closed Holm-Welch step-down at margin 0 (``comparison.compare_with_best``; Welch-
-  Satterthwaite df between values of equal n from 4 seeds, min(n) - 1 otherwise), the same
-  step-down with min(n) - 1 df for every pair, and the rule the step-down replaced (Holm over
-  each value's two-sided Welch test against the best).
+  answers' step-down at margin 0 (``comparison.compare_with_best(...).worse``, the IQM's
+  tests; nothing below 4 seeds), the tie's closed Holm-Welch step-down of means with min(n) -
+  1 df for every pair, and the rule the step-down replaced (Holm over each value's two-sided
+  Welch test against the best).
 - Power against one truly better value (1 sd above the others): the share of the truly worse
   values called worse, by all three.
 - Coverage of every interval a report prints, at n = 2, 3, 4, 5, 10, on normal, left-skewed
@@ -20,14 +20,15 @@
   ``coverage.csv`` nor in the last line), with the mean width of each interval of the mean
   relative to the Student-t interval's. P(improvement)'s Newcombe interval is measured for a
   value 1 sd better, n seeds a side.
-- The margin (``comparison.compare`` at ``--margin``, 0.2 x the best's |mean|, 1 sd here), on
-  normal, heavy-tailed, skewed and failing-seed noise: P(some value answered equivalent while
+- The margin (``comparison.compare`` at ``--margin``, 0.2 x the best's |IQM|, 1 sd here), on
+  normal, heavy-tailed, skewed and failing-seed noise, each centred on its IQM (the answers are
+  about the IQM, so a value's true location is its IQM): P(some value answered equivalent while
   truly worse by the margin), the others exactly the margin below the best; the power to
   answer a truly equal value equivalent at 5 and 10 seeds; and races at the margin and at three
   times it: P(the race's selection is truly more than the margin below the best), the runs
   they use and how often the 10 seeds' budget cuts them short.
-- Unequal spreads with skew: 2 and 4 values x 3, 5 and 10 seeds, sd 0.25 against 1 (1:4, the
-  wide one's sd the margin), the others exactly the margin below the best, the wide values
+- Unequal spreads with skew: 2 and 4 values x 3, 4, 5, 8 and 10 seeds, sd 0.25 against 1
+  (1:4, the wide one's sd the margin), the others exactly the margin below the best, the wide values
   either the tested ones or the best, on normal (the control), failing-seed and right-skewed
   (lognormal sigma 1) noise: P(some value answered equivalent) and P(some value answered worse),
   both false there. The last line's max equivalence error covers these cells too.
@@ -56,7 +57,14 @@ import numpy as np
 import pandas as pd
 from scipy import stats as sps
 
-from kraby_study.decision.comparison import ALPHA, MARGIN, compare, compare_with_best, holm
+from kraby_study.decision.comparison import (
+    ALPHA,
+    ANSWER_FROM,
+    MARGIN,
+    compare,
+    compare_with_best,
+    holm,
+)
 from kraby_study.decision.coverage import COVERAGE_PATH
 from kraby_study.decision.intervals import (
     hall_interval,
@@ -309,7 +317,9 @@ POWER_EQUIVALENCE = [(2, 5), (2, 10), (5, 5), (5, 10)]
 SPREAD_NOISES = ("normal", "failing seed", "right-skewed")
 """Noises of the unequal-spread cells: normal (the control), the failing seed, and a lognormal
 with sigma 1 (a long upper tail, skewness 6.2)."""
-SPREAD_SHAPES = [(2, 3), (2, 5), (2, 10), (4, 3), (4, 5), (4, 10)]
+SPREAD_SHAPES = [(2, 3), (2, 4), (2, 5), (2, 8), (2, 10), (4, 3), (4, 4), (4, 5), (4, 8), (4, 10)]
+"""3, 5 and 10 seeds, and the thresholds of the answers' tests: 4 (the first answer) and 8 (the
+percentile bootstrap alone)."""
 WIDE = ("tested", "best")
 """Which values of an unequal-spread cell spread four times as much as the others: the values
 tested (on the margin), or the best."""
@@ -324,19 +334,48 @@ RACE_CONFIGS = ("slippage", "spaced")
 indifference zone's least favourable configuration); ``spaced``, a half margin apart."""
 
 
-def unit_noise(rng: np.random.Generator, kind: str, size: tuple[int, ...]) -> np.ndarray:
-    """Noise of one of :data:`NOISES` or :data:`SPREAD_NOISES`, mean 0 and sd 1."""
+LOGNORMAL_SD = math.sqrt((math.e - 1) * math.e)
+"""Sd of a lognormal with sigma 1."""
+FAILING_SD = math.sqrt(1 + 0.09 * 16)
+"""Sd of the failing-seed mixture: N(0, 1), with probability 0.1 shifted by -4."""
+
+
+def _standard_noise(rng: np.random.Generator, kind: str, size: tuple[int, ...]) -> np.ndarray:
+    """Noise of one of :data:`NOISES` or :data:`SPREAD_NOISES` with sd 1, before centring."""
     if kind == "normal":
         return rng.normal(size=size)
     if kind == "heavy-tailed t3":
         return rng.standard_t(3, size=size) / math.sqrt(3.0)
     if kind in ("skewed", "right-skewed"):
-        z = rng.lognormal(0.0, 1.0, size=size)
-        sign = -1.0 if kind == "skewed" else 1.0
-        return sign * (z - math.exp(0.5)) / math.sqrt((math.e - 1) * math.e)
+        z = rng.lognormal(0.0, 1.0, size=size) / LOGNORMAL_SD
+        return -z if kind == "skewed" else z
     failed = rng.random(size) < 0.1
-    x = rng.normal(size=size) + np.where(failed, -4.0, 0.0)
-    return (x + 0.4) / math.sqrt(1 + 0.09 * 16)
+    return (rng.normal(size=size) + np.where(failed, -4.0, 0.0)) / FAILING_SD
+
+
+def noise_iqm(kind: str) -> float:
+    """The population interquartile mean of :func:`_standard_noise`'s ``kind``: the mean of its
+    quantile function over (0.25, 0.75), by the midpoint rule on 200,000 steps."""
+    q = (np.arange(200_000) + 0.5) / 200_000 * 0.5 + 0.25
+    if kind in ("normal", "heavy-tailed t3"):
+        return 0.0  # symmetric about 0
+    if kind in ("skewed", "right-skewed"):
+        lognormal = float(np.mean(sps.lognorm(1.0).ppf(q))) / LOGNORMAL_SD
+        return -lognormal if kind == "skewed" else lognormal
+    return float(np.mean(FailingSeed().ppf(q))) / FAILING_SD
+
+
+_CENTRES: dict[str, float] = {}
+
+
+def unit_noise(rng: np.random.Generator, kind: str, size: tuple[int, ...]) -> np.ndarray:
+    """Noise of one of :data:`NOISES` or :data:`SPREAD_NOISES`, sd 1, centred on its
+    interquartile mean (:func:`noise_iqm`): the four answers are about each value's IQM, so a
+    value's true location in these simulations is its IQM. For the symmetric noises it is also
+    the mean."""
+    if kind not in _CENTRES:
+        _CENTRES[kind] = noise_iqm(kind)
+    return _standard_noise(rng, kind, size) - _CENTRES[kind]
 
 
 def equivalence_error(job: tuple[int, int, str, int, int, float]
@@ -404,7 +443,7 @@ def equivalence_power(job: tuple[int, int, str, int, int, float]) -> tuple[str, 
 
 def race_selection(job: tuple[int, int, str, str, int, int, float]
                    ) -> tuple[str, str, str, float, float, float, float]:
-    """Races at the margin (min_seeds 3, alpha 0.05 over the looks): P(the selection, the
+    """Races at the margin (min_seeds 4, alpha 0.05 over the looks): P(the selection, the
     highest mean on all their seeds among the values not dropped, is truly more than the
     margin below the best), the runs used over the fixed design's, and the share of races
     cut by the seeds' budget with more than one value still racing (truncation)."""
@@ -414,7 +453,7 @@ def race_selection(job: tuple[int, int, str, str, int, int, float]
     step = delta if config == "slippage" else delta / 2
     means = np.array([LOCATION] + [LOCATION - (step if config == "slippage" else step * i)
                                    for i in range(1, k)])
-    rules = RaceRules(seeds=n, round_seeds=tuple(range(n)), min_seeds=3, alpha=ALPHA,
+    rules = RaceRules(seeds=n, round_seeds=tuple(range(n)), min_seeds=ANSWER_FROM, alpha=ALPHA,
                       margin=fraction)
     outside = truncated = used = 0
     for _ in range(simulations):
@@ -545,7 +584,7 @@ def main() -> None:
                          ("fastest: P(3-seed value beats a 10-seed value | a value is fastest)",
                           fastest(sims, SEED + 400))):
         print(f"- {what}: " + ", ".join(f"{k} {v:.3f}" for k, v in shares.items()))
-    print(f"\nThe margin ({args.margin:g} x the best's |mean|, 1 sd here; {sims:,} simulations "
+    print(f"\nThe margin ({args.margin:g} x the best's |IQM|, 1 sd here; {sims:,} simulations "
           f"each, Monte-Carlo SE {se:.3f} at 0.05). P(some value answered equivalent while "
           "truly worse by the margin), the k - 1 others exactly the margin below the best:")
     eq_frame = pd.DataFrame(equivalence, columns=["values x seeds", "noise", "P(false equivalent)",
@@ -581,7 +620,7 @@ def main() -> None:
                                               "margin (sd)", "P(selection outside the margin)",
                                               "runs used / fixed", "truncated"])
     race_se = math.sqrt(ALPHA * (1 - ALPHA) / args.race_simulations)
-    print(f"\nRaces at the margin (min_seeds 3, alpha {ALPHA:g} over the looks; "
+    print(f"\nRaces at the margin (min_seeds {ANSWER_FROM}, alpha {ALPHA:g} over the looks; "
           f"{args.race_simulations:,} races each, Monte-Carlo SE {race_se:.3f} at 0.05): "
           "P(the selection is truly more than the margin below the best), runs used over the "
           "fixed design's, and the share cut at the last seed with more than one value still "

@@ -26,7 +26,7 @@ measures races at a margin.
 Usage::
 
     python benchmarks/bench_racing.py --store sqlite:///quick10.db [--margin 0.2]
-        [--rule final_score] [--min-seeds 3] [--alpha 0.05] [--simulations 2000] [--paired]
+        [--rule final_score] [--min-seeds 4] [--alpha 0.05] [--simulations 2000] [--paired]
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ from kraby_study.decision.selection import select
 from kraby_study.plan.spec import RaceRules
 from kraby_study.records.attributes import SelectRule, StudyKind, TrialAttrs
 from kraby_study.records.stored import Outcome, counted, outcome, parse_sweep_key
-from kraby_study.records.values import value_label
+from kraby_study.records.values import ANSWER_FROM, value_label
 from kraby_study.store.store import opened_for_reading
 
 SEED = 20261125
@@ -242,7 +242,7 @@ def main() -> None:
                         "shown worse)")
     parser.add_argument("--rule", default=None,
                         help="select by this rule instead of each study's stored one")
-    parser.add_argument("--min-seeds", type=int, default=3)
+    parser.add_argument("--min-seeds", type=int, default=ANSWER_FROM)
     parser.add_argument("--alpha", type=float, default=0.05)
     parser.add_argument("--simulations", type=int, default=0,
                         help="simulated races per shape (0: none)")
