@@ -318,8 +318,7 @@ SPREAD_NOISES = ("normal", "failing seed", "right-skewed")
 """Noises of the unequal-spread cells: normal (the control), the failing seed, and a lognormal
 with sigma 1 (a long upper tail, skewness 6.2)."""
 SPREAD_SHAPES = [(2, 3), (2, 4), (2, 5), (2, 8), (2, 10), (4, 3), (4, 4), (4, 5), (4, 8), (4, 10)]
-"""3, 5 and 10 seeds, and the thresholds of the answers' tests: 4 (the first answer) and 8 (the
-percentile bootstrap alone)."""
+"""3, 5 and 10 seeds, the fewest seeds answered (4, ``ANSWER_FROM``; 3 is refused) and 8."""
 WIDE = ("tested", "best")
 """Which values of an unequal-spread cell spread four times as much as the others: the values
 tested (on the margin), or the best."""

@@ -8,8 +8,8 @@ Two parts:
   study, the runs the race uses against the fixed design's, the values it drops (shown worse)
   and settles (shown equivalent) and when, the raced selection (the study's own rule, or
   ``--rule``, among the values not dropped, on the seeds the race ran) and whether it lies
-  within the margin of the fixed design's best by the fixed design's own means (all seeds;
-  the margin in score units: the fraction x the fixed best's |mean|), and the fixed design's
+  within the margin of the fixed design's best by the fixed design's own IQMs (all seeds;
+  the margin in score units: the fraction x the fixed best's |IQM|), and the fixed design's
   tie set (the best value and those not shown worse at margin 0). A replay runs rounds in
   lockstep: a live race may also run up to one round ahead on idle workers (docs/studies.md,
   Racing).
@@ -18,10 +18,11 @@ Two parts:
   better, over a grid of shapes and noises (normal or skewed, with or without a part that a
   seed gives every value alike), each with ``N`` simulated races.
 
-Both race with Welch's tests, the default; ``--paired`` races with paired t-tests
-(``racing.paired=true``). The simulations race at margin 0 (their scores are centred on 0, where
-a margin relative to the best's |mean| means nothing): ``benchmarks/bench_error_rates.py``
-measures races at a margin.
+Both race with the answers' tests of the IQM (the percentile bootstrap and Yuen's test, both
+needed), unpaired by default; ``--paired`` races with their paired forms on the seeds values
+share (``racing.paired=true``). The simulations race at margin 0 (their scores are centred
+on 0, where a margin relative to the best's |IQM| means nothing):
+``benchmarks/bench_error_rates.py`` measures races at a margin.
 
 Usage::
 
@@ -42,6 +43,7 @@ import numpy as np
 from kraby_study.decision.comparison import MARGIN, compare_with_best
 from kraby_study.decision.measures import auc
 from kraby_study.decision.race import race
+from kraby_study.decision.robust import iqm
 from kraby_study.decision.selection import select
 from kraby_study.plan.spec import RaceRules
 from kraby_study.records.attributes import SelectRule, StudyKind, TrialAttrs
@@ -69,11 +71,11 @@ class Replay:
     settled: list[str]
     """Values the race settled as equivalent, with the round (value@round)."""
     margin: float
-    """The margin in score units: the fraction x the fixed design's best |mean|."""
+    """The margin in score units: the fraction x the fixed design's best |IQM|."""
     within: bool
-    """The raced selection's fixed-design mean is within the margin of the fixed best's."""
+    """The raced selection's fixed-design IQM is within the margin of the fixed best's."""
     gap: float
-    """The fixed best's mean minus the raced selection's (both on all seeds)."""
+    """The fixed best's IQM minus the raced selection's (both on all seeds)."""
     seed_share: float
     """The share of a score's variance that its seed gives every value alike (values with a
     failed run left out): :func:`seed_share`, what paired looks exploit (``rho`` of the
@@ -156,10 +158,10 @@ def replay_study(ledger, min_seeds: int, alpha: float,  # noqa: ANN001
     full = {v: [x for x in by_round[v].values() if not math.isnan(x)] for v in by_round}
     fixed = compare_with_best(full)
     tie_set = [fixed.best, *fixed.tied] if fixed.best is not None else []
-    means = {v: float(np.mean(x)) if len(x) else math.nan for v, x in full.items()}
-    best_mean = means[fixed.best] if fixed.best is not None else math.nan
-    units = margin * abs(best_mean)
-    gap = best_mean - means[raced] if raced is not None else math.nan
+    iqms = {v: float(iqm(np.asarray(x))) if len(x) else math.nan for v, x in full.items()}
+    best_iqm = iqms[fixed.best] if fixed.best is not None else math.nan
+    units = margin * abs(best_iqm)
+    gap = best_iqm - iqms[raced] if raced is not None else math.nan
     label = {v: value_label(values[v]) for v in range(len(values))}
     scores = np.array([[by_round[v][i] for i in range(n)] for v in sorted(by_round)])
     return Replay(
@@ -237,7 +239,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--store", help="a store with complete fixed-design sweeps")
     parser.add_argument("--margin", type=float, default=MARGIN,
-                        help="the race's margin as a fraction of the best's |mean| "
+                        help="the race's margin as a fraction of the best's |IQM| "
                         f"(compare.margin; default {MARGIN:g}, 0: races that drop only values "
                         "shown worse)")
     parser.add_argument("--rule", default=None,
@@ -247,18 +249,18 @@ def main() -> None:
     parser.add_argument("--simulations", type=int, default=0,
                         help="simulated races per shape (0: none)")
     parser.add_argument("--paired", action="store_true",
-                        help="race with paired t-tests on the seeds values share "
+                        help="race with the paired tests on the seeds values share "
                         "(racing.paired=true)")
     args = parser.parse_args()
     paired = args.paired
-    test = "paired t-tests" if paired else "Welch tests"
+    test = "paired IQM tests" if paired else "IQM tests"
     if args.store:
         start = time.perf_counter()
         replays = replay_store(args.store, args.min_seeds, args.alpha, paired, args.margin,
                                args.rule)
         print(f"racing replayed on {args.store} ({test}, min_seeds {args.min_seeds}, alpha "
               f"{args.alpha:g}, spent equally over the looks; margin {args.margin:g} x the "
-              "best's |mean|):\n")
+              "best's |IQM|):\n")
         print("| study | values x seeds | fixed runs | raced runs | share | dropped (after "
               "round) | settled equivalent (after round) | raced selection | fixed best minus "
               "it (margin, score units) | within the margin | fixed tie set | seed share |")
