@@ -367,6 +367,26 @@ def test_summary_intervals_are_bootstrap_t_from_five_seeds() -> None:
         hall_bounds(aucs[1])[1:], rel=1e-9)
 
 
+def test_a_value_no_test_reaches_has_no_p_and_says_why() -> None:
+    # "three" has 3 seeds, far below the best: no pair with it is tested, so it is undecided
+    # with empty p's and a note; "six", as far below on 6 seeds, is tested and worse.
+    from kraby_study.decision.summary import summarise, untested_note
+
+    finals = {0: [-1.0, -1.02, -0.98, -1.01, -0.99, -1.0],
+              1: [-5.0, -5.1, -4.9, -5.05, -4.95, -5.0], 2: [-5.0, -5.1, -4.9]}
+    trials = pd.DataFrame(
+        [(10 * vi + i, f"k{vi}{i}", i, vi, vi, Outcome.COMPLETE, score, 10.0, 1000.0, "", None)
+         for vi, scores in finals.items() for i, score in enumerate(scores)],
+        columns=["number", "key", "seed", "vi", "value", "outcome", "final_score",
+                 "wall_time", "env_steps", "failure", "model_path"])
+    summary = summarise(trials, ["best", "six", "three"], bootstrap=200)
+    assert list(summary["answer"]) == ["best", "worse", "undecided"]
+    assert summary.loc[1, "p_worse"] < 0.05 and summary.loc[1, "note"] == ""
+    assert np.isnan(summary.loc[2, "p_worse"]) and np.isnan(summary.loc[2, "p_equivalent"])
+    assert summary.loc[2, "note"] == untested_note()
+    assert "fewer than 4 seeds" in untested_note()
+
+
 def test_few_seeds_note_prints_the_measured_coverage(report: ReportIndex) -> None:
     # learning_rate has values of 4, 4, 1 and 3 complete seeds: the summary's notes give the
     # measured coverage (kraby_study/coverage.csv) of every interval at n = 3 and n = 4.

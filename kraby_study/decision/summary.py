@@ -41,6 +41,7 @@ from kraby_study.decision.selection import RULES, mean_by_value
 from kraby_study.decision.verdict import Verdict, compare_to_best, verdict, welch_p
 from kraby_study.records.attributes import SelectRule
 from kraby_study.records.stored import Outcome
+from kraby_study.records.values import ANSWER_FROM
 
 DROPPED_PREFIX = "dropped by the race"
 """How the summary's note of a value the race dropped begins."""
@@ -69,6 +70,12 @@ def left_out_note(n: int, min_seeds: int) -> str:
     """Why a value with ``n`` complete seeds is in no comparison and no answer of the verdict."""
     return (f"left out: {n} complete seed{'s' if n != 1 else ''}, fewer than report.min_seeds "
             f"= {min_seeds}")
+
+
+def untested_note() -> str:
+    """Why a value is undecided whatever its scores: no test of it against the best is run."""
+    return (f"not tested: fewer than {ANSWER_FROM} seeds here or on the best, so undecided by "
+            "rule")
 
 
 def dropped_note(drop: Drop, look_alpha: float) -> str:
@@ -111,7 +118,8 @@ def summarise(trials: pd.DataFrame, labels: list[str],
     probability that the best value beats this one, with its Newcombe score-type interval; a mark:
     ``best``, ``tie`` (adjusted p >= 0.05: not shown worse at margin 0) or empty; the ``answer`` of
     the comparison, written out (best, equivalent, worse, undecided; ``left out`` for a value with
-    too few seeds, empty for one without any), with ``p_worse`` and ``p_equivalent``, the margin in
+    too few seeds, empty for one without any), with ``p_worse`` and ``p_equivalent`` (empty
+    where no test of the value against the best is run), the margin in
     score units (``margin``, the same on every row) and the smallest margin its seeds resolve
     (``margin_resolvable``); and a note naming why a value with fewer than ``min_seeds``
     complete seeds is left out, or which look of the race dropped or settled it. The curve
@@ -164,6 +172,9 @@ def summarise(trials: pd.DataFrame, labels: list[str],
             notes.append(settled_note(settled[vi], look_alpha))
         if vi in left_out:
             notes.append(left_out_note(len(finals), comparison.min_seeds))
+        untested = vi in comparison.unanswered
+        if untested:
+            notes.append(untested_note())
         answer = ("worse" if drop is not None else
                   str(comparison.answers[vi]) if vi in comparison.answers else
                   "left out" if vi in left_out else "")
@@ -190,8 +201,9 @@ def summarise(trials: pd.DataFrame, labels: list[str],
             "env_steps": float(steps.mean()) if len(steps) else np.nan,
             "p_vs_best": raw[vi],
             "p_holm": p_holm,
-            "p_worse": comparison.p_worse.get(vi, np.nan),
-            "p_equivalent": comparison.p_equivalent.get(vi, np.nan),
+            # An untested value has no p: the comparison's 1 only keeps it out of every answer.
+            "p_worse": np.nan if untested else comparison.p_worse.get(vi, np.nan),
+            "p_equivalent": np.nan if untested else comparison.p_equivalent.get(vi, np.nan),
             "p_improvement": improvement,
             "p_improvement_low": improvement_low,
             "p_improvement_high": improvement_high,
