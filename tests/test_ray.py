@@ -114,10 +114,16 @@ class Cluster:
         return [p for p in ray_processes("ray.util.client.server")
                 if b"--address=" in cmdline(p) and port in cmdline(p)]
 
-    def stop(self) -> None:
-        """SIGKILL every process of the cluster and everything they started."""
-        own = ray_processes(str(self.folder)) + self.client_servers()
-        kill_all(own + descendants(own))
+    def stop(self, patience: float = 20.0) -> None:
+        """SIGKILL every process of the cluster and everything they started, until none is
+        left (or ``patience`` seconds have passed): a SIGKILL takes effect asynchronously, and
+        a head being killed may still start a client server, so one pass can miss one."""
+        deadline = time.monotonic() + patience
+        while own := ray_processes(str(self.folder)) + self.client_servers():
+            kill_all(own + descendants(own))
+            if time.monotonic() > deadline:
+                return
+            time.sleep(0.2)
 
 
 @pytest.fixture
