@@ -126,13 +126,13 @@ def _sweep_arms(name: str, parameter: str, planned: list[Any], done: list[Any]) 
         value = swept_value(trial, short, planned)
         groups.setdefault(value_key(value), []).append(trial)
         values.setdefault(value_key(value), value)
-    means = {k: sum(float(t.value) for t in g) / len(g) for k, g in groups.items()}
-    ranks = {k: float(iqm(np.array([float(t.value) for t in g]))) for k, g in groups.items()}
-    order = sorted(groups, key=lambda k: -ranks[k])
+    scores = {k: np.array([float(t.value) for t in g]) for k, g in groups.items()}
+    order = sorted(groups, key=lambda k: -float(iqm(scores[k])))
     return [Arm(label=f"{short}={value_label(values[k])}",
                 settings=groups[k][0].user_attrs["settings"],
                 origin=f"{parameter} = {value_label(values[k])} in sweep {name!r} (mean final "
                        f"score over {len(groups[k])} seed(s))",
-                source_score=means[k]) for k in order]
+                source_score=sum(float(t.value) for t in groups[k]) / len(groups[k]))
+            for k in order]
 
 

@@ -71,8 +71,9 @@ from typing import Generic, TypeVar
 import numpy as np
 import scipy  # submodules load on first use: `list` loads none for a rule that needs no test
 
-from kraby_study.decision.robust import ANSWER_FROM, iqm, iqm_pairs
+from kraby_study.decision.robust import ANSWER_FROM, CONSTANT_RTOL, iqm, iqm_pairs
 from kraby_study.decision.robust import NAME as TESTS_NAME
+from kraby_study.records.values import best_group
 
 ALPHA = 0.05
 MIN_SEEDS = 2
@@ -85,10 +86,6 @@ POWER = 0.8
 SATTERTHWAITE_FROM = 4
 """From this many seeds a side (equal n), Welch's test takes Welch-Satterthwaite's degrees of
 freedom; below, and at unequal n, min(n_i, n_j) - 1."""
-CONSTANT_RTOL = 1e-9
-"""A sample whose range is at most this times the scale of the scores compared (their largest
-absolute value) has no spread: float noise such as 0.7 against 0.7 + 1e-15 is not a
-difference."""
 PROCEDURE = ("closed Holm step-down over one-sided Welch t-tests with Welch-Satterthwaite "
              f"degrees of freedom between values of equal n from {SATTERTHWAITE_FROM} seeds, "
              "min(n) - 1 otherwise (each value as a best)")
@@ -483,12 +480,8 @@ def evidence(scores: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS
 def best_by_iqm(samples: Mapping[K, np.ndarray]) -> K | None:
     """The value with the highest IQM (the first such in order; NaN never wins); None if no
     value has a sample."""
-    best: K | None = None
-    top = -math.inf
-    for g, x in samples.items():
-        if len(x) and (location := float(iqm(np.asarray(x, dtype=float)))) > top:
-            best, top = g, location
-    return best
+    return best_group({g: [float(iqm(np.asarray(x, dtype=float)))]
+                       for g, x in samples.items() if len(x)})
 
 
 def best_with_evidence(scores: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS

@@ -34,7 +34,7 @@ def welch_p(a: Sequence[float], b: Sequence[float]) -> float:
     """Two-sided Welch's t-test p-value of two samples; NaN when either has fewer than 2.
 
     Two samples without spread, relative to the scale of the scores
-    (:data:`kraby_study.decision.comparison.CONSTANT_RTOL`), are identical (p = 1) when their means
+    (:data:`kraby_study.decision.robust.CONSTANT_RTOL`), are identical (p = 1) when their means
     agree within that tolerance, else certainly different (p = 0).
     """
     return welch_two_sided_p(a, b)

@@ -303,13 +303,13 @@ def resolution_text(sweep: Sweep) -> str | None:
     compared = sweep.comparison
     if compared is None or compared.fraction <= 0:
         return None
-    unanswered = compared.unanswered_text()
+    reason = compared.unanswered_text()
+    unanswered = f"{reason[0].upper()}{reason[1:]}." if reason else None
     warning = compared.resolution_text()
     if warning:
-        return f"Warning: {warning}." + (f" {unanswered[0].upper()}{unanswered[1:]}."
-                                         if unanswered else "")
+        return f"Warning: {warning}." + (f" {unanswered}" if unanswered else "")
     if unanswered:
-        return f"{unanswered[0].upper()}{unanswered[1:]}."
+        return unanswered
     if math.isfinite(compared.resolution):
         return (f"These seeds resolve a margin of about {compared.resolution:.3g} (median over "
                 "the values of (t + t_0.8) x Yuen's standard error of the IQM contrast with the "
