@@ -516,7 +516,7 @@ def main() -> None:
     parser.add_argument("--race-simulations", type=int, default=1000,
                         help="simulated races of each shape, noise and configuration")
     parser.add_argument("--margin", type=float, default=MARGIN,
-                        help="the margin as a fraction of the best's |mean| (compare.margin; "
+                        help="the margin as a fraction of the best's |IQM| (compare.margin; "
                              f"default {MARGIN:g}: 1 sd in these simulations)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--write-coverage", action="store_true",

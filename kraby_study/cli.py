@@ -48,7 +48,7 @@ tensorboard --logdir DIR (pip install 'kraby-study[tensorboard]').
 seeding=streams|offset: how a run's seed gives each env copy (a leg) its stream (streams:
 independent children of the seed; offset: seed + i, the scheme before streams); unset, a
 stored study keeps its own and a new one takes streams.
-compare.margin=F (default 0.2): the smallest difference that matters, F x the best's |mean|;
+compare.margin=F (default 0.2): the smallest difference that matters, F x the best's |IQM|;
 each value is best, equivalent (within it), worse (below the best by more) or undecided.
 compare.select=RULE: best, report and ${winner:...} apply RULE instead of a study's stored one.
 Any setting can be overridden with key=value (ppo.gamma=0.8); a flag such as --storage URL is

@@ -239,7 +239,7 @@ def test_a_race_settles_what_is_shown_equivalent_and_ends() -> None:
 
 @pytest.mark.parametrize(("override", "message"), [
     ("compare.margin=-0.1", "compare.margin must be at least 0"),
-    ("compare.margin=1.5", "compare.margin is a fraction of the best's |mean|: at most 1"),
+    ("compare.margin=1.5", "compare.margin is a fraction of the best's |IQM|: at most 1"),
     ("compare.select=cheapest", "compare.select must be one of final_score, auc"),
     ("study.select=cheapest", "study.select must be one of final_score, auc"),
 ])

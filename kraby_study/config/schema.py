@@ -253,10 +253,10 @@ class CompareConfig:
     """How values are compared with the best (see docs/statistics.md, Four answers)."""
 
     margin: float = 0.2
-    """The smallest difference in mean final score that matters, as a fraction of the best
-    value's |mean| (0 .. 1): a value is equivalent when shown within it of the best, worse
+    """The smallest difference in IQM final score that matters, as a fraction of the best
+    value's |IQM| (0 .. 1): a value is equivalent when shown within it of the best, worse
     when shown below the best by more than it. 0: no value can be equivalent, and worse means
-    shown worse at all (the answers of earlier releases). A race stores it; a report may
+    shown worse at all. A race stores it; a report may
     re-analyse a finished study at any margin."""
     select: str | None = None
     """A selection rule that ``best``, ``report`` and ``${winner:...}`` apply instead of

@@ -234,9 +234,9 @@ def validate(cfg: DictConfig) -> None:
     validate_racing(cfg.racing)
     margin = float(cfg.compare.margin)
     _require(math.isfinite(margin) and margin >= 0,
-             f"compare.margin must be at least 0 (a fraction of the best's |mean|), got "
+             f"compare.margin must be at least 0 (a fraction of the best's |IQM|), got "
              f"{cfg.compare.margin}")
-    _require(margin <= 1, f"compare.margin is a fraction of the best's |mean|: at most 1, got "
+    _require(margin <= 1, f"compare.margin is a fraction of the best's |IQM|: at most 1, got "
              f"{cfg.compare.margin}")
     if cfg.compare.select is not None:
         SelectRule.check(str(cfg.compare.select), "compare.select")

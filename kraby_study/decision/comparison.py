@@ -358,7 +358,7 @@ class Comparison(Generic[K]):
     alpha: float = ALPHA
     min_seeds: int = MIN_SEEDS
     fraction: float = 0.0
-    """The margin as a fraction of the best's |mean| (``compare.margin``)."""
+    """The margin as a fraction of the best's |IQM| (``compare.margin``)."""
     margin: float = 0.0
     """The margin in score units: ``fraction`` x |IQM of the best|."""
     answers: dict[K, Answer] = field(default_factory=dict)
@@ -408,11 +408,12 @@ class Comparison(Generic[K]):
             self.margin < self.resolution)
 
     def margin_text(self) -> str:
-        """The margin as reports state it, e.g. 'margin 0.0028 (0.2 x |best mean| 0.0140)'."""
+        """The margin as reports state it, e.g. 'margin 0.0028 in score units (0.2 x the
+        best's |IQM| 0.014)'."""
         if self.fraction <= 0:
             return "margin 0 (no value can be shown equivalent)"
         return (f"margin {self.margin:.3g} in score units ({self.fraction:g} x the best's "
-                f"|mean| {abs(self.margin / self.fraction):.4g})")
+                f"|IQM| {abs(self.margin / self.fraction):.4g})")
 
     def unanswered_text(self) -> str | None:
         """Why some values are undecided whatever their scores; None when every value could
@@ -438,7 +439,7 @@ class CompareOptions:
     and, optionally, a rule read instead of each study's stored one."""
 
     margin: float = MARGIN
-    """``compare.margin``: the margin as a fraction of the best's |mean| (0: none)."""
+    """``compare.margin``: the margin as a fraction of the best's |IQM| (0: none)."""
     alpha: float = ALPHA
     min_seeds: int = MIN_SEEDS
     """``report.min_seeds``, clamped to at least 2 by :func:`evidence` alone."""

@@ -142,7 +142,7 @@ def select(rule: str, final: Mapping[K, Sequence[float]], aucs: Mapping[K, Seque
         seconds: Training time of each complete seed, by group.
         min_seeds: Fewest complete seeds a group needs to be selected.
         dropped: Groups a race dropped as worse: left out of every rule, as if never run.
-        margin: ``compare.margin``, the margin as a fraction of the best's |mean|.
+        margin: ``compare.margin``, the margin as a fraction of the best's |IQM|.
     """
     chosen = rule_of(rule)
     comparison = compare({g: vs for g, vs in final.items() if g not in dropped}, margin,
