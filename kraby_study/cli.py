@@ -166,11 +166,13 @@ SEARCH_FLAGS = [
          "trials), as search.floor=NAME (default tuned); none for no floor", "NAME|none",
          _floor),
     Flag("--sampler", "search.sampler", "default tpe (seeded; handles one objective or two), "
-         "nsga2 for NSGA-II, as search.sampler=...", choices=("tpe", "random", "nsga2")),
+         "nsga2 for NSGA-II, gp for Optuna's Gaussian-process sampler, as search.sampler=...",
+         choices=("tpe", "random", "nsga2", "gp")),
     Flag("--pruner", "search.pruner", "stops bad trials: median and hyperband at env-step "
          "checkpoints, wilcoxon after whole seeds (races a trial's seeds against the best "
          "trial's), as search.pruner=... (default median; none with two objectives, which "
-         "Optuna cannot prune)", choices=("median", "hyperband", "wilcoxon", "none")),
+         "Optuna cannot prune, and with --sampler gp, which learns nothing from a pruned "
+         "trial)", choices=("median", "hyperband", "wilcoxon", "none")),
     Flag("--seed", "search.seed", "sampler seed, stored with the study, as search.seed=S "
          "(default 0)", "S", _whole),
 ]
@@ -662,7 +664,7 @@ def build_parser() -> argparse.ArgumentParser:
         "4th seed on, so budget.seeds=5 or more; budget=full has 10).\n\n"
         "--objective final_reward,training_time (search.objective=[final_reward,"
         "training_time]) searches for score and cost at once: the cost is the trial's CPU "
-        "seconds per seed, the study has two directions, TPE (or --sampler nsga2) samples "
+        "seconds per seed, the study has two directions, TPE (or --sampler nsga2 or gp) samples "
         "for both, and no pruner runs (Optuna cannot prune a trial of several objectives; "
         "--pruner other than none is refused). A trial scoring below the --floor "
         "configuration (ppo=tuned unless you choose; it is enqueued) is infeasible: off the "

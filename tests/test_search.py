@@ -242,6 +242,32 @@ def test_each_command_on_a_search_takes_the_next_opening_and_its_own_seed(
     assert seeds[0] == 7 and len(set(seeds)) == 4
 
 
+def test_the_gp_sampler_starts_as_random_search_then_follows_its_model() -> None:
+    from kraby_study.run.sampling import make_sampler
+
+    def draws(sampler: optuna.samplers.BaseSampler, n: int) -> list[float]:
+        study = optuna.create_study(direction="maximize", sampler=sampler)
+        # A peak at x = 0.8 with a little noise that depends on the trial, as seeds add.
+        study.optimize(lambda t: -(t.suggest_float("x", 0.0, 1.0) - 0.8) ** 2
+                       + 0.001 * ((t.number * 7) % 3), n_trials=n)
+        return [t.params["x"] for t in study.trials]
+
+    cfg = compose_config(["search.sampler=gp", "search.seed=3", "search.startup_trials=4"])
+    gp = make_sampler(cfg)
+    assert isinstance(gp, optuna.samplers.GPSampler)
+    # It learns nothing from a pruned trial, so it prunes none unless told to.
+    assert isinstance(make_pruner(cfg), optuna.pruners.NopPruner)
+    assert isinstance(make_pruner(compose_config(["search.sampler=gp", "search.pruner=median"])),
+                      optuna.pruners.MedianPruner)
+    with_gp = draws(gp, 12)
+    at_random = draws(make_sampler(compose_config(["search.sampler=random",
+                                                   "search.seed=3"])), 12)
+    # Its start is random search's of the same seed; after it, its model's choices.
+    assert with_gp[:4] == at_random[:4] and with_gp[4:] != at_random[4:]
+    distance = [sum(abs(x - 0.8) for x in xs[4:]) / 8 for xs in (with_gp, at_random)]
+    assert distance[0] < 0.1 < distance[1]
+
+
 def test_checkpoint_prunes_a_trial_below_the_median_at_equal_steps(tmp_path: Path) -> None:
     cfg = compose_config(["search.startup_trials=1", "budget=smoke",
                           f"storage=sqlite:///{tmp_path}/k.db"])

@@ -168,18 +168,20 @@ class SearchConfig:
     no new trial (those running finish, so it overshoots by what they use after that), so two
     searches compare at the same budget. null: no limit but ``trials``."""
     sampler: str = "tpe"
-    """tpe, random or nsga2 (NSGA-II, Optuna's default population of 50). TPE handles one
-    objective or two."""
+    """tpe, random, nsga2 (NSGA-II, Optuna's default population of 50) or gp (Optuna's
+    Gaussian-process sampler, which models the score's noise; it learns from complete trials
+    only). TPE and gp handle one objective or two."""
     pruner: str | None = None
     """median, hyperband, wilcoxon or none; null: median with one objective, none with two
-    (Optuna prunes no trial of several objectives, and refuses a pruner there). median and
+    (Optuna prunes no trial of several objectives, and refuses a pruner there) or with the gp
+    sampler (it learns nothing from a pruned trial). median and
     hyperband judge env-step checkpoints; wilcoxon races a trial's seeds: it sees each seed's
     final score and stops the remaining seeds once they are significantly worse than the best
     trial's same seeds."""
     seed: int = 0
     """Seed of the sampler, stored with the study."""
     startup_trials: int = 5
-    """Trials sampled at random before TPE starts."""
+    """Trials sampled at random before TPE starts (for gp: complete trials)."""
     pruner_startup_trials: int = 3
     """Complete trials the median pruner waits for: it compares with their values."""
     recheck: int = 0

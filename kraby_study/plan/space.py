@@ -31,7 +31,7 @@ from kraby_study.plan.spec import (
 from kraby_study.records.definition import REWARDS, check_objective, stored_objective
 from kraby_study.records.values import value_key
 
-SAMPLERS = ("tpe", "random", "nsga2")
+SAMPLERS = ("tpe", "random", "nsga2", "gp")
 PRUNERS = ("median", "hyperband", "wilcoxon", "none")
 NMINIBATCHES = "ppo.nminibatches"
 BATCH_SIZE = "ppo.batch_size"
@@ -98,10 +98,11 @@ def objectives(cfg: DictConfig) -> list[str]:
 
 def pruner_name(cfg: DictConfig) -> str:
     """The search's pruner: ``search.pruner``, or when it is null, median with one objective
-    and none with two (Optuna prunes no trial of several objectives)."""
+    and none with two (Optuna prunes no trial of several objectives) or with the gp sampler
+    (which learns nothing from a pruned trial)."""
     if cfg.search.pruner is not None:
         return str(cfg.search.pruner)
-    return "none" if len(objectives(cfg)) == 2 else "median"
+    return "none" if len(objectives(cfg)) == 2 or cfg.search.sampler == "gp" else "median"
 
 
 def search_cpu_budget(cfg: DictConfig) -> float | None:

@@ -52,12 +52,17 @@ def sampler_seed(seed: int, opening: int) -> int:
 def make_sampler(cfg: DictConfig, opening: int = 0) -> optuna.samplers.BaseSampler:
     """The seeded sampler of a search's ``opening``-th command (:func:`sampler_seed`). TPE
     handles one objective or two (Optuna's multi-objective TPE); NSGA-II keeps Optuna's
-    default population."""
+    default population. The GP sampler (Optuna's Gaussian-process sampler, which models
+    the score's noise) draws its first ``startup_trials`` *complete* trials at random, as
+    random search of the same seed draws them; it learns nothing from a pruned trial."""
     seed = sampler_seed(int(cfg.search.seed), opening)
     if cfg.search.sampler == "random":
         return optuna.samplers.RandomSampler(seed=seed)
     if cfg.search.sampler == "nsga2":
         return optuna.samplers.NSGAIISampler(seed=seed)
+    if cfg.search.sampler == "gp":
+        return optuna.samplers.GPSampler(seed=seed,
+                                         n_startup_trials=int(cfg.search.startup_trials))
     return optuna.samplers.TPESampler(seed=seed, n_startup_trials=int(cfg.search.startup_trials),
                                       constant_liar=True)
 
