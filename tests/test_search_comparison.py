@@ -381,3 +381,44 @@ def test_paired_picks_refuses_a_confirm_still_running(tmp_path: Path) -> None:
     with pytest.raises(SystemExit, match=r"b-s0-confirm is not finished \(1 of 2 runs"):
         _benchmark("paired_picks").main(  # type: ignore[attr-defined]
             ["--seeds", "0", "--first", "a", "--second", "b", "--storage", url])
+
+
+def test_the_sampler_cost_replay_suggests_each_trial_from_those_ended_before_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from optuna.distributions import FloatDistribution
+
+    url = f"sqlite:///{tmp_path / 'c.db'}"
+    study = optuna.create_study(study_name="s", storage=url, direction="maximize")
+    study.set_user_attr("sampler_seed", 4)
+    zero = datetime.datetime(2026, 12, 2, 5, 0, 0)
+    # Two workers: t2 (4-9 s) starts while t1 runs (0-5 s), so only t0 has ended before it.
+    for start, end, state in ((0, 4, TrialState.COMPLETE), (0, 5, TrialState.PRUNED),
+                              (4, 9, TrialState.COMPLETE), (5, 8, TrialState.COMPLETE),
+                              (9, 12, TrialState.COMPLETE)):
+        study.add_trial(optuna.trial.FrozenTrial(
+            number=0, trial_id=0, state=state, value=float(end) if state.name == "COMPLETE"
+            else None, params={"x": end / 20}, distributions={"x": FloatDistribution(0, 1)},
+            user_attrs={"cpu_time": 2.0}, system_attrs={},
+            intermediate_values={} if state.name == "COMPLETE" else {1: 0.0},
+            datetime_start=zero + datetime.timedelta(seconds=start),
+            datetime_complete=zero + datetime.timedelta(seconds=end)))
+    cost = _benchmark("sampler_cost")
+    seen: list[int] = []
+    add_trials = optuna.Study.add_trials
+    monkeypatch.setattr(optuna.Study, "add_trials",
+                        lambda self, trials: (seen.append(len(trials)),
+                                              add_trials(self, trials))[1])
+    assert cost.main(["--storage", url, "s", "--samplers", "gp", "random",  # type: ignore[attr-defined]
+                      "--startup", "2"]) == 0
+    # t2 from t0; t3 from t0, t1 (t2 still running); t4 from t0-t3; for each sampler.
+    assert seen == [1, 2, 4, 1, 2, 4]
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert [line.split(":")[0] for line in lines[:2]] == ["s gp", "s random"]
+    assert all("3 suggestions" in line and "of its trials' 10 CPU s" in line
+               for line in lines[:2])
+    assert re.fullmatch(r"sampler_cost: gp [\d.]+ CPU s, random [\d.]+ CPU s over 3 "
+                        r"suggestions", lines[-1])
+    with pytest.raises(SystemExit) as stop:
+        cost.main(["--storage", url, "missing"])  # type: ignore[attr-defined]
+    assert stop.value.code == 2
