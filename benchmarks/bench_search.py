@@ -53,7 +53,7 @@ from scipy import stats
 
 from kraby_study.answers.search_front import search_front
 from kraby_study.decision.front import spread
-from kraby_study.records.stored import counted
+from kraby_study.records.stored import counted, spent_cpu
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
@@ -93,7 +93,8 @@ def kraby(*args: str) -> None:
 
 def read_search(storage: str, arm: Arm) -> None:
     """The search's trials (each by its latest attempt: a rechecked trial by its recheck), CPU
-    seconds used (every attempt's) and pick (its best complete trial)."""
+    seconds used (every attempt's, and asking the sampler for each) and pick (its best
+    complete trial)."""
     study = optuna.load_study(study_name=arm.study, storage=storage)
     two = len(study.directions) == 2
     every = [t for t in study.trials if t.state != optuna.trial.TrialState.WAITING]
@@ -104,7 +105,7 @@ def read_search(storage: str, arm: Arm) -> None:
     arm.trials = (f"{len(complete)}/{states.count(optuna.trial.TrialState.PRUNED)}/"
                   f"{states.count(optuna.trial.TrialState.FAIL)}"
                   + (f" ({rechecked} rechecked)" if rechecked else ""))
-    arm.cpu = sum(float(t.user_attrs.get("cpu_time") or 0.0) for t in every)
+    arm.cpu = spent_cpu(every)
     arm.after_start = after_start(study, trials)
     if two:
         # The front's best score, as confirm --top 1 takes it (no floor: the searches have none).

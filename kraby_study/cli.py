@@ -145,9 +145,9 @@ SEARCH_FLAGS = [
          "rerunning tops it up to this number, so --trials 50 twice gives 50, not 100 "
          "(default 50)", "N", _positive_int),
     Flag("--cpu-budget", "search.cpu_budget", "CPU seconds the search may spend over all "
-         "its trials, as search.cpu_budget=S: it starts no trial once its ended trials and "
-         "what its running ones used so far reach it (the running ones finish, so it "
-         "overshoots), so two searches compare at the same budget "
+         "its trials, as search.cpu_budget=S: it starts no trial once its ended trials, "
+         "what its running ones used so far and what asking the sampler cost reach it (the "
+         "running ones finish, so it overshoots), so two searches compare at the same budget "
          "(default: none, --trials alone)", "S", _positive_float),
     Flag("--recheck", "search.recheck", "before the search ends, retrain its K best trials "
          "on search.recheck_seeds (2) more seeds each, ranking each by all its seeds, and the "

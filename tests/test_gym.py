@@ -355,6 +355,10 @@ def test_a_gym_sweep_search_confirm_and_report_end_to_end(
     assert "clip_range" in summary or "0.1" in summary
     record = (workdir / "out" / "ppo_search" / "reproducibility.md").read_text()
     assert "| env_id | CartPole-v1 |" in record and "| env_package | gymnasium |" in record
+    # A search's page says what its sampler spent choosing its trials; a sweep's has none.
+    assert "CPU seconds the search's sampler spent choosing the trials" in record
+    assert "sampler spent" not in (workdir / "out" / "clip_range" /
+                                   "reproducibility.md").read_text()
     # CartPole's returns are episode lengths, 8 to 500: the curves are in its own units.
     import pandas as pd
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import time
 from pathlib import Path
 
 import optuna
@@ -292,16 +293,42 @@ def test_a_cpu_budget_counts_what_the_running_trials_have_used(tmp_path: Path) -
         second = source.next_trial()  # 60 of 100 used
         assert second is not None
         source.using(second[0], 45.0)
+        # What asking the sampler cost counts too (a small part here).
+        asked = sum(t.user_attrs["suggest_cpu"] for t in source.ledger.trials())
+        assert 0 < asked < 1
         # Nothing has ended, yet the two running trials have used the budget: none starts.
-        assert source.spent() == 105.0 and source.next_trial() is None
+        assert source.spent() == pytest.approx(105.0 + asked) and source.next_trial() is None
         assert source.used_text() == "105 of 100 CPU s used"
         # An ended trial counts by its stored CPU time, no longer by its last report.
         source.record(first[0], first[1], TrialResult(outcome=Outcome.COMPLETE,
                                                       final_score=-0.1, cpu_time=61.0))
-        assert source.spent() == 106.0 and source.next_trial() is None
+        assert source.spent() == pytest.approx(106.0 + asked) and source.next_trial() is None
         # A trial given back (Ctrl-C) counts nothing; 61 of 100 used, so the next one starts.
         source.requeue(second[0], second[1], "interrupted")
-        assert source.spent() == 61.0 and source.next_trial() is not None
+        assert source.spent() == pytest.approx(61.0 + asked) and source.next_trial() is not None
+
+
+class _DearSampler(optuna.samplers.RandomSampler):
+    """Random search that spends at least 0.3 CPU s on each trial it is asked for."""
+
+    def sample_relative(self, study: optuna.Study, trial: optuna.trial.FrozenTrial,
+                        search_space: dict[str, object]) -> dict[str, object]:
+        start = time.process_time()
+        while time.process_time() - start < 0.3:
+            pass
+        return {}
+
+
+def test_a_cpu_budget_counts_what_the_sampler_spent_asking(tmp_path: Path) -> None:
+    cfg = compose_config(["budget=smoke", "search.cpu_budget=0.5", "save_models=false",
+                          f"storage=sqlite:///{tmp_path}/k.db"])
+    with opened(cfg.storage) as store:
+        source = SearchSource(store.define("s", StudyAttrs(kind="search"),
+                                           sampler=_DearSampler(seed=0)), cfg)
+        assert source.next_trial() is not None and source.next_trial() is not None
+        # No trial has trained, yet two asks of 0.3 CPU s or more used the 0.5 CPU s.
+        assert all(t.user_attrs["suggest_cpu"] >= 0.3 for t in source.ledger.trials())
+        assert source.spent() >= 0.6 and source.next_trial() is None
 
 
 def _one_done(ledger: StudyLedger, values: tuple[tuple[int, float], ...]) -> StudyLedger:

@@ -164,9 +164,10 @@ class SearchConfig:
     """Total trials of the study, over every invocation (a rerun tops it up to this number)."""
     cpu_budget: float | None = None
     """CPU seconds the search may spend, over every attempt of every trial and invocation:
-    once its ended trials and what its running ones have used so far reach them it asks for
-    no new trial (those running finish, so it overshoots by what they use after that), so two
-    searches compare at the same budget. null: no limit but ``trials``."""
+    once its ended trials, what its running ones have used so far and what asking the sampler
+    for each trial cost (its ``suggest_cpu``) reach them it asks for no new trial (those
+    running finish, so it overshoots by what they use after that), so two searches compare at
+    the same budget. null: no limit but ``trials``."""
     sampler: str = "tpe"
     """tpe, random, nsga2 (NSGA-II, Optuna's default population of 50) or gp (Optuna's
     Gaussian-process sampler, which models the score's noise; it learns from complete trials

@@ -181,6 +181,10 @@ class TrialAttrs(TrialMeasures):
     enqueued: str | None = None
     """The configuration a new search evaluated first (``search.enqueue``), e.g. ppo=tuned;
     kept by its later attempts."""
+    suggest_cpu: float | None = None
+    """A search trial: CPU seconds the command's process spent asking the sampler for it (a
+    Gaussian process's fit is dearer than TPE's); part of what the search spends under its
+    CPU budget, not of the trial's own cpu_time."""
 
     def stored(self) -> dict[str, Any]:
         """The attributes to store: every field that is set."""

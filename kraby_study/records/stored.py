@@ -164,8 +164,10 @@ def counted(trials: Iterable[T]) -> list[T]:
 
 def spent_cpu(trials: Iterable[StoredTrial]) -> float:
     """CPU seconds the trials used, every attempt counted (a failed or retried one too): the
-    ended trials' stored ``cpu_time``; a running trial has none yet."""
-    return float(sum(float(t.user_attrs.get("cpu_time") or 0.0) for t in trials))
+    ended trials' stored ``cpu_time`` (a running trial has none yet), and what asking the
+    sampler for each cost (``suggest_cpu``, stored when it is asked for)."""
+    return float(sum(float(t.user_attrs.get("cpu_time") or 0.0)
+                     + float(t.user_attrs.get("suggest_cpu") or 0.0) for t in trials))
 
 
 def latest_by_key(trials: Iterable[T]) -> dict[str, T]:

@@ -196,6 +196,10 @@ def _budget_block(data: StudyData, trials: Sequence[StoredTrial]) -> list[str]:
         lines.append(f"CPU seconds in all (user + system, worker and leg processes): "
                      f"{sum(cpu):,.0f}; training wall-clock seconds summed over runs: "
                      f"{wall:,.0f}{note}.")
+        asked = sum(a.suggest_cpu or 0.0 for a in attrs)
+        if asked:
+            lines.append(f"CPU seconds the search's sampler spent choosing the trials (the "
+                         f"command's process, counted in a CPU budget): {asked:,.1f}.")
     else:
         lines.append(f"CPU seconds: not recorded; training wall-clock seconds summed over "
                      f"runs: {wall:,.0f}.")

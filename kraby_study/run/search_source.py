@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any, TextIO
@@ -81,9 +82,9 @@ class SearchSource(StudySource):
         self._running: dict[int, float] = {}  # running trial -> CPU s it has used so far
 
     def spent(self) -> float:
-        """CPU seconds the search has used: its ended trials', every attempt counted, and what
+        """CPU seconds the search has used: its ended trials', every attempt counted, what
         the trials this command runs have used so far (a trial another machine runs counts
-        once it ends)."""
+        once it ends), and what asking the sampler for each trial cost."""
         return spent_cpu(self.ledger.trials()) + self._running_cpu()
 
     def _running_cpu(self) -> float:
@@ -129,7 +130,11 @@ class SearchSource(StudySource):
                     held = TrialAttrs.of(leader)
                     self.ledger.queue(leader.params, TrialAttrs(
                         key=held.key, recheck_of=leader.number, enqueued=held.enqueued))
+                asked = time.process_time()
                 trial = self.ledger.ask(self.space)
+                # The sampler runs in this process: its CPU counts against the budget.
+                self.ledger.set_attrs(trial.number, TrialAttrs(
+                    suggest_cpu=time.process_time() - asked))
             number = trial.number
             params = {name: trial.params[name] for name in self.space}
             try:
