@@ -3,8 +3,10 @@
 Run: python benchmarks/sampler_cost.py --storage URL STUDY [STUDY ...]
          [--samplers gp tpe random] [--startup 5]
 
-A search's sampler runs in the command's own process, and its CPU seconds are not counted in a
-trial's (the CPU budget counts trials only). For each stored search, each of its trials from
+A search's sampler runs in the command's own process, so its CPU seconds are not in a trial's
+cpu_time; a search now stores them on each trial (``suggest_cpu``) and counts them in its CPU
+budget, but a search stored before did not, and one sampler's searches say nothing of what
+another would have cost on the same trials. For each stored search, each of its trials from
 the ``--startup``-th on is suggested again by each sampler, from the trials that had ended
 before that trial was asked for (their parameters, states and values, in an in-memory study;
 trials still running then are left out, so GP's account of them is not replayed), and the
