@@ -175,10 +175,9 @@ class SearchConfig:
     pruner: str | None = None
     """median, hyperband, wilcoxon or none; null: median with one objective, none with two
     (Optuna prunes no trial of several objectives, and refuses a pruner there) or with the gp
-    sampler (it learns nothing from a pruned trial). median and
-    hyperband judge env-step checkpoints; wilcoxon races a trial's seeds: it sees each seed's
-    final score and stops the remaining seeds once they are significantly worse than the best
-    trial's same seeds."""
+    sampler (it learns nothing from a pruned trial). median and hyperband judge env-step
+    checkpoints; wilcoxon races a trial's seeds: it sees each seed's final score and stops
+    the remaining seeds once they are significantly worse than the best trial's same seeds."""
     seed: int = 0
     """Seed of the sampler, stored with the study."""
     startup_trials: int = 5

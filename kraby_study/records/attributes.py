@@ -215,7 +215,7 @@ class StudyAttrs:
     """A search's CPU budget (search.cpu_budget) in CPU seconds, as the latest command that
     set one gave it."""
     sampler: str | None = field(default=None, metadata={"stored": "sampler"})
-    """A search's sampler (tpe or random)."""
+    """A search's sampler (tpe, random, nsga2 or gp)."""
     sampler_seed: int | None = field(default=None, metadata={"stored": "sampler_seed"})
     """A search's sampler seed."""
     openings: int | None = None
