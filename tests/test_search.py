@@ -409,6 +409,7 @@ def test_best_of_a_sweep_writes_the_best_value(workdir: Path,
     (["budget.seeds=1", "--pruner", "wilcoxon"], "budget.seeds=1 never leaves any to stop"),
     (["search.wilcoxon_p=0"], "search.wilcoxon_p"),
     (["search.wilcoxon_p=1", "--pruner", "wilcoxon"], "search.wilcoxon_p"),
+    (["search.sampler=gpx"], "unknown sampler 'gpx': choose tpe, random, nsga2, gp"),
 ])
 def test_bad_search_input_is_refused_before_anything_runs(
         workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str],

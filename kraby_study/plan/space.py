@@ -47,7 +47,7 @@ def validate_search(cfg: DictConfig) -> None:
     """Refuse a search that cannot run: bad flags, a malformed space, a batch that cannot fit."""
     search = cfg.search
     if search.sampler not in SAMPLERS:
-        _fail(f"unknown sampler {search.sampler!r}: choose {' or '.join(SAMPLERS)}")
+        _fail(f"unknown sampler {search.sampler!r}: choose {', '.join(SAMPLERS)}")
     if search.pruner is not None and search.pruner not in PRUNERS:
         _fail(f"unknown pruner {search.pruner!r}: choose {', '.join(PRUNERS)}")
     names = objectives(cfg)
