@@ -434,8 +434,9 @@ def cmd_optuna(args: argparse.Namespace) -> int:
               for name in cfg.search.enqueue]
     if dry_run(args):
         from kraby_study.plan.preview import search_count
+        from kraby_study.plan.space import method_text
 
-        return print_preview(cfg, [search_count(cfg)])
+        return print_preview(cfg, [search_count(cfg)], {str(cfg.search.name): [method_text(cfg)]})
     with executor_for(cfg) as executor, open_writer(cfg) as store:
         summary, ledger = run_search(store, cfg, executor, executor.workers(cfg.workers),
                                      sys.stdout, starts=starts)

@@ -105,6 +105,18 @@ def pruner_name(cfg: DictConfig) -> str:
     return "none" if len(objectives(cfg)) == 2 or cfg.search.sampler == "gp" else "median"
 
 
+def method_text(cfg: DictConfig) -> str:
+    """How a search chooses and stops its trials, as a dry run names it: the sampler, its seed
+    and random start, and the pruner (:func:`pruner_name`), e.g. ``sampler tpe (search.seed 0;
+    its first 5 trials random), pruner median``."""
+    sampler = str(cfg.search.sampler)
+    start = int(cfg.search.startup_trials)
+    random_start = {"tpe": f"; its first {start} trials random",
+                    "gp": f"; its first {start} complete trials random"}.get(sampler, "")
+    return (f"sampler {sampler} (search.seed {int(cfg.search.seed)}{random_start}), "
+            f"pruner {pruner_name(cfg)}")
+
+
 def search_cpu_budget(cfg: DictConfig) -> float | None:
     """The CPU seconds a search may spend over all its trials (``search.cpu_budget``), or None
     for no limit but the trial total."""
