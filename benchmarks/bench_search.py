@@ -23,8 +23,9 @@ comparison then also pairs the picks' CPU seconds per run in the confirm.
 
 After the table, one line per search says what its sampler chose after the random start
 (the first ``search.startup_trials`` trials, the same for TPE as for random search of the same
-seed): how many trials, how many pruned, and how many distinct settings of the space's
-categorical parameters, which shows a sampler drawing the same few again.
+seed; for the GP sampler, the trials it modelled): how many trials, how many pruned, and how
+many distinct settings of the space's categorical parameters, which shows a sampler drawing
+the same few again.
 
 Two searches are compared by what their picks do on the fresh seeds, not by the search's own
 best score (the maximum of noisy scores, which overstates its pick: the table shows both). One
@@ -121,15 +122,25 @@ def after_start(study: optuna.Study, trials: list[optuna.trial.FrozenTrial]) -> 
     """What the sampler chose after its random start (the first ``startup_trials`` trials,
     which a seeded TPE draws as random search of the same seed does): trials, pruned, and
     distinct settings of the space's categorical parameters among them, the sign of a sampler
-    that keeps drawing the same few (random search draws them nearly all different)."""
-    start = int(study.user_attrs["kraby_definition"]["search"]["startup_trials"])
-    own = [t for t in trials if t.number >= start and "recheck_of" not in t.user_attrs]
+    that keeps drawing the same few (random search draws them nearly all different).
+
+    The GP sampler's start is its first ``startup_trials`` *complete* trials, so which trial
+    it models first depends on when trials ended; its own trials are the ones Optuna marks
+    with the GP's relative parameters (``gp:relative_params:...``)."""
+    search = study.user_attrs["kraby_definition"]["search"]
+    start = int(search["startup_trials"])
+    if search.get("sampler") == "gp":
+        own = [t for t in trials
+               if any(key.startswith("gp:relative_params") for key in t.system_attrs)]
+    else:
+        own = [t for t in trials if t.number >= start]
+    own = [t for t in own if "recheck_of" not in t.user_attrs]
     pruned = sum(1 for t in own if t.state == optuna.trial.TrialState.PRUNED)
     kinds = {name: d for t in own for name, d in t.distributions.items()}
     names = sorted(n for n, d in kinds.items()
                    if isinstance(d, optuna.distributions.CategoricalDistribution))
     distinct = len({tuple(t.params.get(n) for n in names) for t in own})
-    return (f"{len(own)} trials, {pruned} pruned, {distinct} distinct "
+    return (f"{len(own)} trial{'s' if len(own) != 1 else ''}, {pruned} pruned, {distinct} distinct "
             f"setting{'s' if distinct != 1 else ''} of "
             f"{', '.join(names) or 'no categorical parameter'}")
 

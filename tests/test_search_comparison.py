@@ -149,6 +149,27 @@ def test_after_the_random_start_a_search_counts_its_distinct_categorical_setting
     assert arm.after_start == "4 trials, 3 pruned, 2 distinct settings of n, s"
 
 
+def test_after_the_gp_samplers_start_a_search_counts_the_trials_it_modelled(
+        tmp_path: Path) -> None:
+    from optuna.distributions import FloatDistribution
+    from optuna.trial import create_trial
+
+    url = f"sqlite:///{tmp_path / 'g.db'}"
+    study = optuna.create_study(study_name="s", storage=url, direction="maximize")
+    study.set_user_attr("kraby_definition", {"search": {"startup_trials": 2, "sampler": "gp"}})
+    space = {"x": FloatDistribution(0, 1)}
+    # Trial 2 started before the start's second trial ended: still a random draw, unmarked.
+    for number, modelled in enumerate([False, False, False, True, True]):
+        marks = {"gp:relative_params:0": '{"x": 0.5}'} if modelled else {}
+        study.add_trial(create_trial(value=-1.0, params={"x": number / 10},
+                                     distributions=space, system_attrs=marks,
+                                     user_attrs={"key": f"t{number}", "cpu_time": 1.0}))
+    bench = _bench()
+    arm = bench.Arm("gp", 0, "s")  # type: ignore[attr-defined]
+    bench.read_search(url, arm)  # type: ignore[attr-defined]
+    assert arm.after_start == "2 trials, 0 pruned, 1 distinct setting of no categorical parameter"
+
+
 @pytest.mark.slow
 def test_with_cost_each_search_has_two_objectives_and_its_pick_is_the_one_confirmed(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
