@@ -447,3 +447,54 @@ def test_the_sampler_cost_replay_suggests_each_trial_from_those_ended_before_it(
     with pytest.raises(SystemExit) as stop:
         cost.main(["--storage", url, "missing"])  # type: ignore[attr-defined]
     assert stop.value.code == 2
+
+
+def _tied_search(url: str, name: str, trials: list[tuple[float, list[float], float, str]],
+                 confirmed: dict[str, list[float]]) -> None:
+    """A search of (score, intermediate values, CPU s, setting) trials, and a confirm of
+    configurations by key, as ``confirm --top N confirm.name=NAME-ties`` stores them."""
+    from optuna.distributions import CategoricalDistribution, FloatDistribution
+    from optuna.trial import create_trial
+
+    study = optuna.create_study(study_name=name, storage=url, direction="maximize")
+    for number, (value, curve, cpu, setting) in enumerate(trials):
+        study.add_trial(create_trial(
+            value=value, intermediate_values=dict(enumerate(curve, start=1)),
+            params={"x": 0.5}, distributions={"x": FloatDistribution(0, 1)},
+            user_attrs={"key": f"t{number}", "cpu_time": cpu, "scores": [value, value],
+                        "settings": {"x": setting}}))
+    ties = optuna.create_study(study_name=f"{name}-ties", storage=url, direction="maximize")
+    keys = list(confirmed)
+    for key, values in confirmed.items():
+        for fresh, value in enumerate(values):
+            ties.add_trial(create_trial(
+                value=value, params={"config": key},
+                distributions={"config": CategoricalDistribution(keys)},
+                user_attrs={"seed": 1000 + fresh, "final_score": value}))
+
+
+def test_tie_breaks_picks_among_the_trials_tied_at_the_top_by_each_rule(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    url = f"sqlite:///{tmp_path / 't.db'}"
+    # Trials 1, 2 and 4 tie at 500; trial 3 repeats trial 1's setting and is not a new tie.
+    _tied_search(url, "a-s0", [(300.0, [100, 300], 4.0, "p"), (500.0, [100, 500], 10.0, "q"),
+                               (500.0, [400, 500], 12.0, "r"), (500.0, [450, 500], 2.0, "q"),
+                               (500.0, [200, 500], 6.0, "s")],
+                 {"t1": [500.0, 400.0], "t2": [500.0, 500.0], "t4": [300.0, 310.0]})
+    _tied_search(url, "b-s0", [(500.0, [50, 500], 8.0, "p"), (490.0, [490, 490], 1.0, "q")],
+                 {"t0": [480.0, 500.0]})
+    breaks = _benchmark("tie_breaks")
+    assert breaks.main(["--storage", url, "--arms", "a", "b",  # type: ignore[attr-defined]
+                        "--seeds", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "| a-s0 | 500.0 | 3 | 418.3 [305.0, 500.0] | t1: 450.0 | t2: 500.0 | t4: 305.0 |" \
+        in out
+    assert "| b-s0 | 500.0 | 1 | 490.0 [490.0, 490.0] | t0: 490.0 | t0: 490.0 | t0: 490.0 |" \
+        in out
+    assert "tie_breaks first: a - b -40.0; --first-means 450.0 --second-means 490.0" in out
+    assert "tie_breaks curve: a - b +10.0; --first-means 500.0 --second-means 490.0" in out
+    # A tied trial the confirm did not retrain stops the analysis with its key.
+    _tied_search(url, "c-s0", [(500.0, [1], 1.0, "p"), (500.0, [2], 1.0, "q")],
+                 {"t0": [500.0]})
+    with pytest.raises(SystemExit, match="c-s0-ties has no complete run of t1"):
+        breaks.main(["--storage", url, "--arms", "c", "--seeds", "0"])  # type: ignore[attr-defined]
