@@ -85,12 +85,12 @@ def test_optuna_and_confirm_dry_runs(workdir: Path, finished: Path,
     assert ("ppo_search: 6 trials (search.trials, each 2 seeds x 1,024 env steps), 2,048 env "
             "steps each, 12,288 in all") in out
     assert "x 2 workers, measured over 4 trials" in out
-    assert "\n  sampler tpe (search.seed 0; its first 5 trials random), pruner median\n" in out
+    assert "\n  sampler tpe (search.seed 0; its model from trial 5 on), pruner median\n" in out
     # The pruner named is the one the search would use: none by default with the gp sampler.
     assert run_cli("optuna", "--trials", "6", "budget=smoke", "--storage", url,
                    "--sampler", "gp", "--seed", "3", "--dry-run") == 0
     out = capsys.readouterr().out
-    assert ("\n  sampler gp (search.seed 3; its first 5 complete trials random), pruner none\n"
+    assert ("\n  sampler gp (search.seed 3; its model after 5 complete trials), pruner none\n"
             in out)
     # A race needs 4 seeds a value before its first look.
     assert run_cli("confirm", "--study-name", "clip_range", "--top", "2", "--seeds", "4",

@@ -107,13 +107,14 @@ def pruner_name(cfg: DictConfig) -> str:
 
 def method_text(cfg: DictConfig) -> str:
     """How a search chooses and stops its trials, as a dry run names it: the sampler, its seed
-    and random start, and the pruner (:func:`pruner_name`), e.g. ``sampler tpe (search.seed 0;
-    its first 5 trials random), pruner median``."""
+    and when its model takes over, and the pruner (:func:`pruner_name`), e.g. ``sampler tpe
+    (search.seed 0; its model from trial 5 on), pruner median``."""
     sampler = str(cfg.search.sampler)
     start = int(cfg.search.startup_trials)
-    random_start = {"tpe": f"; its first {start} trials random",
-                    "gp": f"; its first {start} complete trials random"}.get(sampler, "")
-    return (f"sampler {sampler} (search.seed {int(cfg.search.seed)}{random_start}), "
+    # The first trials are the enqueued ones, then random draws, until the model takes over.
+    model = {"tpe": f"; its model from trial {start} on",
+             "gp": f"; its model after {start} complete trials"}.get(sampler, "")
+    return (f"sampler {sampler} (search.seed {int(cfg.search.seed)}{model}), "
             f"pruner {pruner_name(cfg)}")
 
 
