@@ -54,7 +54,7 @@ from scipy import stats
 
 from kraby_study.answers.search_front import search_front
 from kraby_study.decision.front import spread
-from kraby_study.records.stored import counted, spent_cpu
+from kraby_study.records.stored import counted, search_key, spent_cpu
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
@@ -114,7 +114,7 @@ def read_search(storage: str, arm: Arm) -> None:
         best = next(t for t in complete if t.number == number)
     else:
         best = max(complete, key=lambda t: float(t.value))  # type: ignore[arg-type]
-    arm.pick = str(best.user_attrs.get("key", f"t{best.number}"))
+    arm.pick = str(best.user_attrs.get("key", search_key(best.number)))
     arm.search_score = float(best.values[0])
 
 

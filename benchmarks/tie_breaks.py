@@ -23,7 +23,6 @@ each sampler seed, and the means as ``--first-means``/``--second-means`` for
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 from collections.abc import Callable
@@ -33,6 +32,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).parent))
 import optuna  # noqa: E402
 from paired_picks import signed  # noqa: E402
+
+from kraby_study.records.stored import search_key  # noqa: E402
+from kraby_study.records.values import value_key  # noqa: E402
 
 RULES: dict[str, Callable[[optuna.trial.FrozenTrial], tuple[float, int]]] = {
     "first": lambda t: (0.0, t.number),
@@ -63,25 +65,30 @@ class Ties:
 
 def key_of(trial: optuna.trial.FrozenTrial) -> str:
     """A search trial's key, as its confirm names the configuration."""
-    return str(trial.user_attrs.get("key", f"t{trial.number}"))
+    return str(trial.user_attrs.get("key", search_key(trial.number)))
+
+
+def loaded(storage: str, name: str) -> optuna.Study:
+    """A stored study; the analysis stops in one line if there is none of that name."""
+    try:
+        return optuna.load_study(study_name=name, storage=storage)
+    except KeyError:
+        raise SystemExit(f"tie_breaks: no study {name!r} in {storage}") from None
 
 
 def tied_trials(storage: str, search: str) -> tuple[float, list[optuna.trial.FrozenTrial]]:
     """A search's top score and its complete trials at it, one per distinct setting (the
-    first by number), as ``confirm --top`` takes them."""
-    try:
-        study = optuna.load_study(study_name=search, storage=storage)
-    except KeyError:
-        raise SystemExit(f"tie_breaks: no study {search!r} in {storage}") from None
-    done = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE
+    first by number, by confirm's own equality of settings), as ``confirm --top`` takes
+    them."""
+    done = [t for t in loaded(storage, search).trials if t.state == optuna.trial.TrialState.COMPLETE
             and "recheck_of" not in t.user_attrs]
     if not done:
         raise SystemExit(f"tie_breaks: {search} has no complete trial")
     top = max(float(t.values[0]) for t in done)
-    seen: set[str] = set()
+    seen: set[object] = set()
     tied = []
     for trial in sorted(done, key=lambda t: t.number):
-        setting = json.dumps(trial.user_attrs.get("settings"), sort_keys=True, default=str)
+        setting = value_key(trial.user_attrs.get("settings"))
         if float(trial.values[0]) == top and setting not in seen:
             seen.add(setting)
             tied.append(trial)
@@ -91,10 +98,7 @@ def tied_trials(storage: str, search: str) -> tuple[float, list[optuna.trial.Fro
 def confirmed_means(storage: str, name: str) -> dict[str, float]:
     """A confirm's mean score per configuration (over its fresh seeds, to 0.1); the analysis
     stops if a run of it has not ended."""
-    try:
-        study = optuna.load_study(study_name=name, storage=storage)
-    except KeyError:
-        raise SystemExit(f"tie_breaks: no study {name!r} in {storage}") from None
+    study = loaded(storage, name)
     if any(not t.state.is_finished() for t in study.trials):
         raise SystemExit(f"tie_breaks: {name} is not finished")
     scores: dict[str, list[float]] = {}
@@ -133,8 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---:|---:|---|" + "---|" * len(RULES))
     for tie in ties.values():
         means = [tie.mean_of(t) for t in tie.trials]
-        picks = [f"{key_of(tie.pick(rule))}: {tie.mean_of(tie.pick(rule)):.1f}"
-                 for rule in RULES]
+        picks = [f"{key_of(pick)}: {tie.mean_of(pick):.1f}"
+                 for pick in map(tie.pick, RULES)]
         print(f"| {tie.search} | {tie.top:.1f} | {len(tie.trials)} | "
               f"{statistics.fmean(means):.1f} [{min(means):.1f}, {max(means):.1f}] | "
               + " | ".join(picks) + " |")
