@@ -12,9 +12,9 @@ and the running ones so far have used it; the running ones finish, so each searc
 Both searches evaluate rl-zoo3's settings first, as the default search does when it trains with them
 (``search.enqueue`` null: the command's ppo config), then sample; ``--enqueue NAME ...`` names
 other ppo configs, and ``--enqueue`` alone none (a cold start). The search's pick (its best
-complete trial) is then retrained by ``kraby-study confirm --top 1`` on ``--confirm-seeds``
-fresh seeds, each scored on its own evaluation episodes, and rl-zoo3's settings are
-confirmed once on the same fresh seeds, for reference.
+complete trial, the cheaper of equal scores) is then retrained by ``kraby-study confirm --top 1``
+on ``--confirm-seeds`` fresh seeds, each scored on its own evaluation episodes, and rl-zoo3's
+settings are confirmed once on the same fresh seeds, for reference.
 
 With ``--cost`` each search has two objectives, the evaluation return and CPU seconds per seed
 (``--objective evaluation,training_time --floor none``: unpruned, a front), and its pick is what
@@ -55,6 +55,7 @@ from scipy import stats
 from kraby_study.answers.search_front import search_front
 from kraby_study.decision.front import spread
 from kraby_study.records.stored import counted, search_key, spent_cpu
+from kraby_study.records.values import best_trial
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
@@ -113,7 +114,9 @@ def read_search(storage: str, arm: Arm) -> None:
         number = spread(search_front(complete).front, 1)[0].key
         best = next(t for t in complete if t.number == number)
     else:
-        best = max(complete, key=lambda t: float(t.value))  # type: ignore[arg-type]
+        best = best_trial(complete)
+        if best is None:
+            sys.exit(f"bench_search: {arm.study} has no complete trial to confirm")
     arm.pick = str(best.user_attrs.get("key", search_key(best.number)))
     arm.search_score = float(best.values[0])
 

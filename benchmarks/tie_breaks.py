@@ -3,17 +3,19 @@
 Run: python benchmarks/tie_breaks.py --storage URL --arms NAME [NAME] --seeds 0 1 2
 
 Where a reward has a ceiling (CartPole-v1's 500), many trials of a search reach it on their
-search seeds, and the pick is the first of them by trial number (Optuna's best trial, and what
-``confirm --top 1`` takes). This reads, per arm and sampler seed, the search ``NAME-sS`` and a
+search seeds; the pick among them was the first by trial number (Optuna's best trial), and is
+now the cheapest (``best`` and ``confirm --top 1``: ``kraby_study.records.values.ranking``).
+This reads, per arm and sampler seed, the search ``NAME-sS`` and a
 confirm of every distinct trial tied at its top score, ``NAME-sS-ties`` (made by
 ``kraby-study confirm --study-name NAME-sS --top N confirm.name=NAME-sS-ties``, N the number
 tied), and prints each tied trial's confirmed mean (over the confirm's fresh seeds, to 0.1)
 beside what three tie-breaks would pick:
 
-- ``first``: the lowest trial number (the pick today);
+- ``first``: the lowest trial number (the pick before);
 - ``curve``: the highest mean of the trial's stored intermediate values (the scores the
   pruner saw along training: the area under its learning curve), then the lowest number;
-- ``cheapest``: the fewest CPU seconds per search seed, then the lowest number.
+- ``cheapest``: the fewest CPU seconds per search seed, then the lowest number (the pick
+  now).
 
 With two arms it prints, per tie-break, the first arm's confirmed mean minus the second's at
 each sampler seed, and the means as ``--first-means``/``--second-means`` for
@@ -34,13 +36,12 @@ import optuna  # noqa: E402
 from paired_picks import signed  # noqa: E402
 
 from kraby_study.records.stored import search_key  # noqa: E402
-from kraby_study.records.values import value_key  # noqa: E402
+from kraby_study.records.values import ranking, value_key  # noqa: E402
 
 RULES: dict[str, Callable[[optuna.trial.FrozenTrial], tuple[float, int]]] = {
     "first": lambda t: (0.0, t.number),
     "curve": lambda t: (-statistics.fmean(t.intermediate_values.values()), t.number),
-    "cheapest": lambda t: (float(t.user_attrs["cpu_time"]) / len(t.user_attrs["scores"]),
-                           t.number),
+    "cheapest": lambda t: ranking(t)[1:],
 }
 """Each tie-break as a sort key over the tied trials: the smallest is picked."""
 

@@ -3,7 +3,9 @@ known settings."""
 
 from __future__ import annotations
 
+import json
 import shutil
+import sqlite3
 from pathlib import Path
 
 import pandas as pd
@@ -11,11 +13,14 @@ import pytest
 from conftest import TINY, csv_approx, file_digest, finished_search, load, run_cli, sqlite_url
 from optuna.trial import TrialState
 
+from kraby_study.answers.configurations import confirmed_study
 from kraby_study.config.compose import compose_config
 from kraby_study.plan.confirm import Arm, distinct_arms
 from kraby_study.plan.settings import resolved_settings
 from kraby_study.plan.space import fitted_params, outside_space
 from kraby_study.records.stored import counted
+from kraby_study.records.values import ranking
+from kraby_study.store.store import opened
 
 SPACE = """\
 name: tiny
@@ -87,8 +92,7 @@ def test_confirm_retrains_the_top_configurations_on_fresh_seeds(
         folder: Path, capsys: pytest.CaptureFixture[str]) -> None:
     db = folder / "studies" / "kraby.db"
     search = counted(load(db, "tiny").trials)
-    ranked = sorted((t for t in search if t.state == TrialState.COMPLETE),
-                    key=lambda t: -float(t.value))
+    ranked = sorted((t for t in search if t.state == TrialState.COMPLETE), key=ranking)
     args = ["confirm", "--study-name", "tiny", "--top", "2", "--seeds", "2", "--workers", "2",
             "--baseline", "ppo=tuned", *TINY]
     assert run_cli(*args) == 0
@@ -133,6 +137,26 @@ def test_confirm_retrains_the_top_configurations_on_fresh_seeds(
     assert run_cli("best", "--study-name", "tiny-confirm", "--name", "confirmed") == 0
     assert "confirm 'tiny-confirm'" in capsys.readouterr().out
     assert (folder / "conf" / "ppo" / "confirmed.yaml").is_file()
+
+
+def test_of_equal_search_scores_confirm_takes_the_cheaper_first(folder: Path) -> None:
+    db = folder / "studies" / "kraby.db"
+    # Tie the search's complete trials at one score, each later one 1 CPU s cheaper.
+    with sqlite3.connect(db) as con:
+        ids = [row[0] for row in con.execute(
+            "SELECT trial_id FROM trials WHERE state = 'COMPLETE' ORDER BY number")]
+        for k, trial_id in enumerate(ids):
+            con.execute("UPDATE trial_values SET value = 1.0 WHERE trial_id = ?", (trial_id,))
+            con.execute("UPDATE trial_user_attributes SET value_json = ? "
+                        "WHERE trial_id = ? AND key = 'cpu_time'", (json.dumps(100.0 - k),
+                                                                    trial_id))
+    keys = [t.user_attrs["key"] for t in load(db, "tiny").trials
+            if t.state == TrialState.COMPLETE]
+    assert len(keys) >= 3
+    with opened(sqlite_url(db)) as store:
+        confirmed = confirmed_study(store.load("tiny"), len(keys))
+    assert [arm.label for arm in confirmed.arms] == keys[::-1]
+    assert [arm.source_score for arm in confirmed.arms] == [1.0] * len(keys)
 
 
 def test_baselines_alone_retrain_a_config_on_n_seeds(store_url: str) -> None:

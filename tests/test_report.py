@@ -272,6 +272,31 @@ def test_search_report(tmp_path: Path) -> None:
     assert f"Best: trial {study.best_trial.number}" in markdown
 
 
+def test_search_report_ranks_equal_scores_by_their_cpu_seconds_per_seed(tmp_path: Path) -> None:
+    # Four trials reach the ceiling, at 9, 4 and 6 CPU s per seed and one without a cost;
+    # the pick and the top table take the cheapest first, then by cost, then by number.
+    url = sqlite_url(tmp_path / "c.db")
+    store = Store(url)
+    study = optuna.create_study(study_name="ceiling", storage=store.storage,
+                                direction="maximize")
+    study.set_user_attr("kraby_kind", "search")
+    for value, cpu in [(500.0, 18.0), (500.0, None), (500.0, 8.0), (480.0, 1.0), (500.0, 12.0)]:
+        trial = study.ask()
+        trial.suggest_float("learning_rate", 1e-4, 1e-2, log=True)
+        if cpu is not None:
+            trial.set_user_attr("cpu_time", cpu)
+            trial.set_user_attr("scores", [value, value])
+        study.tell(trial, value)
+    store.close()
+    out = tmp_path / "r"
+    write_report(url, out)
+    top = pd.read_csv(out / "ceiling" / "top_trials.csv")
+    assert list(top["number"]) == [2, 4, 0, 1, 3]
+    assert list(top["training_time"].iloc[:3]) == [4.0, 6.0, 9.0]
+    assert "Best: trial 2" in (out / "index.md").read_text()
+    assert "| CPU s per seed |" in (out / "ceiling" / "top_trials.md").read_text()
+
+
 def test_search_with_too_few_trials_for_importances(tmp_path: Path) -> None:
     url = sqlite_url(tmp_path / "s.db")
     study = optuna.create_study(study_name="plain", storage=url)  # not made by kraby-study

@@ -15,7 +15,14 @@ from kraby_study.plan.confirm import Arm, ConfirmedStudy
 from kraby_study.records.attributes import StudyKind
 from kraby_study.records.definition import REWARDS, objective_names, stored_floor, two_objectives
 from kraby_study.records.stored import Outcome, counted, outcome, search_key, trial_seeds
-from kraby_study.records.values import param_name, score, swept_value, value_key, value_label
+from kraby_study.records.values import (
+    param_name,
+    ranking,
+    score,
+    swept_value,
+    value_key,
+    value_label,
+)
 from kraby_study.store.ledger import StudyLedger
 
 
@@ -102,10 +109,11 @@ def _front_arms(name: str, done: list[Any], top: int, floor: str | None) -> list
 
 
 def _search_arms(name: str, done: list[Any]) -> list[Arm]:
-    """Complete search trials, best first, one per distinct configuration."""
+    """Complete search trials, best first (the cheaper of equal scores: :func:`ranking`), one
+    per distinct configuration."""
     arms: list[Arm] = []
     seen: set[Any] = set()
-    for trial in sorted(done, key=lambda t: -float(score(t))):  # type: ignore[arg-type]
+    for trial in sorted(done, key=ranking):
         settings = trial.user_attrs["settings"]
         if value_key(settings) in seen:
             continue

@@ -128,7 +128,8 @@ def importances(maximize: bool, trials: list[FrozenTrial],
 def trial_rows(trials: list[FrozenTrial], params: list[str],
                two: bool = False) -> pd.DataFrame:
     """One row per trial with its outcome, value (its score) and the seeds it is the mean of
-    (``seeds``: none for a trial that did not complete), costs and parameters; with
+    (``seeds``: none for a trial that did not complete), costs (``training_time``: CPU s per
+    seed of a complete trial) and parameters; with
     ``two`` (a two-objective search) also its cost objective (``cost``, CPU s per seed) and
     the configuration it was enqueued as (``enqueued``)."""
     rows = []
@@ -146,6 +147,8 @@ def trial_rows(trials: list[FrozenTrial], params: list[str],
             "seeds": (len(attrs["scores"]) if state == Outcome.COMPLETE and attrs.get("scores")
                       else math.nan),
             "cost": cost(trial) if state == Outcome.COMPLETE else None,
+            "training_time": (TrialAttrs.of(trial).training_time()
+                              if state == Outcome.COMPLETE else None),
             "enqueued": TrialAttrs.of(trial).enqueued or "",
             "env_steps": steps, "wall_time": attrs.get("wall_time", _duration(trial)),
             "pruned_at": attrs.get("pruned_at", max(trial.intermediate_values)
@@ -156,9 +159,10 @@ def trial_rows(trials: list[FrozenTrial], params: list[str],
         })
     extra = ["cost", "enqueued"] if two else []
     frame = pd.DataFrame(rows, columns=["number", "outcome", "value", "seeds", *extra,
-                                        "env_steps",
-                                        "wall_time", "pruned_at", "failure", *params])
-    for column in ("seeds", "env_steps", "wall_time", "pruned_at", *extra[:1]):
+                                        "env_steps", "wall_time", "training_time",
+                                        "pruned_at", "failure", *params])
+    for column in ("seeds", "env_steps", "wall_time", "training_time", "pruned_at",
+                   *extra[:1]):
         frame[column] = pd.to_numeric(frame[column], errors="coerce").astype(float)
     return frame
 
@@ -225,9 +229,12 @@ def answer_of(choice: FrontChoice[int] | None, key: int) -> str:
 
 
 def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:
-    """The best complete trials, best first, with a rank column."""
+    """The best complete trials, best first as the pick ranks them (the cheaper of equal
+    scores first: :func:`kraby_study.records.values.ranking`), with a rank column."""
     done = search.trials[search.trials["outcome"] == Outcome.COMPLETE]
-    done = done.sort_values("value", ascending=not search.maximize, kind="stable").head(count)
+    done = done.sort_values(["value", "training_time", "number"],
+                            ascending=[not search.maximize, True, True],
+                            na_position="last").head(count)
     return done.drop(columns=["outcome", "pruned_at", "failure"]).assign(
         rank=range(1, len(done) + 1))[["rank", "number", "value", "seeds", *search.params,
-                                       "env_steps", "wall_time"]]
+                                       "env_steps", "training_time", "wall_time"]]

@@ -7,6 +7,7 @@ import math
 from collections.abc import Hashable, Iterable, Mapping, Sequence
 from typing import Any, TypeVar
 
+from kraby_study.records.attributes import TrialAttrs
 from kraby_study.records.stored import Outcome, StoredTrial, T, outcome, parse_sweep_key
 
 ANSWER_FROM = 4
@@ -107,8 +108,22 @@ def cost(trial: StoredTrial) -> float | None:
 
 
 
+def ranking(trial: StoredTrial, maximize: bool = True) -> tuple[float, float, int]:
+    """Where a complete search trial ranks, as a sort key (the smallest ranks first): by its
+    score, the best first; among equal scores the cheaper, by training time (CPU seconds per
+    seed; one without it after those with it); then the earlier.
+
+    Where the reward has a ceiling many trials tie at it on their search seeds, and those seeds
+    do not tell them apart; of equal scores the tool takes the one that costs less to train.
+    """
+    value = float(score(trial))  # type: ignore[arg-type]
+    time = TrialAttrs.of(trial).training_time()
+    return (-value if maximize else value, math.inf if time is None else time, trial.number)
+
+
 def best_trial(trials: Iterable[T], maximize: bool = True, objectives: int = 1) -> T | None:
-    """The complete trial with the best score (a search's best); None when none is complete.
+    """The complete trial with the best score (a search's best), the cheaper of equal scores
+    (:func:`ranking`); None when none is complete.
 
     kraby-study maximises; ``maximize=False`` serves foreign studies that minimise. Trials
     count when they have ``objectives`` values, by the first: 2 for a two-objective search's
@@ -116,5 +131,4 @@ def best_trial(trials: Iterable[T], maximize: bool = True, objectives: int = 1) 
     """
     done = [t for t in trials if outcome(t) == Outcome.COMPLETE and t.values
             and len(t.values) == objectives]
-    pick = max if maximize else min
-    return pick(done, key=lambda t: float(score(t)), default=None)  # type: ignore[arg-type]
+    return min(done, key=lambda t: ranking(t, maximize), default=None)
