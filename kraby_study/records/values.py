@@ -107,7 +107,6 @@ def cost(trial: StoredTrial) -> float | None:
     return float(values[1]) if values and len(values) > 1 else None
 
 
-
 def ranking(trial: StoredTrial, maximize: bool = True) -> tuple[float, float, int]:
     """Where a complete search trial ranks, as a sort key (the smallest ranks first): by its
     score, the best first; among equal scores the cheaper, by training time (CPU seconds per
