@@ -236,5 +236,5 @@ def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:
                             ascending=[not search.maximize, True, True],
                             na_position="last").head(count)
     return done.drop(columns=["outcome", "pruned_at", "failure"]).assign(
-        rank=range(1, len(done) + 1))[["rank", "number", "value", "seeds", *search.params,
-                                       "env_steps", "training_time", "wall_time"]]
+        rank=range(1, len(done) + 1))[["rank", "number", "value", "seeds", "training_time",
+                                       *search.params, "env_steps", "wall_time"]]

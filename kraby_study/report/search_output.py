@@ -61,17 +61,17 @@ def _cell(value: Any) -> str:
 def top_table(search: Search) -> Table:
     """The top trials as formatted cells, best first."""
     top = top_trials(search)
-    header = ["rank", "trial", "objective", "seeds", *search.params, "env steps",
-              "CPU s per seed", "time (s)"]
+    header = ["rank", "trial", "objective", "seeds", "CPU s per seed", *search.params,
+              "env steps", "time (s)"]
     rows = []
     # Records keep each column's type: iterrows would make every cell a float (256.0) when
     # all parameters are numbers, as on a gym env's space.
     for row in top.to_dict("records"):
         rows.append([str(int(row["rank"])), str(int(row["number"])), _cell(row["value"]),
                      f"{int(row['seeds'])}" if np.isfinite(row["seeds"]) else "-",
+                     _cell(row["training_time"]),
                      *[format_param(row[p], search.distributions.get(p)) for p in search.params],
                      f"{int(row['env_steps']):,}" if np.isfinite(row["env_steps"]) else "-",
-                     _cell(row["training_time"]),
                      f"{row['wall_time']:.0f}" if np.isfinite(row["wall_time"]) else "-"])
     marks = ["best"] + [""] * (len(rows) - 1) if rows else []
     return Table(header, rows, marks=marks)
