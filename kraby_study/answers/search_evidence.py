@@ -28,7 +28,7 @@ from kraby_study.decision.front import FrontChoice
 from kraby_study.records.attributes import StudyKind, TrialAttrs
 from kraby_study.records.definition import stored_floor, two_objectives
 from kraby_study.records.stored import Outcome, outcome
-from kraby_study.records.values import best_trial, cost, score
+from kraby_study.records.values import best_trial, cost, ranking, score
 
 TOP = 10
 """Rows of the top-trials table."""
@@ -135,6 +135,7 @@ def trial_rows(trials: list[FrozenTrial], params: list[str],
     rows = []
     for trial in trials:
         attrs = trial.user_attrs
+        stored = TrialAttrs.of(trial)
         state = outcome(trial)
         steps = attrs.get("env_steps")
         if steps is None and trial.intermediate_values:
@@ -147,9 +148,8 @@ def trial_rows(trials: list[FrozenTrial], params: list[str],
             "seeds": (len(attrs["scores"]) if state == Outcome.COMPLETE and attrs.get("scores")
                       else math.nan),
             "cost": cost(trial) if state == Outcome.COMPLETE else None,
-            "training_time": (TrialAttrs.of(trial).training_time()
-                              if state == Outcome.COMPLETE else None),
-            "enqueued": TrialAttrs.of(trial).enqueued or "",
+            "training_time": stored.training_time() if state == Outcome.COMPLETE else None,
+            "enqueued": stored.enqueued or "",
             "env_steps": steps, "wall_time": attrs.get("wall_time", _duration(trial)),
             "pruned_at": attrs.get("pruned_at", max(trial.intermediate_values)
                                    if state == Outcome.PRUNED and trial.intermediate_values
@@ -232,9 +232,9 @@ def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:
     """The best complete trials, best first as the pick ranks them (the cheaper of equal
     scores first: :func:`kraby_study.records.values.ranking`), with a rank column."""
     done = search.trials[search.trials["outcome"] == Outcome.COMPLETE]
-    done = done.sort_values(["value", "training_time", "number"],
-                            ascending=[not search.maximize, True, True],
-                            na_position="last").head(count)
+    by_number = {t.number: t for t in search.data.trials}
+    order = sorted(done["number"], key=lambda n: ranking(by_number[n], search.maximize))
+    done = done.set_index("number", drop=False).loc[order[:count]].reset_index(drop=True)
     return done.drop(columns=["outcome", "pruned_at", "failure"]).assign(
         rank=range(1, len(done) + 1))[["rank", "number", "value", "seeds", "training_time",
                                        *search.params, "env_steps", "wall_time"]]
