@@ -38,7 +38,7 @@ from paired_picks import signed  # noqa: E402
 from kraby_study.records.stored import search_key  # noqa: E402
 from kraby_study.records.values import ranking, value_key  # noqa: E402
 
-RULES: dict[str, Callable[[optuna.trial.FrozenTrial], tuple[float, int]]] = {
+RULES: dict[str, Callable[[optuna.trial.FrozenTrial], tuple[float, ...]]] = {
     "first": lambda t: (0.0, t.number),
     "curve": lambda t: (-statistics.fmean(t.intermediate_values.values()), t.number),
     "cheapest": lambda t: ranking(t)[1:],

@@ -68,6 +68,19 @@ def test_a_queued_or_running_recheck_holds_its_place_by_the_score_before() -> No
     assert next_recheck(trials, 1) is None
 
 
+def test_of_leaders_tied_at_a_ceiling_the_cheaper_are_rechecked_first() -> None:
+    # Four trials at 500 on their 2 seeds: 20, 4, 8 and 2 CPU s a seed.
+    tied = [_trial(0, [500.0, 500.0], cpu=40.0), _trial(1, [500.0, 500.0], cpu=8.0),
+            _trial(2, [500.0, 500.0], cpu=16.0), _trial(3, [500.0, 500.0], cpu=4.0)]
+    assert [lead.trial.number for lead in leaders(tied, 2)] == [3, 1]
+    assert next_recheck(tied, 2).number == 3
+    # t3 held 500 on 3 more seeds: by 5 seeds it leads the ties it cost less than, and
+    # the next cheapest (t1) is rechecked next, not the first by number.
+    held = [*tied, _trial(4, [500.0] * 5, key="t3", of=3, seed=2, cpu=10.0)]
+    assert [lead.trial.number for lead in leaders(held, 2)] == [4, 1]
+    assert next_recheck(held, 2).number == 1
+
+
 def test_the_reserve_is_each_unchecked_leaders_cpu_per_seed_times_the_seeds() -> None:
     trials = [_trial(0, [-1.0, -1.0], cpu=30.0), _trial(1, [-0.5, -0.5], cpu=50.0),
               _trial(2, [-9.0, -9.0], cpu=1000.0)]

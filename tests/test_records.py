@@ -215,7 +215,7 @@ def test_best_trial_maximises_or_minimises_over_complete_trials() -> None:
     assert best_trial([]) is None
 
 
-def test_of_equal_scores_the_cheaper_trial_ranks_first() -> None:
+def test_of_equal_scores_the_surer_then_the_cheaper_trial_ranks_first() -> None:
     # Three trials at the ceiling: 10 CPU s per seed, 3 per seed (6 over 2 seeds), unknown.
     tied = [trial(0, COMPLETE, 500.0, cpu_time=20.0, scores=[500.0, 500.0]),
             trial(1, COMPLETE, 500.0),
@@ -223,7 +223,11 @@ def test_of_equal_scores_the_cheaper_trial_ranks_first() -> None:
             trial(3, COMPLETE, 499.0, cpu_time=1.0, scores=[499.0, 499.0])]
     assert best_trial(tied).number == 2  # type: ignore[union-attr]
     assert [t.number for t in sorted(tied, key=ranking)] == [2, 0, 1, 3]
-    assert ranking(tied[2]) == (-500.0, 3.0, 2)
+    assert ranking(tied[2]) == (-500.0, -2, 3.0, 2)
+    # A tie that held on more seeds (a recheck's) ranks before a cheaper one on fewer.
+    rechecked = trial(5, COMPLETE, 500.0, cpu_time=50.0, scores=[500.0] * 5)
+    assert best_trial([*tied, rechecked]).number == 5  # type: ignore[union-attr]
+    assert ranking(rechecked) == (-500.0, -5, 10.0, 5)
     # Of equal costs (or none), the earlier; minimising, the lowest score still comes first.
     assert best_trial([trial(4, COMPLETE, 1.0), trial(5, COMPLETE, 1.0)]).number == 4  # type: ignore[union-attr]
     assert best_trial(tied, maximize=False).number == 3  # type: ignore[union-attr]

@@ -107,17 +107,21 @@ def cost(trial: StoredTrial) -> float | None:
     return float(values[1]) if values and len(values) > 1 else None
 
 
-def ranking(trial: StoredTrial, maximize: bool = True) -> tuple[float, float, int]:
+def ranking(trial: StoredTrial, maximize: bool = True) -> tuple[float, int, float, int]:
     """Where a complete search trial ranks, as a sort key (the smallest ranks first): by its
-    score, the best first; among equal scores the cheaper, by training time (CPU seconds per
-    seed; one without it after those with it); then the earlier.
+    score, the best first; among equal scores the one scored on more seeds (a recheck's
+    trial, ``search.recheck``), then the cheaper, by training time (CPU seconds per seed; one
+    without it after those with it); then the earlier.
 
     Where the reward has a ceiling many trials tie at it on their search seeds, and those seeds
-    do not tell them apart; of equal scores the tool takes the one that costs less to train.
+    do not tell them apart; a tie that held on more seeds is surer, and of ties alike the tool
+    takes the one that costs less to train.
     """
     value = float(score(trial))  # type: ignore[arg-type]
-    time = TrialAttrs.of(trial).training_time()
-    return (-value if maximize else value, math.inf if time is None else time, trial.number)
+    attrs = TrialAttrs.of(trial)
+    time = attrs.training_time()
+    return (-value if maximize else value, -len(attrs.scores or []),
+            math.inf if time is None else time, trial.number)
 
 
 def best_trial(trials: Iterable[T], maximize: bool = True, objectives: int = 1) -> T | None:

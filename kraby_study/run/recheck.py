@@ -21,7 +21,7 @@ from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.records.attributes import TrialAttrs, TrialResult
 from kraby_study.records.stored import Outcome, counted, outcome
-from kraby_study.records.values import score
+from kraby_study.records.values import ranking, score
 
 
 @dataclass(frozen=True)
@@ -38,19 +38,22 @@ class Leader:
 
 
 def leaders(trials: Sequence[FrozenTrial], count: int) -> list[Leader]:
-    """The ``count`` best configurations of a search, best first."""
+    """The ``count`` best configurations of a search, best first, in the order a search's
+    pick reads them (:func:`~kraby_study.records.values.ranking`: equal scores by seeds,
+    then cost, then number); a recheck that is queued or running stands where its trial
+    does."""
     by_number = {t.number: t for t in trials}
-    ranked: list[Leader] = []
+    ranked: list[tuple[tuple[float, int, float, int], Leader]] = []
     for trial in counted(trials):
         of = TrialAttrs.of(trial).recheck_of
         value = score(trial)
         if outcome(trial) == Outcome.COMPLETE and value is not None:
-            ranked.append(Leader(trial, value, of is not None))
+            ranked.append((ranking(trial), Leader(trial, value, of is not None)))
         elif (trial.state in (TrialState.WAITING, TrialState.RUNNING) and of is not None
               and of in by_number and (before := score(by_number[of])) is not None):
-            ranked.append(Leader(trial, before, True))
-    ranked.sort(key=lambda leader: -leader.score)
-    return ranked[:count]
+            ranked.append((ranking(by_number[of]), Leader(trial, before, True)))
+    ranked.sort(key=lambda pair: pair[0])
+    return [leader for _, leader in ranked[:count]]
 
 
 def next_recheck(trials: Sequence[FrozenTrial], count: int) -> FrozenTrial | None:
