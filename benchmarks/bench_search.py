@@ -12,9 +12,10 @@ and the running ones so far have used it; the running ones finish, so each searc
 Both searches evaluate rl-zoo3's settings first, as the default search does when it trains with them
 (``search.enqueue`` null: the command's ppo config), then sample; ``--enqueue NAME ...`` names
 other ppo configs, and ``--enqueue`` alone none (a cold start). The search's pick (its best
-complete trial, the cheaper of equal scores) is then retrained by ``kraby-study confirm --top 1``
-on ``--confirm-seeds`` fresh seeds, each scored on its own evaluation episodes, and rl-zoo3's
-settings are confirmed once on the same fresh seeds, for reference.
+complete trial; of equal scores the one on more seeds, then the cheaper) is then
+retrained by ``kraby-study confirm --top 1`` on ``--confirm-seeds`` fresh seeds, each scored
+on its own evaluation episodes, and rl-zoo3's settings are confirmed once on the same fresh
+seeds, for reference.
 
 With ``--cost`` each search has two objectives, the evaluation return and CPU seconds per seed
 (``--objective evaluation,training_time --floor none``: unpruned, a front), and its pick is what

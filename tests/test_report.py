@@ -295,7 +295,7 @@ def test_search_report_ranks_equal_scores_by_their_cpu_seconds_per_seed(tmp_path
     assert list(top["training_time"].iloc[:3]) == [4.0, 6.0, 9.0]
     assert "Best: trial 2" in (out / "index.md").read_text()
     table = (out / "ceiling" / "top_trials.md").read_text()
-    assert "| CPU s per seed |" in table and "fewer CPU s per seed first" in table
+    assert "| CPU s per seed |" in table and "on more seeds, then the one with fewer CPU s" in table
 
 
 def test_search_with_too_few_trials_for_importances(tmp_path: Path) -> None:

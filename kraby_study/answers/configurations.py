@@ -109,8 +109,8 @@ def _front_arms(name: str, done: list[Any], top: int, floor: str | None) -> list
 
 
 def _search_arms(name: str, done: list[Any]) -> list[Arm]:
-    """Complete search trials, best first (the cheaper of equal scores: :func:`ranking`), one
-    per distinct configuration."""
+    """Complete search trials, best first (of equal scores the one on more seeds, then the
+    cheaper: :func:`ranking`), one per distinct configuration."""
     arms: list[Arm] = []
     seen: set[Any] = set()
     for trial in sorted(done, key=ranking):

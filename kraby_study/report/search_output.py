@@ -202,7 +202,8 @@ def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyRepor
         section += [Text(f"The front ({len(search.front.front)} trials), best score first:"),
                     front_cells(search)]
     section += [Text(f"Top {len(top_trials(search))} complete trials (of equal objectives, the "
-                     "one with fewer CPU s per seed first):"), top_table(search)]
+                     "one on more seeds, then the one with fewer CPU s per seed, first):"),
+                top_table(search)]
     failed = failed_items(search)
     if failed:
         section += [Text(f"Failed trials ({len(failed)}):"), Items(failed)]
