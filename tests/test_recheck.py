@@ -147,8 +147,13 @@ def test_a_search_rechecks_its_leaders_and_picks_by_all_their_seeds(
     assert run_cli("best", "--study-name", "tiny", "--storage", f"sqlite:///{db}",
                    "--name", "picked") == 0
     best_out = capsys.readouterr().out
-    assert f"trial {complete[0].number} of search 'tiny'" in best_out
+    # The pick is named as the search and its leaders name it (its key), not by the number
+    # of the attempt that rechecked it.
+    picked = int(complete[0].user_attrs["key"][1:])
+    assert picked != complete[0].number
+    assert f"trial {picked} of search 'tiny'" in best_out
     assert "over 2 seeds (rechecked)" in best_out
+    assert f"best trial {picked} (" in out
     # A rerun finds its leaders rechecked and the total reached: nothing more runs.
     assert run_cli("optuna", *args) == 0
     assert len(load(db, "tiny").trials) == len(trials)
@@ -221,3 +226,8 @@ def test_the_report_says_over_how_many_seeds_each_top_trial_scored(
     assert top["seeds"].iloc[0] == 3 and set(top["seeds"].iloc[1:]) == {1}
     table = (space / "r" / "tiny" / "top_trials.md").read_text()
     assert "| rank | trial | objective | seeds |" in table
+    # The top trial is named by its key, as the search's leaders name it.
+    key = load(db, "tiny").trials[int(top["number"].iloc[0])].user_attrs["key"]
+    assert f"| 1 | {key[1:]} |" in table
+    pages = [page.read_text() for page in (space / "r").rglob("*.md")]
+    assert any(f"Best: trial {key[1:]}," in page for page in pages)

@@ -28,7 +28,15 @@ from kraby_study.decision.selection import RULES, mean_by_value
 from kraby_study.errors import StoreError
 from kraby_study.records.attributes import SelectRule, StudyAttrs, StudyKind, TrialAttrs
 from kraby_study.records.definition import stored_floor, two_objectives
-from kraby_study.records.stored import Outcome, StoredTrial, Tally, counted, outcome, tally
+from kraby_study.records.stored import (
+    Outcome,
+    StoredTrial,
+    Tally,
+    counted,
+    known_number,
+    outcome,
+    tally,
+)
 from kraby_study.records.values import (
     best_trial,
     param_name,
@@ -99,7 +107,7 @@ def selection_of(ledger: StudyLedger, options: CompareOptions | None = None
     seeds = (f" over {len(held.scores or [])} seeds (rechecked)"
              if held.recheck_of is not None else "")
     return Selection(short=trial_short(trial),
-                     description=f"trial {trial.number} of {attrs.kind or 'study'} "
+                     description=f"trial {known_number(trial)} of {attrs.kind or 'study'} "
                                  f"{ledger.name!r}: score {value:.4g}{seeds} ({params})",
                      settings=trial.user_attrs.get("settings", {}), env_keys=env_keys,
                      steps=trial.user_attrs.get("steps"))
@@ -245,7 +253,7 @@ def sweep_short(attrs: StudyAttrs, chosen: SweepSelection) -> str:
 
 def trial_short(trial: StoredTrial) -> str:
     """A search's best trial in a few words: ``trial 7 (-0.0123)``."""
-    return f"trial {trial.number} ({float(score(trial)):.4g})"  # type: ignore[arg-type]
+    return f"trial {known_number(trial)} ({float(score(trial)):.4g})"  # type: ignore[arg-type]
 
 
 def require_selection(ledger: StudyLedger, options: CompareOptions | None = None

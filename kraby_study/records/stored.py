@@ -113,6 +113,16 @@ def search_key(number: int) -> str:
     return f"t{number}"
 
 
+def known_number(trial: StoredTrial) -> int:
+    """The number a search trial is known by: its first attempt's, read from its key (``t10``),
+    whichever attempt holds it now (a retry, or a recheck on more seeds); a trial without a
+    search key by its own number."""
+    key = trial.user_attrs.get("key")
+    if isinstance(key, str) and key.startswith("t") and key[1:].isdigit():
+        return int(key[1:])
+    return trial.number
+
+
 # Outcomes and which trials count -----------------------------------------------------------------
 
 

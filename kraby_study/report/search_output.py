@@ -10,7 +10,7 @@ import pandas as pd
 
 from kraby_study.answers.search_evidence import Search, front_table, top_trials
 from kraby_study.records.attributes import StudyKind
-from kraby_study.records.stored import Outcome
+from kraby_study.records.stored import Outcome, known_number
 from kraby_study.records.values import score
 from kraby_study.report import search_plots
 from kraby_study.report.document import Block, Heading, Image, Items, Links, Table, Text, write_csvs
@@ -64,10 +64,11 @@ def top_table(search: Search) -> Table:
     header = ["rank", "trial", "objective", "seeds", "CPU s per seed", *search.params,
               "env steps", "time (s)"]
     rows = []
+    known = {t.number: known_number(t) for t in search.data.trials}
     # Records keep each column's type: iterrows would make every cell a float (256.0) when
     # all parameters are numbers, as on a gym env's space.
     for row in top.to_dict("records"):
-        rows.append([str(int(row["rank"])), str(int(row["number"])), _cell(row["value"]),
+        rows.append([str(int(row["rank"])), str(known[int(row["number"])]), _cell(row["value"]),
                      f"{int(row['seeds'])}" if np.isfinite(row["seeds"]) else "-",
                      _cell(row["training_time"]),
                      *[format_param(row[p], search.distributions.get(p)) for p in search.params],
@@ -109,7 +110,7 @@ def verdict(search: Search) -> str:
         return "No trial is complete yet."
     params = ", ".join(f"{p}={format_param(best.params.get(p), search.distributions.get(p))}"
                        for p in search.params if p in best.params)
-    text = f"Best: trial {best.number}, objective {number(float(score(best)))} ({params})."
+    text = f"Best: trial {known_number(best)}, objective {number(float(score(best)))} ({params})."
     if search.front is None or search.front.choice is None:
         return text
     choice = search.front.choice
@@ -128,7 +129,7 @@ def result_text(search: Search) -> str:
     best = search.best
     if best is None:
         return "no complete trial"
-    text = f"best trial {best.number}, objective {number(float(score(best)))}"
+    text = f"best trial {known_number(best)}, objective {number(float(score(best)))}"
     choice = search.front.choice if search.front is not None else None
     return text if choice is None else f"{text}; selected trial {choice.chosen.key}"
 
@@ -230,5 +231,5 @@ def policy_candidates(search: Search) -> list[tuple[str, dict[str, Any], str]]:
         path = trial.user_attrs.get("model_path")
         if isinstance(path, str) and path:
             out.append((path, dict(trial.user_attrs.get("settings") or {}),
-                        f"trial {trial.number} (objective {number(float(score(trial)))})"))
+                        f"trial {known_number(trial)} (objective {number(float(score(trial)))})"))
     return out
