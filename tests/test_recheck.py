@@ -231,3 +231,22 @@ def test_the_report_says_over_how_many_seeds_each_top_trial_scored(
     assert f"| 1 | {key[1:]} |" in table
     pages = [page.read_text() for page in (space / "r").rglob("*.md")]
     assert any(f"Best: trial {key[1:]}," in page for page in pages)
+
+
+def test_exploring_once_ended_for_the_rechecks_does_not_start_again(tmp_path: Path) -> None:
+    from kraby_study.config.compose import compose_config
+    from kraby_study.records.attributes import StudyAttrs
+    from kraby_study.run.search_source import SearchSource
+    from kraby_study.store.store import opened
+
+    cfg = compose_config(["budget=smoke", "search.recheck=2", "search.recheck_seeds=2",
+                          "search.cpu_budget=110", f"storage=sqlite:///{tmp_path}/k.db"])
+    with opened(cfg.storage) as store:
+        source = SearchSource(store.define("s", StudyAttrs(kind="search")), cfg)
+        trials = [_trial(0, [-1.0, -1.0], cpu=30.0), _trial(1, [-2.0, -2.0], cpu=30.0)]
+        # 60 spent + 60 to recheck both: exploring ends.
+        assert source.exploring(trials) is False
+        # t0's recheck has started and used nothing yet: only t1's 30 is reserved now, and
+        # 60 + 30 < 110 would seem to leave room, but the rest of the budget is the rechecks'.
+        running = [*trials, _trial(2, None, key="t0", of=0, state=TrialState.RUNNING)]
+        assert source.exploring(running) is False

@@ -80,6 +80,7 @@ class SearchSource(StudySource):
         self.recheck, self.recheck_seeds = recheck_plan(cfg)
         self._rechecks: dict[int, Any] = {}  # recheck trial -> the trial it rechecks
         self._running: dict[int, float] = {}  # running trial -> CPU s it has used so far
+        self._explored = False  # exploring ended for the rechecks: it does not start again
 
     def spent(self) -> float:
         """CPU seconds the search has used: its ended trials', every attempt counted, what
@@ -106,13 +107,19 @@ class SearchSource(StudySource):
     def exploring(self, trials: list[Any]) -> bool:
         """Whether the search still asks its sampler for new trials: its total is not reached
         and, with rechecks under a CPU budget, what is spent leaves room to recheck today's
-        leaders."""
+        leaders. Once exploring has ended for the rechecks it does not start again in this
+        command: the rest of the budget is the rechecks' (a running recheck's CPU is not
+        reserved once it starts, so room would seem to open while it runs, and a trial
+        explored then could lead at the end on its search seeds alone)."""
         if len(counted(trials)) >= self.total:
             return False
         if self.cpu_budget is None or not self.recheck:
             return True
+        if self._explored:
+            return False
         held = reserve(trials, self.recheck, self.recheck_seeds)
-        return spent_cpu(trials) + self._running_cpu() + held < self.cpu_budget
+        self._explored = spent_cpu(trials) + self._running_cpu() + held >= self.cpu_budget
+        return not self._explored
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
         """Ask for the next trial (a queued retry first, then new ones while exploring, then
