@@ -250,3 +250,15 @@ def test_exploring_once_ended_for_the_rechecks_does_not_start_again(tmp_path: Pa
         # 60 + 30 < 110 would seem to leave room, but the rest of the budget is the rechecks'.
         running = [*trials, _trial(2, None, key="t0", of=0, state=TrialState.RUNNING)]
         assert source.exploring(running) is False
+
+
+def test_a_rechecked_trials_cpu_per_seed_is_over_the_seeds_it_trained() -> None:
+    from kraby_study.records.attributes import TrialAttrs
+
+    # A recheck trained 3 seeds of 20,000 steps in 72 CPU s; its scores hold the trial's 2
+    # seeds too. Its CPU per seed is 24, not 72 / 5.
+    held = TrialAttrs(recheck_of=1, cpu_time=72.0, scores=[500.0] * 5, steps=20_000,
+                      env_steps=60_000)
+    assert held.training_time() == pytest.approx(24.0)
+    assert TrialAttrs(cpu_time=40.0, scores=[500.0] * 2, steps=20_000,
+                      env_steps=40_000).training_time() == pytest.approx(20.0)

@@ -186,6 +186,16 @@ class TrialAttrs(TrialMeasures):
     Gaussian process's fit is dearer than TPE's); part of what the search spends under its
     CPU budget, not of the trial's own cpu_time."""
 
+    def training_time(self) -> float | None:
+        """CPU seconds per seed (:meth:`TrialMeasures.training_time`). A recheck's CPU seconds
+        are its own seeds' (its env steps over the steps a seed), while its scores hold the
+        original trial's too: it is divided by the seeds it trained."""
+        time = super().training_time()
+        if time is None or self.recheck_of is None or not self.steps or not self.env_steps:
+            return time
+        trained = round(self.env_steps / self.steps)
+        return float(self.cpu_time) / trained if trained > 0 else time  # type: ignore[arg-type]
+
     def stored(self) -> dict[str, Any]:
         """The attributes to store: every field that is set."""
         return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
