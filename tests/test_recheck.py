@@ -229,6 +229,22 @@ def test_the_report_says_over_how_many_seeds_each_top_trial_scored(
     # The top trial is named by its key, as the search's leaders name it.
     key = load(db, "tiny").trials[int(top["number"].iloc[0])].user_attrs["key"]
     assert f"| 1 | {key[1:]} |" in table
+    # The CSV files name it so too (trial), beside the attempt that holds it now (number).
+    assert top["trial"].iloc[0] == int(key[1:]) != top["number"].iloc[0]
+    trials = pd.read_csv(space / "r" / "tiny" / "trials.csv")
+    assert list(trials.loc[trials["trial"] == int(key[1:]), "number"]) == [
+        top["number"].iloc[0]]
+    # Its intermediate values, drawn as the best trial's line, are its first attempt's.
+    from kraby_study.answers.search_evidence import build_search
+    from kraby_study.answers.study_data import load_study
+    from kraby_study.report.search_plots import reported
+    from kraby_study.store.store import Store
+
+    search = build_search(load_study(Store(f"sqlite:///{db}"), "tiny"))
+    recheck = next(t for t in search.data.trials if t.number == top["number"].iloc[0])
+    first = load(db, "tiny").trials[int(key[1:])]
+    assert not recheck.intermediate_values and first.intermediate_values
+    assert reported(search, recheck) == first.intermediate_values
     pages = [page.read_text() for page in (space / "r").rglob("*.md")]
     assert any(f"Best: trial {key[1:]}," in page for page in pages)
 
@@ -262,3 +278,17 @@ def test_a_rechecked_trials_cpu_per_seed_is_over_the_seeds_it_trained() -> None:
     assert held.training_time() == pytest.approx(24.0)
     assert TrialAttrs(cpu_time=40.0, scores=[500.0] * 2, steps=20_000,
                       env_steps=40_000).training_time() == pytest.approx(20.0)
+
+
+def test_a_failed_attempt_is_named_by_its_trial_and_attempt() -> None:
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from kraby_study.report.search_output import failed_items
+
+    trials = pd.DataFrame({"number": [4, 9], "trial": [4, 2], "outcome": ["failed", "failed"],
+                           "failure": ["diverged", ""], "gamma": [0.9, 0.95]})
+    search = SimpleNamespace(trials=trials, params=["gamma"], distributions={})
+    assert failed_items(search) == ["trial 4 (gamma=0.9): diverged",  # type: ignore[arg-type]
+                                    "trial 2, attempt 9 (gamma=0.95): failed"]

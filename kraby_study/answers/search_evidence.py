@@ -27,7 +27,7 @@ from kraby_study.decision.comparison import MARGIN, MIN_SEEDS, CompareOptions
 from kraby_study.decision.front import FrontChoice
 from kraby_study.records.attributes import StudyKind, TrialAttrs
 from kraby_study.records.definition import stored_floor, two_objectives
-from kraby_study.records.stored import Outcome, outcome
+from kraby_study.records.stored import Outcome, known_number, outcome
 from kraby_study.records.values import best_trial, cost, ranking, score
 
 TOP = 10
@@ -127,7 +127,10 @@ def importances(maximize: bool, trials: list[FrozenTrial],
 
 def trial_rows(trials: list[FrozenTrial], params: list[str],
                two: bool = False) -> pd.DataFrame:
-    """One row per trial with its outcome, value (its score) and the seeds it is the mean of
+    """One row per trial (``trial``: the number the search knows it by, its first attempt's;
+    ``number``: Optuna's number of the attempt that holds it now, a retry's or a recheck's)
+    with its
+    outcome, value (its score) and the seeds it is the mean of
     (``seeds``: none for a trial that did not complete), costs (``training_time``: CPU s per
     seed of a complete trial) and parameters; with
     ``two`` (a two-objective search) also its cost objective (``cost``, CPU s per seed) and
@@ -141,7 +144,7 @@ def trial_rows(trials: list[FrozenTrial], params: list[str],
         if steps is None and trial.intermediate_values:
             steps = max(trial.intermediate_values)
         rows.append({
-            "number": trial.number, "outcome": state.value,
+            "number": trial.number, "trial": known_number(trial), "outcome": state.value,
             "value": float(score(trial))  # type: ignore[arg-type]
             if state == Outcome.COMPLETE and score(trial) is not None else math.nan,
             # The seeds its score is the mean of: budget.seeds, more for a rechecked trial.
@@ -158,7 +161,7 @@ def trial_rows(trials: list[FrozenTrial], params: list[str],
             **{name: trial.params.get(name) for name in params},
         })
     extra = ["cost", "enqueued"] if two else []
-    frame = pd.DataFrame(rows, columns=["number", "outcome", "value", "seeds", *extra,
+    frame = pd.DataFrame(rows, columns=["number", "trial", "outcome", "value", "seeds", *extra,
                                         "env_steps", "wall_time", "training_time",
                                         "pruned_at", "failure", *params])
     for column in ("seeds", "env_steps", "wall_time", "training_time", "pruned_at",
@@ -237,5 +240,5 @@ def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:
     order = sorted(done["number"], key=lambda n: ranking(by_number[n], search.maximize))
     done = done.set_index("number", drop=False).loc[order[:count]].reset_index(drop=True)
     return done.drop(columns=["outcome", "pruned_at", "failure"]).assign(
-        rank=range(1, len(done) + 1))[["rank", "number", "value", "seeds", "training_time",
+        rank=range(1, len(done) + 1))[["rank", "trial", "number", "value", "seeds", "training_time",
                                        *search.params, "env_steps", "wall_time"]]

@@ -36,6 +36,9 @@ class StudyData:
             mean_reward, wall_time, episodes``.
         planned: Planned number of runs (or trials), if the store says.
         replaced: Attempts that a later attempt superseded (not results).
+        rechecked: For each counted recheck (a search trial retrained on more seeds), the
+            attempt it rechecked, by the recheck's number: the checkpoints its first seeds
+            reported are that attempt's (a recheck reports none).
         provenance: What made its trials: each distinct provenance record, by key.
         source_seeds: A confirm study's source's seeds (the tuning seeds), None when it has
             no source or the source is not in the store.
@@ -52,6 +55,7 @@ class StudyData:
     curves: pd.DataFrame
     planned: int | None = None
     replaced: int = 0
+    rechecked: dict[int, FrozenTrial] = field(default_factory=dict)
     provenance: dict[str, dict[str, str]] = field(default_factory=dict)
     source_seeds: list[int] | None = None
     source_legs: set[int] | None = None
@@ -87,9 +91,13 @@ def load_study(store: Store, name: str) -> StudyData:
     every = ledger.trials()
     trials = counted(every)
     curves = ledger.curves([t.number for t in trials])
+    by_number = {t.number: t for t in every}
+    rechecked = {t.number: by_number[int(t.user_attrs["recheck_of"])] for t in trials
+                 if int(t.user_attrs.get("recheck_of", -1)) in by_number}
     return StudyData(name=name, kind=kind, ledger=ledger, definition=dict(attrs.definition),
                      trials=trials, curves=curves, planned=attrs.planned,
-                     replaced=len(every) - len(trials), provenance=ledger.provenances(),
+                     replaced=len(every) - len(trials), rechecked=rechecked,
+                     provenance=ledger.provenances(),
                      **_source(store, kind, attrs.definition))
 
 

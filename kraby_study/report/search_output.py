@@ -37,7 +37,8 @@ CAPTIONS = {
     "slices": "Objective against each parameter, one point per complete trial, coloured by "
               "trial number.",
     "intermediate": "Values reported at checkpoints; pruned trials stop where the pruner "
-                    "stopped them (x).",
+                    "stopped them (x); a rechecked trial's line is its first seeds' (its "
+                    "recheck reports none).",
     "parallel": "Every complete trial as a line through its parameters and its objective.",
 }
 SEED_SCORES_CAPTION = ("Each seed's final score, at the env steps where that seed ends (the "
@@ -64,11 +65,10 @@ def top_table(search: Search) -> Table:
     header = ["rank", "trial", "objective", "seeds", "CPU s per seed", *search.params,
               "env steps", "time (s)"]
     rows = []
-    known = {t.number: known_number(t) for t in search.data.trials}
     # Records keep each column's type: iterrows would make every cell a float (256.0) when
     # all parameters are numbers, as on a gym env's space.
     for row in top.to_dict("records"):
-        rows.append([str(int(row["rank"])), str(known[int(row["number"])]), _cell(row["value"]),
+        rows.append([str(int(row["rank"])), str(int(row["trial"])), _cell(row["value"]),
                      f"{int(row['seeds'])}" if np.isfinite(row["seeds"]) else "-",
                      _cell(row["training_time"]),
                      *[format_param(row[p], search.distributions.get(p)) for p in search.params],
@@ -79,13 +79,16 @@ def top_table(search: Search) -> Table:
 
 
 def failed_items(search: Search) -> list[str]:
-    """One line per failed trial: number, parameters, reason."""
+    """One line per failed trial: number (and attempt, when a retry or recheck failed),
+    parameters, reason."""
     failed = search.trials[search.trials["outcome"] == Outcome.FAILED]
     items = []
     for _, row in failed.iterrows():
         params = ", ".join(f"{p}={format_param(row[p], search.distributions.get(p))}"
                            for p in search.params)
-        items.append(f"trial {row['number']} ({params}): {row['failure'] or 'failed'}")
+        name = (f"trial {row['trial']}" if row["trial"] == row["number"]
+                else f"trial {row['trial']}, attempt {row['number']}")
+        items.append(f"{name} ({params}): {row['failure'] or 'failed'}")
     return items
 
 

@@ -17,10 +17,11 @@ from matplotlib.collections import LineCollection
 from matplotlib.colors import Normalize
 from matplotlib.lines import Line2D
 from optuna.distributions import BaseDistribution, CategoricalDistribution
+from optuna.trial import FrozenTrial
 
 from kraby_study.answers.search_evidence import Search
 from kraby_study.records.attributes import StudyKind
-from kraby_study.records.stored import Outcome
+from kraby_study.records.stored import Outcome, known_number
 from kraby_study.report.search_format import is_log, numeric_array
 from kraby_study.report.style import (
     BEST_COLOUR,
@@ -134,6 +135,15 @@ def slices(search: Search, path: Path) -> Path:
     return save(fig, path)
 
 
+def reported(search: Search, trial: FrozenTrial) -> dict[int, float]:
+    """The values a trial reported at its checkpoints; a recheck's are those of the attempt
+    it rechecked (the trial's first seeds), as a recheck reports none of its own."""
+    original = search.data.rechecked.get(trial.number)
+    if not trial.intermediate_values and original is not None:
+        return dict(original.intermediate_values)
+    return dict(trial.intermediate_values)
+
+
 def intermediate(search: Search, path: Path) -> Path:
     """Reported values against steps; pruned trials end where they were stopped."""
     fig, (ax,) = new_figure(SINGLE)
@@ -143,10 +153,10 @@ def intermediate(search: Search, path: Path) -> Path:
     states = dict(zip(search.trials["number"], search.trials["outcome"], strict=True))
     for trial in search.data.trials:
         state = states[trial.number]
-        if state not in groups or not trial.intermediate_values:
+        values = reported(search, trial)
+        if state not in groups or not values:
             continue
-        steps = sorted(trial.intermediate_values)
-        line = np.array([[s, trial.intermediate_values[s]] for s in steps], dtype=float)
+        line = np.array([[s, values[s]] for s in sorted(values)], dtype=float)
         groups[state].append(line)
         if state == Outcome.PRUNED:
             ends.append(line[-1])
@@ -161,12 +171,12 @@ def intermediate(search: Search, path: Path) -> Path:
                       label=f"complete ({len(groups['complete'])})"),
                Line2D([], [], color=PRUNED_COLOUR, marker="x",
                       label=f"pruned ({len(groups['pruned'])}), x = stopped")]
-    if best is not None and best.intermediate_values:
-        steps = sorted(best.intermediate_values)
-        ax.plot(steps, [best.intermediate_values[s] for s in steps], color=BEST_COLOUR,
+    if best is not None and reported(search, best):
+        values = reported(search, best)
+        ax.plot(sorted(values), [values[s] for s in sorted(values)], color=BEST_COLOUR,
                 linewidth=2.2, zorder=4)
         handles.append(Line2D([], [], color=BEST_COLOUR, linewidth=2.2,
-                              label=f"best trial ({best.number})"))
+                              label=f"best trial ({known_number(best)})"))
     ax.autoscale_view()
     if search.data.kind == StudyKind.SEARCH:
         ax.set_xlabel("environment steps")
