@@ -129,9 +129,8 @@ def trial_rows(trials: list[FrozenTrial], params: list[str],
                two: bool = False) -> pd.DataFrame:
     """One row per trial (``trial``: the number the search knows it by, its first attempt's;
     ``number``: Optuna's number of the attempt that holds it now, a retry's or a recheck's)
-    with its
-    outcome, value (its score) and the seeds it is the mean of
-    (``seeds``: none for a trial that did not complete), costs (``training_time``: CPU s per
+    with its outcome, value (its score) and the seeds it is the mean of (``seeds``: none for
+    a trial that did not complete), costs (``training_time``: CPU s per
     seed of a complete trial) and parameters; with
     ``two`` (a two-objective search) also its cost objective (``cost``, CPU s per seed) and
     the configuration it was enqueued as (``enqueued``)."""
