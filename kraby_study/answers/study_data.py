@@ -13,7 +13,7 @@ import pandas as pd
 from optuna.trial import FrozenTrial
 
 from kraby_study.errors import StoreError
-from kraby_study.records.attributes import StudyKind
+from kraby_study.records.attributes import StudyKind, TrialAttrs
 from kraby_study.records.definition import LEGACY_SEEDING, stored_seeding
 from kraby_study.records.stored import Tally, counted, offset_leg_seeds, tally, trial_seeds
 from kraby_study.store.ledger import StudyLedger
@@ -92,8 +92,8 @@ def load_study(store: Store, name: str) -> StudyData:
     trials = counted(every)
     curves = ledger.curves([t.number for t in trials])
     by_number = {t.number: t for t in every}
-    rechecked = {t.number: by_number[int(t.user_attrs["recheck_of"])] for t in trials
-                 if int(t.user_attrs.get("recheck_of", -1)) in by_number}
+    rechecked = {t.number: by_number[of] for t in trials
+                 if (of := TrialAttrs.of(t).recheck_of) is not None and of in by_number}
     return StudyData(name=name, kind=kind, ledger=ledger, definition=dict(attrs.definition),
                      trials=trials, curves=curves, planned=attrs.planned,
                      replaced=len(every) - len(trials), rechecked=rechecked,

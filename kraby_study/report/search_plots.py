@@ -171,8 +171,8 @@ def intermediate(search: Search, path: Path) -> Path:
                       label=f"complete ({len(groups['complete'])})"),
                Line2D([], [], color=PRUNED_COLOUR, marker="x",
                       label=f"pruned ({len(groups['pruned'])}), x = stopped")]
-    if best is not None and reported(search, best):
-        values = reported(search, best)
+    values = reported(search, best) if best is not None else {}
+    if best is not None and values:
         ax.plot(sorted(values), [values[s] for s in sorted(values)], color=BEST_COLOUR,
                 linewidth=2.2, zorder=4)
         handles.append(Line2D([], [], color=BEST_COLOUR, linewidth=2.2,
