@@ -13,7 +13,16 @@ from optuna.trial import TrialState, create_trial
 
 from kraby_study.records.attributes import TrialResult
 from kraby_study.records.stored import Outcome
-from kraby_study.run.recheck import combined, first_seed, leaders, next_recheck, reserve
+from kraby_study.run.recheck import (
+    combined,
+    cpu_per_step,
+    first_seed,
+    leaders,
+    next_recheck,
+    reserve,
+    to_spend,
+    trial_cpu,
+)
 
 SPACE = """\
 name: tiny
@@ -32,9 +41,11 @@ params:
 
 
 def _trial(number: int, scores: list[float] | None, *, key: str | None = None,
-           of: int | None = None, cpu: float = 10.0, seed: int = 0,
+           of: int | None = None, cpu: float = 10.0, seed: int = 0, steps: int | None = None,
            state: TrialState = TrialState.COMPLETE) -> optuna.trial.FrozenTrial:
-    attrs = {"key": key or f"t{number}", "seed": seed, "cpu_time": cpu}
+    attrs: dict[str, object] = {"key": key or f"t{number}", "seed": seed, "cpu_time": cpu}
+    if steps is not None:
+        attrs["env_steps"] = steps
     if scores is not None:
         attrs["scores"] = scores
     if of is not None:
@@ -192,7 +203,7 @@ def test_a_recheck_that_cannot_run_is_refused_before_anything_runs(
     assert not (workdir / "studies").exists()
 
 
-@pytest.mark.parametrize("budget,exploring", [(130.0, True), (110.0, False), (None, True)])
+@pytest.mark.parametrize("budget,exploring", [(160.0, True), (140.0, False), (None, True)])
 def test_exploring_stops_when_what_is_left_pays_for_the_rechecks(
         tmp_path: Path, budget: float | None, exploring: bool) -> None:
     from kraby_study.config.compose import compose_config
@@ -205,7 +216,8 @@ def test_exploring_stops_when_what_is_left_pays_for_the_rechecks(
                           f"storage=sqlite:///{tmp_path}/k.db"])
     with opened(cfg.storage) as store:
         source = SearchSource(store.define("s", StudyAttrs(kind="search")), cfg)
-        # 60 CPU s spent; rechecking the two leaders on 2 more seeds each costs 2 x 30 more.
+        # 60 CPU s spent, a new trial expected to use 30 (the ended ones' mean), and
+        # rechecking the two leaders on 2 more seeds each costs 2 x 30 more.
         trials = [_trial(0, [-1.0, -1.0], cpu=30.0), _trial(1, [-2.0, -2.0], cpu=30.0)]
         assert source.exploring(trials) is exploring
         # Once the total is reached, exploring ends whatever the budget.
@@ -292,3 +304,55 @@ def test_a_failed_attempt_is_named_by_its_trial_and_attempt() -> None:
     search = SimpleNamespace(trials=trials, params=["gamma"], distributions={})
     assert failed_items(search) == ["trial 4 (gamma=0.9): diverged",  # type: ignore[arg-type]
                                     "trial 2, attempt 9 (gamma=0.95): failed"]
+
+
+def test_a_running_trial_could_still_use_its_steps_left_at_its_own_pace_or_the_searchs()\
+        -> None:
+    # 10 % trained or more: its own pace (0.2 CPU s a step) over the 1,600 steps left.
+    assert to_spend(400, 2000, 80.0, rate=0.015) == pytest.approx(320.0)
+    # Less: its start would inflate its own pace, so the search's ended trials' pace.
+    assert to_spend(100, 2000, 20.0, rate=0.015) == pytest.approx(28.5)
+    # No ended trial to learn from: its own pace; nothing trained yet: the search's pace.
+    assert to_spend(100, 2000, 20.0, rate=None) == pytest.approx(380.0)
+    assert to_spend(0, 2000, 0.0, rate=0.015) == pytest.approx(30.0)
+    assert to_spend(0, 2000, 0.0, rate=None) == 0.0 == to_spend(2000, 2000, 9.0, rate=0.1)
+
+
+def test_a_new_trial_is_expected_to_use_what_the_explored_ones_used() -> None:
+    trials = [_trial(0, [-1.0], cpu=30.0, steps=2000), _trial(1, [-2.0], cpu=10.0, steps=500),
+              _trial(2, None, cpu=5.0, steps=1000, state=TrialState.PRUNED),
+              _trial(3, [-1.0, -1.0], key="t0", of=0, cpu=90.0, steps=2000)]
+    # Paces 0.015, 0.02, 0.005 and 0.045 CPU s a step: the median of all four.
+    assert cpu_per_step(trials) == pytest.approx(0.0175)
+    # The recheck (t3) is not a new trial's kind: the mean of the three explored.
+    assert trial_cpu(trials) == pytest.approx(15.0)
+    assert cpu_per_step([_trial(0, [-1.0])]) is None and trial_cpu([]) == 0.0
+
+
+def test_a_dear_running_trial_ends_exploring_before_it_takes_the_rechecks_share(
+        tmp_path: Path) -> None:
+    from kraby_study.config.compose import compose_config
+    from kraby_study.records.attributes import StudyAttrs
+    from kraby_study.run.search_source import SearchSource
+    from kraby_study.store.store import opened
+
+    cfg = compose_config(["budget=smoke", "budget.seeds=2", "search.recheck=2",
+                          "search.recheck_seeds=2", "search.cpu_budget=300",
+                          "save_models=false", f"storage=sqlite:///{tmp_path}/k.db"])
+    with opened(cfg.storage) as store:
+        source = SearchSource(store.define("s", StudyAttrs(kind="search")), cfg)
+        claimed = source.next_trial()
+        assert claimed is not None
+        number, spec = claimed
+        total = spec.steps * spec.seeds
+        # Two ended trials: 60 CPU s spent at 0.015 a step, 30 to recheck each.
+        ended = [_trial(0, [-1.0, -1.0], cpu=30.0, steps=2000),
+                 _trial(1, [-2.0, -2.0], cpu=30.0, steps=2000)]
+        # Early in the running trial, the search's pace projects it: room for more.
+        source.using(number, total // 20, 20.0)
+        assert source.exploring(ended) is True
+        # A fifth of the way in after 100 CPU s, it could use 400 more, the rechecks' share:
+        # exploring ends (counting only what it has used so far, 60 + 100 + 60 < 300, it
+        # would go on, and the rechecks find the budget used when it ends).
+        source.using(number, total // 5, 100.0)
+        assert source.exploring(ended) is False

@@ -77,7 +77,7 @@ class FakeSource:
         self.checkpoints.append((number, step, value))
         return self.answers.get(number, True)
 
-    def using(self, number: int, cpu: float) -> None:
+    def using(self, number: int, steps: int, cpu: float) -> None:
         self.cpu[number] = cpu
 
     def record(self, number: int, spec: TrialSpec, result: TrialResult) -> None:

@@ -289,10 +289,10 @@ def test_a_cpu_budget_counts_what_the_running_trials_have_used(tmp_path: Path) -
         source = SearchSource(store.define("s", StudyAttrs(kind="search")), cfg)
         first = source.next_trial()
         assert first is not None
-        source.using(first[0], 60.0)
+        source.using(first[0], 100, 60.0)
         second = source.next_trial()  # 60 of 100 used
         assert second is not None
-        source.using(second[0], 45.0)
+        source.using(second[0], 100, 45.0)
         # What asking the sampler cost counts too (a small part here).
         asked = sum(t.user_attrs["suggest_cpu"] for t in source.ledger.trials())
         assert 0 < asked < 1

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import statistics
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -70,6 +71,38 @@ def reserve(trials: Sequence[FrozenTrial], count: int, seeds: int) -> float:
             attrs = TrialAttrs.of(lead.trial)
             total += float(attrs.cpu_time or 0.0) / max(1, len(attrs.scores or [])) * seeds
     return total
+
+
+OWN_RATE_FROM = 0.1
+"""Fraction of its env steps after which a running trial's own CPU seconds per step project
+the rest of it; before, its start (making the env and the network) would inflate them."""
+
+
+def cpu_per_step(trials: Sequence[FrozenTrial]) -> float | None:
+    """The median CPU seconds per env step of the ended attempts that trained any; None
+    when none has."""
+    rates = [float(a.cpu_time) / a.env_steps for a in map(TrialAttrs.of, trials)
+             if a.cpu_time is not None and a.env_steps]
+    return statistics.median(rates) if rates else None
+
+
+def to_spend(done: int, total: int, cpu: float, rate: float | None) -> float:
+    """CPU seconds a running trial would still use to train its ``total`` env steps, having
+    trained ``done`` of them in ``cpu`` seconds: at its own pace once it has trained
+    :data:`OWN_RATE_FROM` of them, before that at ``rate`` (the search's ended trials' pace;
+    its own when there is none). A pruner may stop it sooner, so this is what it could use,
+    not what it will."""
+    own = cpu / done if done > 0 else None
+    pace = own if own is not None and (done >= OWN_RATE_FROM * total or rate is None) else rate
+    return (pace or 0.0) * max(0, total - done)
+
+
+def trial_cpu(trials: Sequence[FrozenTrial]) -> float:
+    """The mean CPU seconds of the search's ended attempts that explored (complete, pruned or
+    failed; rechecks left out): what a new trial is expected to use. 0 when none has ended."""
+    used = [float(a.cpu_time) for a in map(TrialAttrs.of, trials)
+            if a.cpu_time is not None and a.recheck_of is None]
+    return statistics.fmean(used) if used else 0.0
 
 
 def first_seed(original: FrozenTrial) -> int:

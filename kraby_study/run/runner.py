@@ -41,8 +41,9 @@ class TrialSource(Protocol):
     def checkpoint(self, number: int, step: int, value: float) -> bool:
         """Record an intermediate value; False prunes the trial."""
 
-    def using(self, number: int, cpu: float) -> None:
-        """Note the CPU seconds a running trial has used so far."""
+    def using(self, number: int, steps: int, cpu: float) -> None:
+        """Note the env steps a running trial has trained and the CPU seconds it has used so
+        far."""
 
     def record(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
         """Store a finished trial."""
@@ -171,7 +172,7 @@ class _Run:
 
     def on_progress(self, event: Event, spec: TrialSpec) -> None:
         step, cpu = event.payload
-        self.source.using(event.number, float(cpu))
+        self.source.using(event.number, int(step), float(cpu))
         self.progress.step(spec.label, int(step))
 
     def on_checkpoint(self, event: Event, spec: TrialSpec) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any, TextIO
 
 from omegaconf import DictConfig
@@ -33,7 +33,16 @@ from kraby_study.records.stored import Failure, Outcome, counted, failure, searc
 from kraby_study.records.values import value_label
 from kraby_study.run.executor import Executor
 from kraby_study.run.progress import Progress
-from kraby_study.run.recheck import combined, first_seed, leaders, next_recheck, reserve
+from kraby_study.run.recheck import (
+    combined,
+    cpu_per_step,
+    first_seed,
+    leaders,
+    next_recheck,
+    reserve,
+    to_spend,
+    trial_cpu,
+)
 from kraby_study.run.runner import CommandRun, Retrying, run_trials
 from kraby_study.run.sampling import directions, distributions, make_pruner, make_sampler
 from kraby_study.run.source import StudySource, requeue_orphans
@@ -68,6 +77,18 @@ def _rounded(value: Any) -> Any:
     return rounded
 
 
+@dataclass(frozen=True)
+class Use:
+    """What a trial this command runs has used so far, and of what."""
+
+    total: int
+    """Env steps it trains if nothing stops it (its steps times its seeds)."""
+    done: int = 0
+    """Env steps it has trained."""
+    cpu: float = 0.0
+    """CPU seconds it has used."""
+
+
 class SearchSource(StudySource):
     """Asks the sampler for trials until the study holds its total; prunes at checkpoints."""
 
@@ -79,7 +100,7 @@ class SearchSource(StudySource):
         self.space = distributions(cfg)
         self.recheck, self.recheck_seeds = recheck_plan(cfg)
         self._rechecks: dict[int, Any] = {}  # recheck trial -> the trial it rechecks
-        self._running: dict[int, float] = {}  # running trial -> CPU s it has used so far
+        self._running: dict[int, Use] = {}  # trial this command runs -> what it has used
         self._explored = False  # exploring ended for the rechecks: it does not start again
 
     def spent(self) -> float:
@@ -90,11 +111,20 @@ class SearchSource(StudySource):
 
     def _running_cpu(self) -> float:
         """CPU seconds the trials this command runs have used so far."""
-        return sum(self._running.values())
+        return sum(use.cpu for use in self._running.values())
 
-    def using(self, number: int, cpu: float) -> None:
-        """Note the CPU seconds a running trial has used so far."""
-        self._running[number] = cpu
+    def _to_spend(self, trials: list[Any]) -> float:
+        """CPU seconds the trials this command runs could still use, each trained to its
+        last env step (:func:`~kraby_study.run.recheck.to_spend`)."""
+        rate = cpu_per_step(trials)
+        return sum(to_spend(use.done, use.total, use.cpu, rate)
+                   for use in self._running.values())
+
+    def using(self, number: int, steps: int, cpu: float) -> None:
+        """Note the env steps a running trial has trained and the CPU seconds it has used so
+        far."""
+        if number in self._running:
+            self._running[number] = replace(self._running[number], done=steps, cpu=cpu)
 
     def over_budget(self) -> bool:
         """Whether the search has used its CPU budget (never without one)."""
@@ -106,11 +136,15 @@ class SearchSource(StudySource):
 
     def exploring(self, trials: list[Any]) -> bool:
         """Whether the search still asks its sampler for new trials: its total is not reached
-        and, with rechecks under a CPU budget, what is spent leaves room to recheck today's
-        leaders. Once exploring has ended for the rechecks it does not start again in this
-        command: the rest of the budget is the rechecks' (a running recheck's CPU is not
-        reserved once it starts, so room would seem to open while it runs, and a trial
-        explored then could lead at the end on its search seeds alone)."""
+        and, with rechecks under a CPU budget, the budget holds what is spent, what the
+        running trials could still use (each to its last step), what a new trial is expected
+        to use (the mean of the ended ones) and the rechecks of today's leaders, so a trial
+        started now does not take the rechecks' share. Once exploring has ended for the
+        rechecks it does not start again in this command: the rest of the budget is the
+        rechecks' (a running recheck's CPU is not reserved once it starts, so room would seem
+        to open while it runs, and a trial explored then could lead at the end on its search
+        seeds alone). A trial dearer than expected, or one another machine runs, can still
+        leave the last rechecks unpaid."""
         if len(counted(trials)) >= self.total:
             return False
         if self.cpu_budget is None or not self.recheck:
@@ -118,7 +152,9 @@ class SearchSource(StudySource):
         if self._explored:
             return False
         held = reserve(trials, self.recheck, self.recheck_seeds)
-        self._explored = spent_cpu(trials) + self._running_cpu() + held >= self.cpu_budget
+        coming = self._to_spend(trials) + trial_cpu(trials)
+        self._explored = (spent_cpu(trials) + self._running_cpu() + coming + held
+                          >= self.cpu_budget)
         return not self._explored
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
@@ -161,6 +197,7 @@ class SearchSource(StudySource):
             self.ledger.set_attrs(number, TrialAttrs(
                 key=spec.key, seed=spec.seed, settings=spec.settings, steps=spec.steps,
                 model_path=spec.model_path))
+            self._running[number] = Use(total=spec.steps * spec.seeds)
             return number, spec
 
     def _spec(self, key: str, trial_cfg: DictConfig, params: dict[str, Any]) -> TrialSpec:

@@ -43,9 +43,9 @@ class StudySource:
         """Record an intermediate value; False prunes the trial (sweeps never prune)."""
         return True
 
-    def using(self, number: int, cpu: float) -> None:
-        """Note the CPU seconds a running trial has used so far (only a search under a CPU
-        budget counts them)."""
+    def using(self, number: int, steps: int, cpu: float) -> None:
+        """Note the env steps a running trial has trained and the CPU seconds it has used so
+        far (only a search under a CPU budget counts them)."""
 
     def running_elsewhere(self) -> bool:
         """Whether other commands still run trials that could come back (PostgreSQL)."""
