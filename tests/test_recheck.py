@@ -13,16 +13,8 @@ from optuna.trial import TrialState, create_trial
 
 from kraby_study.records.attributes import TrialResult
 from kraby_study.records.stored import Outcome
-from kraby_study.run.recheck import (
-    combined,
-    cpu_per_step,
-    first_seed,
-    leaders,
-    next_recheck,
-    reserve,
-    to_spend,
-    trial_cpu,
-)
+from kraby_study.run import recheck as costs
+from kraby_study.run.recheck import combined, first_seed, leaders, next_recheck, reserve
 
 SPACE = """\
 name: tiny
@@ -309,13 +301,14 @@ def test_a_failed_attempt_is_named_by_its_trial_and_attempt() -> None:
 def test_a_running_trial_could_still_use_its_steps_left_at_its_own_pace_or_the_searchs()\
         -> None:
     # 10 % trained or more: its own pace (0.2 CPU s a step) over the 1,600 steps left.
-    assert to_spend(400, 2000, 80.0, rate=0.015) == pytest.approx(320.0)
+    assert costs.to_spend(400, 2000, 80.0, rate=0.015) == pytest.approx(320.0)
     # Less: its start would inflate its own pace, so the search's ended trials' pace.
-    assert to_spend(100, 2000, 20.0, rate=0.015) == pytest.approx(28.5)
+    assert costs.to_spend(100, 2000, 20.0, rate=0.015) == pytest.approx(28.5)
     # No ended trial to learn from: its own pace; nothing trained yet: the search's pace.
-    assert to_spend(100, 2000, 20.0, rate=None) == pytest.approx(380.0)
-    assert to_spend(0, 2000, 0.0, rate=0.015) == pytest.approx(30.0)
-    assert to_spend(0, 2000, 0.0, rate=None) == 0.0 == to_spend(2000, 2000, 9.0, rate=0.1)
+    assert costs.to_spend(100, 2000, 20.0, rate=None) == pytest.approx(380.0)
+    assert costs.to_spend(0, 2000, 0.0, rate=0.015) == pytest.approx(30.0)
+    assert costs.to_spend(0, 2000, 0.0, rate=None) == 0.0
+    assert costs.to_spend(2000, 2000, 9.0, rate=0.1) == 0.0
 
 
 def test_a_new_trial_is_expected_to_use_what_the_explored_ones_used() -> None:
@@ -323,10 +316,10 @@ def test_a_new_trial_is_expected_to_use_what_the_explored_ones_used() -> None:
               _trial(2, None, cpu=5.0, steps=1000, state=TrialState.PRUNED),
               _trial(3, [-1.0, -1.0], key="t0", of=0, cpu=90.0, steps=2000)]
     # Paces 0.015, 0.02, 0.005 and 0.045 CPU s a step: the median of all four.
-    assert cpu_per_step(trials) == pytest.approx(0.0175)
+    assert costs.cpu_per_step(trials) == pytest.approx(0.0175)
     # The recheck (t3) is not a new trial's kind: the mean of the three explored.
-    assert trial_cpu(trials) == pytest.approx(15.0)
-    assert cpu_per_step([_trial(0, [-1.0])]) is None and trial_cpu([]) == 0.0
+    assert costs.trial_cpu(trials) == pytest.approx(15.0)
+    assert costs.cpu_per_step([_trial(0, [-1.0])]) is None and costs.trial_cpu([]) == 0.0
 
 
 def test_a_dear_running_trial_ends_exploring_before_it_takes_the_rechecks_share(
