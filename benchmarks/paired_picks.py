@@ -21,7 +21,10 @@ With both arms stored it also prints what the same work cost in each arm's searc
 two searches of a sampler seed began with the same trial 0 (the same settings and seeds,
 scored alike to the bit, as with ``--enqueue zoo``), its CPU seconds in each, and the first
 over the second. A CPU budget buys more trials where a CPU second does more work, so a ratio
-far from 1 says the pair's arms did not get equal budgets in work.
+far from 1 says the pair's arms did not get equal budgets in work. It then compares the
+picks' CPU seconds a run in their confirms: the first over the second, geometric mean over the
+pairs, and the exact one-sided Wilcoxon signed-rank p that the first's are cheaper (on the log
+ratios; a pair whose two picks are the same settings is a tie).
 
 The last line reads ``paired_picks: first - second D (median m; 95 % t CI [lo, hi]); Wilcoxon
 p P (n N, Z zero)``.
@@ -30,6 +33,7 @@ p P (n N, Z zero)``.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import statistics
 import sys
@@ -53,6 +57,37 @@ def arm_means(storage: str, name: str, seeds: list[int]) -> list[float]:
             raise SystemExit(f"paired_picks: {confirm} has no complete run")
         means.append(round(statistics.fmean(scores), 1))
     return means
+
+
+def arm_costs(storage: str, name: str, seeds: list[int]) -> list[tuple[float, str]]:
+    """Arm NAME's pick at each sampler seed: its confirm's mean CPU s a run, and its settings
+    (as the confirm's first run stored them), which tell two arms' same pick."""
+    costs = []
+    for seed in seeds:
+        confirm = f"{name}-s{seed}-confirm"
+        _, cpu = read_confirm(storage, confirm)
+        study = optuna.load_study(study_name=confirm, storage=storage)
+        settings = next((t.user_attrs.get("settings") for t in study.get_trials(deepcopy=False)),
+                        None)
+        costs.append((cpu, json.dumps(settings, sort_keys=True)))
+    return costs
+
+
+def print_costs(seeds: list[int], first: list[tuple[float, str]],
+                second: list[tuple[float, str]]) -> None:
+    """The picks' CPU s a run in each pair, the first over the second (geometric mean), and
+    the exact one-sided Wilcoxon signed-rank p that the first's picks are cheaper (on the
+    log of each ratio; a pair that picked the same settings is a tie, dropped)."""
+    ratios = [a / b for (a, _), (b, _) in zip(first, second, strict=True)]
+    logs = [0.0 if same_a == same_b else math.log(r)
+            for r, (_, same_a), (_, same_b) in zip(ratios, first, second, strict=True)]
+    pairs = ", ".join(f"seed {seed} {a:.1f} / {b:.1f}"
+                      for seed, (a, _), (b, _) in zip(seeds, first, second, strict=True))
+    p, n = signed_rank(logs, "less")
+    print(f"The picks' CPU s a run, first / second: {pairs}; first over second: geometric "
+          f"mean {statistics.geometric_mean(ratios):.2f}; exact one-sided Wilcoxon "
+          f"signed-rank p {p:.3g} that the first's are cheaper (n {n}, "
+          f"{len(logs) - n} same pick)")
 
 
 def first_trial(storage: str, name: str, seed: int) -> optuna.trial.FrozenTrial | None:
@@ -136,6 +171,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {seed} | {a:.1f} | {b:.1f} | {signed(d)} |")
     if args.first and args.second:
         print_work_rates(work_rates(args.storage, args.first, args.second, args.seeds))
+        print_costs(args.seeds, arm_costs(args.storage, args.first, args.seeds),
+                    arm_costs(args.storage, args.second, args.seeds))
     if args.margin is not None:
         p_margin, n_margin = signed_rank([d + args.margin for d in differences], "greater")
         print(f"Not worse by more than {args.margin:g}: exact one-sided Wilcoxon signed-rank "

@@ -300,13 +300,21 @@ def test_paired_picks_shows_what_the_same_work_cost_in_each_arm(
         study = optuna.create_study(study_name=f"{arm}-s{seed}", storage=url)
         study.add_trial(optuna.trial.create_trial(value=2.0, user_attrs={**attrs, "cpu_time": cpu}))
         confirm = optuna.create_study(study_name=f"{arm}-s{seed}-confirm", storage=url)
+        # The picks: the same settings at seed 0, other settings in b at seed 1.
+        picked = {"gamma": 0.9 if (arm, seed) == ("b", 1) else 0.99}
         confirm.add_trial(optuna.trial.create_trial(
-            value=2.0, user_attrs={"seed": 1000, "final_score": 2.0, "cpu_time": cpu}))
+            value=2.0, user_attrs={"seed": 1000, "final_score": 2.0, "cpu_time": cpu,
+                                   "settings": picked}))
     assert _benchmark("paired_picks").main(  # type: ignore[attr-defined]
         ["--seeds", "0", "1", "--first", "a", "--second", "b", "--storage", url]) == 0
+    out = capsys.readouterr().out
     assert ("The same work (trial 0) in each pair's searches, CPU s first / second: seed 0 30 / "
-            "20; first over second: geometric mean 1.50 (1.50 to 1.50, 1 pair)"
-            ) in capsys.readouterr().out
+            "20; first over second: geometric mean 1.50 (1.50 to 1.50, 1 pair)") in out
+    # The picks' costs: seed 0's confirms are the same settings (a tie, though 1.5 times the
+    # CPU), seed 1's are not; geometric mean of 1.5 and 3.0.
+    assert ("The picks' CPU s a run, first / second: seed 0 30.0 / 20.0, seed 1 30.0 / 10.0; "
+            "first over second: geometric mean 2.12; exact one-sided Wilcoxon signed-rank p 1 "
+            "that the first's are cheaper (n 1, 1 same pick)") in out
 
 
 def test_paired_picks_refuses_means_that_do_not_match_the_seeds(
