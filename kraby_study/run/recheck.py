@@ -97,14 +97,6 @@ def to_spend(done: int, total: int, cpu: float, rate: float | None) -> float:
     return (pace or 0.0) * max(0, total - done)
 
 
-def trial_cpu(trials: Sequence[FrozenTrial]) -> float:
-    """The mean CPU seconds of the search's ended attempts that explored (complete, pruned or
-    failed; rechecks left out): what a new trial is expected to use. 0 when none has ended."""
-    used = [float(a.cpu_time) for a in map(TrialAttrs.of, trials)
-            if a.cpu_time is not None and a.recheck_of is None]
-    return statistics.fmean(used) if used else 0.0
-
-
 def first_seed(original: FrozenTrial) -> int:
     """The first seed a recheck of ``original`` trains: the one after the trial's own."""
     attrs = TrialAttrs.of(original)

@@ -41,7 +41,6 @@ from kraby_study.run.recheck import (
     next_recheck,
     reserve,
     to_spend,
-    trial_cpu,
 )
 from kraby_study.run.runner import CommandRun, Retrying, run_trials
 from kraby_study.run.sampling import directions, distributions, make_pruner, make_sampler
@@ -137,14 +136,14 @@ class SearchSource(StudySource):
     def exploring(self, trials: list[Any]) -> bool:
         """Whether the search still asks its sampler for new trials: its total is not reached
         and, with rechecks under a CPU budget, the budget holds what is spent, what the
-        running trials could still use (each to its last step), what a new trial is expected
-        to use (the mean of the ended ones) and the rechecks of today's leaders, so a trial
-        started now does not take the rechecks' share. Once exploring has ended for the
+        running trials could still use (each to its last step) and the rechecks of today's
+        leaders, so a dear trial running beside the last ones does not take the rechecks'
+        share. Once exploring has ended for the
         rechecks it does not start again in this command: the rest of the budget is the
         rechecks' (a running recheck's CPU is not reserved once it starts, so room would seem
         to open while it runs, and a trial explored then could lead at the end on its search
-        seeds alone). A trial dearer than expected, or one another machine runs, can still
-        leave the last rechecks unpaid."""
+        seeds alone). A trial that starts dear, or one another machine runs, can still leave
+        the last rechecks unpaid."""
         if len(counted(trials)) >= self.total:
             return False
         if self.cpu_budget is None or not self.recheck:
@@ -152,9 +151,8 @@ class SearchSource(StudySource):
         if self._explored:
             return False
         held = reserve(trials, self.recheck, self.recheck_seeds)
-        coming = self._to_spend(trials) + trial_cpu(trials)
-        self._explored = (spent_cpu(trials) + self._running_cpu() + coming + held
-                          >= self.cpu_budget)
+        self._explored = (spent_cpu(trials) + self._running_cpu() + self._to_spend(trials)
+                          + held >= self.cpu_budget)
         return not self._explored
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
