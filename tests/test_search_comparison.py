@@ -246,6 +246,44 @@ def test_the_budget_replay_drops_the_trials_started_once_running_ones_used_the_b
         "largest 90.0 % -> 40.0 %; 2 trials fewer")
 
 
+def test_the_reserve_replay_cuts_exploring_where_a_dear_running_trial_would_take_the_rechecks(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from datetime import datetime, timedelta
+
+    from optuna.distributions import FloatDistribution
+    from optuna.trial import FrozenTrial
+
+    url = f"sqlite:///{tmp_path / 'r.db'}"
+    study = optuna.create_study(study_name="s", storage=url, direction="maximize")
+    study.set_user_attr("kraby_cpu_budget", 60.0)
+    study.set_user_attr("kraby_definition", {"seeds": 1})
+    zero = datetime(2026, 1, 1)
+    # (start s, end s, CPU s, score), one seed of 100 env steps each. At 30 s, t0 has ended
+    # (10 spent, 10 to recheck it on 1 seed) and t1 has trained 20 of its 100 steps in 20
+    # CPU s: it could use 80 more, so the rule starts neither t2 nor t3 (without it: 10 + 20
+    # + 10 < 60). t2 would have been the pick.
+    for number, (start, end, cpu, value) in enumerate(
+            ((0, 10, 10, 1.0), (10, 110, 100, 0.5), (30, 40, 10, 2.0), (40, 50, 10, 0.1))):
+        study.add_trial(FrozenTrial(
+            number=number, trial_id=number, state=TrialState.COMPLETE, value=value,
+            values=None, params={"x": 0.5}, distributions={"x": FloatDistribution(0, 1)},
+            user_attrs={"key": f"t{number}", "cpu_time": float(cpu), "steps": 100,
+                        "env_steps": 100, "scores": [value]},
+            system_attrs={}, intermediate_values={},
+            datetime_start=zero + timedelta(seconds=start),
+            datetime_complete=zero + timedelta(seconds=end)))
+    replay = _benchmark("reserve_replay")
+    assert replay.main([url, "--recheck", "1", "--recheck-seeds", "1"]) == 0  # type: ignore[attr-defined]
+    out = capsys.readouterr().out
+    assert "| s | 4 | 130 | 2 | 20 | t2 | t2 (in the cut) |" in out
+    assert out.strip().splitlines()[-1] == (
+        "reserve_replay: 1 searches; the rule ends exploring before 20 of 130 explored CPU s "
+        "(15.4 %); 1 picks found after it")
+    with pytest.raises(SystemExit) as stop:
+        replay.main([url, "--studies", "nope"])  # type: ignore[attr-defined]
+    assert stop.value.code == 2 and "no study 'nope'" in capsys.readouterr().err
+
+
 # Published confirmed means (docs/results.md, Pendulum-v1 at 1,200 CPU s, sampler seeds 0-9):
 # TPE without the pruner, and random search.
 UNPRUNED = ["-163.8", "-168.5", "-151.1", "-151.9", "-153.6", "-179.3", "-154.1", "-152.6",
