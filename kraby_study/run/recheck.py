@@ -64,12 +64,14 @@ def next_recheck(trials: Sequence[FrozenTrial], count: int) -> FrozenTrial | Non
 
 def reserve(trials: Sequence[FrozenTrial], count: int, seeds: int) -> float:
     """CPU seconds the rechecks of today's leaders would use: each one not rechecked yet, its
-    CPU seconds per seed times ``seeds``."""
+    CPU seconds per seed (its training time; its whole CPU time if it stores no seed's score)
+    times ``seeds``."""
     total = 0.0
     for lead in leaders(trials, count):
         if not lead.rechecked:
             attrs = TrialAttrs.of(lead.trial)
-            total += float(attrs.cpu_time or 0.0) / max(1, len(attrs.scores or [])) * seeds
+            per_seed = attrs.training_time()
+            total += (float(attrs.cpu_time or 0.0) if per_seed is None else per_seed) * seeds
     return total
 
 
