@@ -37,6 +37,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from budget_replay import Span  # noqa: E402
 
 from kraby_study.records.attributes import TrialAttrs  # noqa: E402
+from kraby_study.records.stored import spent_cpu  # noqa: E402
 from kraby_study.run.recheck import cpu_per_step, leaders, reserve, to_spend  # noqa: E402
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -49,35 +50,38 @@ def span(trial: FrozenTrial) -> Span:
                 float(TrialAttrs.of(trial).cpu_time or 0.0))
 
 
-def cut_at(trials: list[FrozenTrial], budget: float, recheck: int, seeds: int, per_trial: int,
-           with_next: bool) -> int | None:
-    """Index, in start order, of the first explored trial the rule would not have started
-    (None: it starts them all). ``per_trial``: a trial's seeds, so its env steps are its
-    steps times them."""
+def explored_of(trials: list[FrozenTrial]) -> list[FrozenTrial]:
+    """The ended attempts that explored (rechecks left out), in the order they started."""
+    return sorted((t for t in trials if t.datetime_complete is not None
+                   and TrialAttrs.of(t).recheck_of is None), key=lambda t: span(t).start)
+
+
+def cut(trials: list[FrozenTrial], budget: float, recheck: int, seeds: int, per_trial: int,
+        with_next: bool) -> list[FrozenTrial]:
+    """The explored trials the rule would not have started: the first such, in start order,
+    and every later one (empty: it starts them all). ``per_trial``: a trial's seeds, so its
+    env steps are its steps times them."""
     ended_all = [t for t in trials if t.datetime_complete is not None]
-    explored = sorted((t for t in ended_all if TrialAttrs.of(t).recheck_of is None),
-                      key=lambda t: span(t).start)
+    spans = {t.number: span(t) for t in ended_all}
+    explored = explored_of(trials)
     for index, trial in enumerate(explored):
-        now = span(trial).start
-        ended = [t for t in ended_all if span(t).end <= now]
-        running = [t for t in ended_all if span(t).start < now < span(t).end]
-        spent = sum(float(TrialAttrs.of(t).cpu_time or 0.0)
-                    + float(TrialAttrs.of(t).suggest_cpu or 0.0) for t in ended)
+        now = spans[trial.number].start
+        ended = [t for t in ended_all if spans[t.number].end <= now]
+        running = [t for t in ended_all if spans[t.number].start < now < spans[t.number].end]
         rate = cpu_per_step(ended)
-        held = reserve(ended, recheck, seeds)
         coming = 0.0
         for t in running:
-            whole, used = span(t), span(t).used_at(now)
+            whole = spans[t.number]
+            used = whole.used_at(now)
             total = int(TrialAttrs.of(t).steps or 0) * per_trial
             done = int(total * used / whole.cpu) if whole.cpu > 0 else 0
             coming += used + to_spend(done, total, used, rate)
         if with_next:
-            costs = [float(TrialAttrs.of(t).cpu_time or 0.0) for t in ended
-                     if TrialAttrs.of(t).recheck_of is None]
+            costs = [spans[t.number].cpu for t in ended if TrialAttrs.of(t).recheck_of is None]
             coming += statistics.fmean(costs) if costs else 0.0
-        if spent + coming + held >= budget:
-            return index
-    return None
+        if spent_cpu(ended) + coming + reserve(ended, recheck, seeds) >= budget:
+            return explored[index:]
+    return []
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -107,22 +111,19 @@ def main(argv: list[str] | None = None) -> int:
         if not budget or any(t.state == TrialState.RUNNING for t in study.trials):
             continue
         per_trial = int(study.user_attrs["kraby_definition"]["seeds"])
-        ended = [t for t in study.trials if t.datetime_complete is not None]
-        explored = sorted((t for t in ended if TrialAttrs.of(t).recheck_of is None),
-                          key=lambda t: span(t).start)
-        index = cut_at(study.trials, float(budget), args.recheck, args.recheck_seeds,
-                       per_trial, args.with_next)
-        cut = [] if index is None else explored[index:]
-        keys = {TrialAttrs.of(t).key for t in cut}
+        explored = explored_of(study.trials)
+        cuts = cut(study.trials, float(budget), args.recheck, args.recheck_seeds, per_trial,
+                   args.with_next)
+        keys = {TrialAttrs.of(t).key for t in cuts}
         top = [str(TrialAttrs.of(lead.trial).key) for lead in leaders(study.trials, args.recheck)]
         found = [key for key in top if key in keys]
         pick = f"{top[0]} (in the cut)" if top and top[0] in keys else (top[0] if top else "-")
         used = sum(span(t).cpu for t in explored)
-        lost = sum(span(t).cpu for t in cut)
+        lost = sum(span(t).cpu for t in cuts)
         total, cut_total = total + used, cut_total + lost
         picks += bool(top) and top[0] in keys
         rows += 1
-        print(f"| {name} | {len(explored)} | {used:,.0f} | {len(cut)} | {lost:,.0f} | "
+        print(f"| {name} | {len(explored)} | {used:,.0f} | {len(cuts)} | {lost:,.0f} | "
               f"{', '.join(found) or '-'} | {pick} |")
     if not rows:
         parser.error("no finished search with a CPU budget among these")
