@@ -271,6 +271,43 @@ def test_exploring_once_ended_for_the_rechecks_does_not_start_again(tmp_path: Pa
         assert source.exploring(running) is False
 
 
+def test_a_search_whose_exploring_ended_for_its_rechecks_is_stopped_by_its_budget(
+        tmp_path: Path) -> None:
+    import io
+
+    from kraby_study.config.compose import compose_config
+    from kraby_study.records.attributes import StudyAttrs
+    from kraby_study.run.search_source import SearchSource, record_budget_end
+    from kraby_study.store.store import opened
+
+    def config(budget: float) -> object:
+        return compose_config(["budget=smoke", "search.recheck=2", "search.recheck_seeds=2",
+                               "search.trials=100", f"search.cpu_budget={budget}",
+                               f"storage=sqlite:///{tmp_path}/k.db"])
+
+    with opened(config(110.0).storage) as store:
+        ledger = store.define("s", StudyAttrs(kind="search", planned=100))
+        study = optuna.load_study(study_name="s", storage=f"sqlite:///{tmp_path}/k.db")
+        for trial in [_trial(0, [-1.0, -1.0], cpu=30.0), _trial(1, [-2.0, -2.0], cpu=30.0)]:
+            study.add_trial(trial)
+        source = SearchSource(ledger, config(110.0))
+        # 60 CPU s spent + 60 to recheck both leaders: exploring ends for the rechecks.
+        assert source.exploring(ledger.trials()) is False and source.explored
+        for of, cpu in ((0, 15.0), (1, 15.0)):
+            study.add_trial(_trial(2 + of, [-1.0 - of] * 4, key=f"t{of}", of=of, cpu=cpu))
+        # The rechecks cost less than reserved: 90 of 110 CPU s used, yet the budget ended it.
+        assert not source.over_budget()
+        out = io.StringIO()
+        record_budget_end(source, out)
+        assert "90 of its 110 CPU s used, 2 of 100 trials (stopped by the CPU budget)" in (
+            out.getvalue())
+        assert ledger.attrs.planned == 2 and ledger.attrs.explored == 110.0
+        # A later command under the same budget only rechecks (here: nothing is left) ...
+        assert SearchSource(ledger, config(110.0)).exploring(ledger.trials()) is False
+        # ... and one given more budget explores again.
+        assert SearchSource(ledger, config(200.0)).exploring(ledger.trials()) is True
+
+
 def test_a_rechecked_trials_cpu_per_seed_is_over_the_seeds_it_trained() -> None:
     from kraby_study.records.attributes import TrialAttrs
 

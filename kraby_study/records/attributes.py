@@ -224,6 +224,9 @@ class StudyAttrs:
     cpu_budget: float | None = None
     """A search's CPU budget (search.cpu_budget) in CPU seconds, as the latest command that
     set one gave it."""
+    explored: float | None = None
+    """The CPU budget under which a search's exploring ended to pay for its rechecks
+    (search.recheck): a later command under the same budget only rechecks."""
     sampler: str | None = field(default=None, metadata={"stored": "sampler"})
     """A search's sampler (tpe, random, nsga2 or gp)."""
     sampler_seed: int | None = field(default=None, metadata={"stored": "sampler_seed"})

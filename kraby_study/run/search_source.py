@@ -100,7 +100,10 @@ class SearchSource(StudySource):
         self.recheck, self.recheck_seeds = recheck_plan(cfg)
         self._rechecks: dict[int, Any] = {}  # recheck trial -> the trial it rechecks
         self._running: dict[int, Use] = {}  # trial this command runs -> what it has used
-        self._explored = False  # exploring ended for the rechecks: it does not start again
+        # Exploring ended for the rechecks: it does not start again, in this command nor in a
+        # later one under the same budget.
+        self._explored = (self.cpu_budget is not None and bool(self.recheck)
+                          and ledger.attrs.explored == self.cpu_budget)
 
     def spent(self) -> float:
         """CPU seconds the search has used: its ended trials', every attempt counted, what
@@ -125,6 +128,11 @@ class SearchSource(StudySource):
         if number in self._running:
             self._running[number] = replace(self._running[number], done=steps, cpu=cpu)
 
+    @property
+    def explored(self) -> bool:
+        """Whether exploring has ended to pay for the rechecks (:meth:`exploring`)."""
+        return self._explored
+
     def over_budget(self) -> bool:
         """Whether the search has used its CPU budget (never without one)."""
         return self.cpu_budget is not None and self.spent() >= self.cpu_budget
@@ -139,11 +147,11 @@ class SearchSource(StudySource):
         running trials could still use (each to its last step) and the rechecks of today's
         leaders, so a dear trial running beside the last ones does not take the rechecks'
         share. Once exploring has ended for the
-        rechecks it does not start again in this command: the rest of the budget is the
-        rechecks' (a running recheck's CPU is not reserved once it starts, so room would seem
-        to open while it runs, and a trial explored then could lead at the end on its search
-        seeds alone). A trial that starts dear, or one another machine runs, can still leave
-        the last rechecks unpaid."""
+        rechecks it does not start again, in this command nor in a later one under the same
+        budget: the rest of the budget is the rechecks' (a running recheck's CPU is not
+        reserved once it starts, so room would seem to open while it runs, and a trial
+        explored then could lead at the end on its search seeds alone). A trial that starts
+        dear, or one another machine runs, can still leave the last rechecks unpaid."""
         if len(counted(trials)) >= self.total:
             return False
         if self.cpu_budget is None or not self.recheck:
@@ -339,17 +347,25 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
     summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream), slots, progress,
                          executor, heartbeat_seconds=float(cfg.heartbeat_interval))
     if source.cpu_budget is not None:
-        ended = len([t for t in source.counted() if t.state != TrialState.WAITING])
-        stopped = source.over_budget() and ended < source.total
-        print(f"search {ledger.name}: {source.spent():,.0f} of its {source.cpu_budget:,.0f} "
-              f"CPU s used, {ended} of {source.total} trials"
-              + (" (stopped by the CPU budget)" if stopped else ""), file=stream, flush=True)
-        if stopped:
-            # The search's plan ended at its budget: list and the report count it complete.
-            ledger.update(StudyAttrs(planned=ended))
+        record_budget_end(source, stream)
     if source.recheck:
         print(f"search {ledger.name}: {_leaders_text(source)}", file=stream, flush=True)
     return summary, ledger
+
+
+def record_budget_end(source: SearchSource, stream: TextIO) -> None:
+    """Say what a search under a CPU budget used and, when the budget stopped it before its
+    total, store the trials it ran as its plan, so listing and the report count it complete.
+    A search with rechecks ends its exploring before the budget is used, to pay for them; that
+    is stored too, so a later command under the same budget does not explore again."""
+    ended = len([t for t in source.counted() if t.state != TrialState.WAITING])
+    stopped = (source.over_budget() or source.explored) and ended < source.total
+    print(f"search {source.ledger.name}: {source.spent():,.0f} of its "
+          f"{source.cpu_budget or 0:,.0f} CPU s used, {ended} of {source.total} trials"
+          + (" (stopped by the CPU budget)" if stopped else ""), file=stream, flush=True)
+    if stopped:
+        source.ledger.update(StudyAttrs(planned=ended, explored=(
+            source.cpu_budget if source.explored else None)))
 
 
 def _leaders_text(source: SearchSource) -> str:
