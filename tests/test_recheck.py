@@ -275,12 +275,14 @@ def test_a_search_whose_exploring_ended_for_its_rechecks_is_stopped_by_its_budge
         tmp_path: Path) -> None:
     import io
 
+    from omegaconf import DictConfig
+
     from kraby_study.config.compose import compose_config
     from kraby_study.records.attributes import StudyAttrs
     from kraby_study.run.search_source import SearchSource, record_budget_end
     from kraby_study.store.store import opened
 
-    def config(budget: float) -> object:
+    def config(budget: float) -> DictConfig:
         return compose_config(["budget=smoke", "search.recheck=2", "search.recheck_seeds=2",
                                "search.trials=100", f"search.cpu_budget={budget}",
                                f"storage=sqlite:///{tmp_path}/k.db"])
