@@ -55,7 +55,7 @@ from scipy import stats
 
 from kraby_study.answers.search_front import search_front
 from kraby_study.decision.front import spread
-from kraby_study.records.stored import counted, search_key, spent_cpu
+from kraby_study.records.stored import counted, known_number, search_key, spent_cpu
 from kraby_study.records.values import best_trial
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -113,7 +113,7 @@ def read_search(storage: str, arm: Arm) -> None:
     if two:
         # The front's best score, as confirm --top 1 takes it (no floor: the searches have none).
         number = spread(search_front(complete).front, 1)[0].key
-        best = next(t for t in complete if t.number == number)
+        best = next(t for t in complete if known_number(t) == number)
     else:
         best = best_trial(complete)
         if best is None:

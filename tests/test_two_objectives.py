@@ -16,7 +16,7 @@ from conftest import TINY, finished_search, load, run_cli
 from optuna.study import StudyDirection
 
 from kraby_study.answers.search_front import front_lines, search_front
-from kraby_study.answers.selected import selected_value
+from kraby_study.answers.selected import front_selection, selected_value
 from kraby_study.config.compose import compose_config
 from kraby_study.decision.comparison import welch_greater_p
 from kraby_study.decision.front import Point, cheapest_tied, pareto_front, spread
@@ -141,6 +141,21 @@ def test_a_floor_not_yet_measured_leaves_every_trial_eligible() -> None:
     assert found.floor_score is None and [p.key for p in found.front] == [1, 3, 2]
     assert "not measured yet" in found.floor_text
     assert search_front(_trials()).floor_text == ""
+
+
+def test_a_retried_trial_is_known_on_the_front_by_its_own_number() -> None:
+    # Trial 3 was interrupted and retried: attempt 7 holds it now, under its key t3. The front,
+    # best's lines and the selection name it trial 3, as every other command does, not 7.
+    retried = _Trial(7, [0.95, 4.0], {"key": "t3", "retry_of": 3, "settings": {"n_epochs": 3},
+                                      "scores": [0.95, 0.96, 0.94]})
+    trials = [t for t in _trials() if t.number != 3] + [retried]
+    found = search_front(trials)
+    assert [p.key for p in found.front] == [1, 3, 2]
+    chosen = front_selection("two", {"search": {}}, trials)
+    assert chosen is not None and chosen.description.startswith("trial 3 of search 'two'")
+    assert chosen.settings == {"n_epochs": 3}
+    assert any(line.startswith("  trial    3") and "selected" in line for line in chosen.front)
+    assert not any(line.startswith("  trial    7") for line in chosen.front)
 
 
 def test_only_a_two_objective_search_with_a_floor_stores_one() -> None:

@@ -14,7 +14,14 @@ from kraby_study.errors import StoreError
 from kraby_study.plan.confirm import Arm, ConfirmedStudy
 from kraby_study.records.attributes import StudyKind
 from kraby_study.records.definition import REWARDS, objective_names, stored_floor, two_objectives
-from kraby_study.records.stored import Outcome, counted, outcome, search_key, trial_seeds
+from kraby_study.records.stored import (
+    Outcome,
+    counted,
+    known_number,
+    outcome,
+    search_key,
+    trial_seeds,
+)
 from kraby_study.records.values import (
     param_name,
     ranking,
@@ -91,7 +98,7 @@ def _front_arms(name: str, done: list[Any], top: int, floor: str | None) -> list
     """Up to ``top`` trials of a two-objective search's front (above its floor, if any),
     spread along it: the best score first, then the cheapest, then the rest by cost."""
     found = search_front(done, floor)
-    by_number = {t.number: t for t in done}
+    by_number = {known_number(t): t for t in done}
     chosen = spread(found.front, top)
     places = {p.key: "best score" for p in chosen[:1]}
     places.update({p.key: "cheapest" for p in chosen[1:2]})
@@ -101,7 +108,7 @@ def _front_arms(name: str, done: list[Any], top: int, floor: str | None) -> list
         place = places.get(point.key, "on the front")
         arms.append(Arm(label=str(trial.user_attrs.get("key", search_key(trial.number))),
                         settings=trial.user_attrs["settings"],
-                        origin=f"trial {trial.number} of search {name!r} ({place} of "
+                        origin=f"trial {point.key} of search {name!r} ({place} of "
                                f"{len(found.front)} on the front: score {point.score:.4g}, "
                                f"{point.cost:.3g} CPU s/seed)",
                         source_score=point.score))

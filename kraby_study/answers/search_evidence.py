@@ -206,7 +206,7 @@ def front_table(search: Search) -> pd.DataFrame:
     answer against the best score, and its parameters (pareto.csv)."""
     assert search.front is not None
     choice = search.front.choice
-    rows = search.trials.set_index("number")
+    rows = search.trials.set_index("trial")
     out = []
     for point in sorted(search.front.front, key=lambda p: -p.score):
         row = rows.loc[point.key]

@@ -11,7 +11,7 @@ from kraby_study.decision.front import FRONT_RULES, FrontChoice, Point, front_ch
 from kraby_study.errors import ConfigError
 from kraby_study.records.attributes import SelectRule, TrialAttrs
 from kraby_study.records.definition import floor_score
-from kraby_study.records.stored import Outcome, StoredTrial, outcome
+from kraby_study.records.stored import Outcome, StoredTrial, known_number, outcome
 from kraby_study.records.values import cost, score
 
 
@@ -20,7 +20,8 @@ class SearchFront:
     """The front of a two-objective search's counted trials and the trial its rule selects."""
 
     points: list[Point[int]]
-    """Every complete trial with a score and a cost, keyed by its number."""
+    """Every complete trial with a score and a cost, keyed by the number the search knows it
+    by (its first attempt's, whichever attempt holds it now: a retry of an interrupted one)."""
     front: list[Point[int]]
     """The trials on the front, cheapest first."""
     choice: FrontChoice[int] | None
@@ -83,14 +84,14 @@ def search_front(trials: Sequence[StoredTrial], floor: str | None = None,
         rule: The front's rule (:func:`front_rule`).
         options: The comparison's margin and seeds.
     """
-    points = [Point(t.number, float(score(t)), float(cost(t)))  # type: ignore[arg-type]
+    points = [Point(known_number(t), float(score(t)), float(cost(t)))  # type: ignore[arg-type]
               for t in trials if outcome(t) == Outcome.COMPLETE and score(t) is not None
               and cost(t) is not None]
     measured = None if floor is None else floor_score(trials, floor)
     feasible = [p for p in points if measured is None or p.score >= measured]
     front = pareto_front(feasible)
     on_front = {p.key for p in front}
-    samples = {t.number: seed_scores(t) for t in trials if t.number in on_front}
+    samples = {known_number(t): seed_scores(t) for t in trials if known_number(t) in on_front}
     return SearchFront(points=points, front=front,
                        choice=front_choice(front, samples, rule, options), floor=floor,
                        floor_score=measured)

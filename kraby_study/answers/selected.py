@@ -123,7 +123,7 @@ def front_selection(name: str, definition: dict[str, Any], trials: Sequence[Stor
     if found.choice is None:
         return None
     chosen = found.choice.chosen
-    trial = next(t for t in trials if t.number == chosen.key)
+    trial = next(t for t in trials if known_number(t) == chosen.key)
     params = ", ".join(f"{k}={value_label(v)}" for k, v in trial.params.items())
     return Selection(short=front_short(found),
                      description=f"trial {chosen.key} of search {name!r}: score "

@@ -296,7 +296,7 @@ def _draw_front(ax: Axes, search: Search, done: pd.DataFrame, queued: pd.DataFra
     ones among them (``queued``) and the selected trial."""
     assert search.front is not None
     on_front = {p.key for p in search.front.front}
-    others = done[~done["number"].isin(on_front)]
+    others = done[~done["trial"].isin(on_front)]
     ax.scatter(others["cost"], others["value"], s=18, color="#3b6ea8", alpha=0.55,
                linewidths=0, label=f"complete trial ({len(done)})", zorder=2)
     front = search.front.front
