@@ -248,6 +248,17 @@ def test_the_report_says_over_how_many_seeds_each_top_trial_scored(
     first = load(db, "tiny").trials[int(key[1:])]
     assert not recheck.intermediate_values and first.intermediate_values
     assert reported(search, recheck) == first.intermediate_values
+    # The history draws it at its own number, at its first seed's score and again (a ring) at
+    # its score over all three; every trial once, in trial order.
+    from kraby_study.report.search_plots import first_scores
+
+    points = first_scores(search)
+    assert list(points["trial"]) == sorted(points["trial"])
+    assert len(set(points["trial"])) == len(points)
+    row = points[points["trial"] == int(key[1:])].iloc[0]
+    assert row["rechecked"] and row["first"] == pytest.approx(first.value)
+    assert row["value"] == pytest.approx(recheck.value) != pytest.approx(first.value)
+    assert not points.loc[points["trial"] != int(key[1:]), "rechecked"].any()
     pages = [page.read_text() for page in (space / "r").rglob("*.md")]
     assert any(f"Best: trial {key[1:]}," in page for page in pages)
 

@@ -30,7 +30,9 @@ CAPTIONS = {
               "cheapest tied with the front's best score). A dashed line, when the search has "
               "a floor, is the floor configuration's score: trials below it are infeasible and "
               "off the front.",
-    "history": "Objective of every complete trial, and the best value so far; pruned and failed "
+    "history": "Objective of every complete trial on the seeds it was first trained on, by "
+               "trial number, and the best value so far; a rechecked trial also as a ring at "
+               "its objective over all its seeds, joined by a thin line; pruned and failed "
                "trials marked along the bottom.",
     "importances": "PED-ANOVA parameter importances (Optuna's default evaluator): how much "
                    "each parameter matters for reaching the top 10 % of complete trials.",

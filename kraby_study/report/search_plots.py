@@ -16,12 +16,14 @@ from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.colors import Normalize
 from matplotlib.lines import Line2D
+from matplotlib.ticker import MaxNLocator
 from optuna.distributions import BaseDistribution, CategoricalDistribution
 from optuna.trial import FrozenTrial
 
 from kraby_study.answers.search_evidence import Search
 from kraby_study.records.attributes import StudyKind
 from kraby_study.records.stored import Outcome, known_number
+from kraby_study.records.values import score
 from kraby_study.report.search_format import is_log, numeric_array
 from kraby_study.report.style import (
     BEST_COLOUR,
@@ -50,29 +52,56 @@ def _title(search: Search, what: str) -> str:
     return title
 
 
-def history(search: Search, path: Path) -> Path:
-    """Objective of every complete trial by trial number, and the best value so far."""
-    fig, (ax,) = new_figure(SINGLE)
+def first_scores(search: Search) -> pd.DataFrame:
+    """Every complete trial by its own number (``trial``), with its score on the seeds it was
+    first trained on (``first``: what the search ranked it by while exploring) and its score
+    now (``value``; over all its seeds when ``rechecked``), in trial order."""
     frame = search.trials
     done = frame[frame["outcome"] == Outcome.COMPLETE]
-    ax.scatter(done["number"], done["value"], s=18, color="#3b6ea8", alpha=0.75, linewidths=0,
+    rows = []
+    for number, trial, value in zip(done["number"], done["trial"], done["value"], strict=True):
+        original = search.data.rechecked.get(int(number))
+        before = score(original) if original is not None else None
+        rows.append({"trial": int(trial), "first": float(value if before is None else before),
+                     "value": float(value), "rechecked": original is not None})
+    return pd.DataFrame(rows, columns=["trial", "first", "value", "rechecked"]).sort_values(
+        "trial", ignore_index=True)
+
+
+def history(search: Search, path: Path) -> Path:
+    """Every complete trial's score on its first seeds by trial number, and the best so far;
+    a rechecked trial also at its score over all its seeds."""
+    fig, (ax,) = new_figure(SINGLE)
+    frame = search.trials
+    done = first_scores(search)
+    ax.scatter(done["trial"], done["first"], s=18, color="#3b6ea8", alpha=0.75, linewidths=0,
                label=f"complete trial ({len(done)})", zorder=3)
+    again = done[done["rechecked"]]
     if len(done):
-        ordered = done.sort_values("number")
-        running = (ordered["value"].cummax() if search.maximize else ordered["value"].cummin())
-        ax.step(ordered["number"], running, where="post", color=BEST_COLOUR, label="best so far",
-                zorder=4)
+        running = (done["first"].cummax() if search.maximize else done["first"].cummin())
+        # Held to the last trial, pruned or failed ones included, which also shows them all.
+        last = max(int(frame["trial"].max()), int(done["trial"].max()))
+        ax.step([*done["trial"], last], [*running, running.iloc[-1]], where="post",
+                color=BEST_COLOUR, zorder=4,
+                label="best so far" + (" (on first seeds)" if len(again) else ""))
+    if len(again):
+        ax.vlines(again["trial"], again["first"], again["value"], color="0.45", linewidth=0.9,
+                  zorder=2)
+        ax.scatter(again["trial"], again["value"], s=46, facecolors="none", edgecolors="black",
+                   linewidths=1.0, zorder=5,
+                   label=f"rechecked: over all its seeds ({len(again)})")
     for state, colour, marker in ((Outcome.PRUNED, PRUNED_COLOUR, "|"),
                                   (Outcome.FAILED, FAILED_COLOUR, "x")):
         rows = frame[frame["outcome"] == state]
         if len(rows):
-            ax.scatter(rows["number"], np.full(len(rows), 0.015),
+            ax.scatter(rows["trial"], np.full(len(rows), 0.015),
                        transform=ax.get_xaxis_transform(), marker=marker, s=30, color=colour,
                        label=f"{state} trial ({len(rows)})", zorder=2)
     ax.set_xlabel("trial number")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel(_objective_label(search))
     ax.margins(y=0.08)
-    fig.legend(loc="outside lower center", ncols=4, frameon=False)
+    fig.legend(loc="outside lower center", ncols=3 if len(again) else 4, frameon=False)
     fig.suptitle(_title(search, "optimization history"))
     return save(fig, path)
 
@@ -110,7 +139,7 @@ def slices(search: Search, path: Path) -> Path:
     fig, _ = new_figure((min(3.4 * ncols + 1.2, 12.0), 2.9 * nrows + 0.8))
     fig.clear()
     axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
-    norm = Normalize(vmin=0, vmax=max(1, int(search.trials["number"].max() or 1)))
+    norm = Normalize(vmin=0, vmax=max(1, int(search.trials["trial"].max() or 1)))
     mappable = None
     for index, name in enumerate(search.params):
         ax: Axes = axes[index // ncols][index % ncols]
@@ -122,7 +151,7 @@ def slices(search: Search, path: Path) -> Path:
             ax.set_xlim(-0.5, len(choices) - 0.5)
         elif is_log(distribution):
             ax.set_xscale("log")
-        mappable = ax.scatter(x, done["value"], c=done["number"], cmap=CMAP, norm=norm, s=16,
+        mappable = ax.scatter(x, done["value"], c=done["trial"], cmap=CMAP, norm=norm, s=16,
                               alpha=0.8, linewidths=0)
         ax.set_xlabel(name)
         if index % ncols == 0:
