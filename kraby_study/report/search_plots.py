@@ -80,7 +80,7 @@ def history(search: Search, path: Path) -> Path:
     if len(done):
         running = (done["first"].cummax() if search.maximize else done["first"].cummin())
         # Held to the last trial, pruned or failed ones included, which also shows them all.
-        last = max(int(frame["trial"].max()), int(done["trial"].max()))
+        last = int(frame["trial"].max())
         ax.step([*done["trial"], last], [*running, running.iloc[-1]], where="post",
                 color=BEST_COLOUR, zorder=4,
                 label="best so far" + (" (on first seeds)" if len(again) else ""))
