@@ -152,7 +152,8 @@ SEARCH_FLAGS = [
     Flag("--recheck", "search.recheck", "before the search ends, retrain its K best trials "
          "on search.recheck_seeds (2) more seeds each, ranking each by all its seeds, and the "
          "next in line when one drops out of the top K, within --cpu-budget (exploring stops "
-         "early enough to pay for them, and does not start again), as search.recheck=K "
+         "early enough to pay for them, and does not start again; past the budget the best "
+         "trial is still rechecked, so the pick always is), as search.recheck=K "
          "(default 0: none; one objective only)", "K", _whole),
     WORKERS, STORAGE,
     Flag("--study-name", "search.name", "name of the search in the store, as search.name=NAME "

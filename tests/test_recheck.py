@@ -169,14 +169,16 @@ def test_a_search_rechecks_its_leaders_and_picks_by_all_their_seeds(
 def test_rechecks_come_out_of_the_cpu_budget(space: Path,
                                              capsys: pytest.CaptureFixture[str]) -> None:
     # A budget below one trial: the first trial is the only one explored (nothing is spent
-    # before it), and its recheck would overspend, so the budget leaves it unrechecked.
+    # before it). Its recheck starts past the budget, since the search picks only a rechecked
+    # trial, and nothing else does.
     args = ["search=tiny", "--workers", "1", *TINY, "budget.seeds=1", "--recheck", "1",
             "--cpu-budget", "0.001"]
     assert run_cli("optuna", *args) == 0
     out = capsys.readouterr().out
     trials = load(space / "studies" / "kraby.db", "tiny").trials
-    assert len(trials) == 1 and "recheck_of" not in trials[0].user_attrs
-    assert "(1 seeds, not rechecked)" in out
+    assert len(trials) == 2 and "recheck_of" not in trials[0].user_attrs
+    assert trials[1].user_attrs["recheck_of"] == 0
+    assert re.search(r"leaders by all their seeds: t0 [-\d.e]+ \(3 seeds\)\n", out)
 
 
 @pytest.mark.parametrize("argv,message", [
@@ -367,6 +369,44 @@ def test_the_searchs_pace_is_the_median_of_its_ended_attempts() -> None:
     # Paces 0.015, 0.02, 0.005 and 0.045 CPU s a step: the median of all four.
     assert costs.cpu_per_step(trials) == pytest.approx(0.0175)
     assert costs.cpu_per_step([_trial(0, [-1.0])]) is None
+
+
+def test_once_the_budget_is_used_the_best_trial_is_still_rechecked(tmp_path: Path) -> None:
+    from kraby_study.config.compose import compose_config
+    from kraby_study.records.attributes import StudyAttrs
+    from kraby_study.run.search_source import SearchSource
+    from kraby_study.store.store import opened
+
+    cfg = compose_config(["budget=smoke", "budget.seeds=2", "search.recheck=2",
+                          "search.recheck_seeds=3", "search.cpu_budget=50",
+                          "save_models=false", f"storage=sqlite:///{tmp_path}/k.db"])
+    # As on MountainCarContinuous-v0 (random search, sampler seed 9): t0 and t3 rechecked,
+    # t3 dropped by its recheck as the budget ran out, so t2 leads on its 2 search seeds.
+    stored = [_trial(0, [92.4, 92.4]), _trial(1, [25.6, 25.6]), _trial(2, [91.3, 91.3]),
+              _trial(3, [91.9, 91.9]),
+              _trial(4, [92.4, 92.4, 93.6, 88.2, 86.5], key="t0", of=0, seed=2),
+              _trial(5, [91.9, 91.9, 90.7, 92.6, -98.2], key="t3", of=3, seed=2)]
+    with opened(cfg.storage) as store:
+        ledger = store.define("s", StudyAttrs(kind="search"))
+        study = optuna.load_study(study_name="s", storage=cfg.storage)
+        for trial in stored:
+            study.add_trial(trial)
+        source = SearchSource(ledger, cfg)
+        assert source.over_budget()  # 60 CPU s of 50
+        claimed = source.next_trial()
+        assert claimed is not None
+        number, spec = claimed
+        assert (spec.key, spec.seed, spec.seeds) == ("t2", 2, 3)
+        assert ledger.trials()[number].user_attrs["recheck_of"] == 2
+        # Past the budget only the best is rechecked: while t2's runs, nothing starts.
+        assert source.next_trial() is None
+        # It drops too (seeds 2-4 as in the TPE search of that seed): t0 leads, rechecked.
+        source.record(number, spec, TrialResult(
+            outcome=Outcome.COMPLETE, scores=[-98.3, 89.7, -41.8], final_score=-16.8,
+            cpu_time=30.0, env_steps=3 * spec.steps))
+        assert [lead.trial.user_attrs["key"] for lead in leaders(ledger.trials(), 2)] == [
+            "t0", "t3"]
+        assert source.next_trial() is None
 
 
 def test_a_dear_running_trial_ends_exploring_before_it_takes_the_rechecks_share(

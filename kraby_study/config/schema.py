@@ -189,7 +189,9 @@ class SearchConfig:
     pick is judged on more seeds than it was found on: a trial ranks by the mean over all its
     seeds, and a trial that drops out of the top is replaced by the next, until the top
     ``recheck`` are all rechecked. Under a CPU budget the rechecks come out of it (exploring
-    stops early enough to pay for them, and does not start again). 0: none. One objective only."""
+    stops early enough to pay for them, and does not start again); once it is used, the best
+    trial is still rechecked if it is not, so the pick is always a rechecked trial. 0: none.
+    One objective only."""
     recheck_seeds: int = 2
     """More seeds a rechecked trial trains (after its own: seeds budget.seeds, ...)."""
     wilcoxon_p: float = 0.1

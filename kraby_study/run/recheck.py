@@ -6,7 +6,8 @@ was given. ``search.recheck = K`` answers this as racing methods do: once the se
 exploring, each of its K leading trials is retrained on ``search.recheck_seeds`` more seeds,
 and ranks by the mean over all its seeds. A rechecked trial that falls out of the top K lets
 the next one in, which is rechecked in turn, until the top K are all rechecked (or the CPU
-budget is used). A recheck is an attempt of its trial (the same key), so everything that
+budget is used; past it, the best trial is still rechecked, so the search never picks a trial
+on its search seeds alone). A recheck is an attempt of its trial (the same key), so everything that
 reads a study's counted trials reads the trial by all its seeds.
 """
 

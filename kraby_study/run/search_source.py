@@ -165,15 +165,22 @@ class SearchSource(StudySource):
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
         """Ask for the next trial (a queued retry first, then new ones while exploring, then
-        rechecks of the leading trials), or None when all is done or the CPU budget is used."""
+        rechecks of the leading trials), or None when all is done or the CPU budget is used.
+
+        With rechecks, the best trial is rechecked even once the budget is used: a recheck
+        that drops a leader as the budget runs out puts the next trial first on its search
+        seeds alone, whose score overstates it as the dropped leader's did, and the search
+        would pick it so. Only that recheck starts past the budget (and the next, if it too
+        drops), so the search overshoots its budget by what they use."""
         while True:
             with self.ledger.plan_lock():
-                if self.over_budget():
-                    return None
+                over = self.over_budget()
                 trials = self.ledger.trials()
                 waiting = any(t.state == TrialState.WAITING for t in trials)
-                if not waiting and not self.exploring(trials):
-                    leader = next_recheck(trials, self.recheck) if self.recheck else None
+                if over or (not waiting and not self.exploring(trials)):
+                    count = 1 if over else self.recheck
+                    leader = (next_recheck(trials, count)
+                              if self.recheck and not (over and waiting) else None)
                     if leader is None:
                         return None
                     held = TrialAttrs.of(leader)
