@@ -301,8 +301,9 @@ def _external(value: float, distribution: dict[str, Any]) -> Any:
 @contextmanager
 def read_only(url: str) -> Iterator[sa.Connection | None]:
     """A connection through the backend's read-only URL, which never creates or writes
-    anything; None when there is nothing to read (a SQLite file not there yet). Errors of the
-    database are the caller's to name."""
+    anything (a killed writer's journal aside, :func:`_rolled_back`); None when there is
+    nothing to read (a SQLite file not there yet). Errors of the database are the caller's to
+    name."""
     reading = _reading_url(url)
     if reading is None:
         yield None
@@ -322,7 +323,7 @@ def _rolled_back(path: Path) -> None:
     read-only connection refuses the file until then ("attempt to write a readonly database"),
     so a study whose command was killed while writing could be neither read nor resumed. The
     rollback restores the last committed state, as the next writer would, and writes nothing
-    else. The journal of a writer still at work is not hot: the read just waits for it.
+    else. The journal of a writer still at work is not hot, and the read leaves it alone.
     """
     if not Path(f"{path}-journal").exists():
         return
