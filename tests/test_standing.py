@@ -26,8 +26,8 @@ from kraby_study.records.attributes import RAY_NODE, Placement, StudyAttrs, Tria
 from kraby_study.records.stored import Failure, Outcome, counted, failure, outcome, search_key
 from kraby_study.records.values import swept_value
 from kraby_study.store.ledger import StudyLedger
-from kraby_study.store.rows import reading
-from kraby_study.store.store import Store, opened
+from kraby_study.store.rows import has_store, reading
+from kraby_study.store.store import Store, opened, study_exists
 
 INTERRUPTED = failure(Failure.INTERRUPTED, "its command stopped")
 EPYC = {"hostname": "vm", "cpu": "AMD EPYC", "torch": "2.13.0+cpu"}
@@ -238,6 +238,39 @@ def test_a_store_without_studies_and_a_missing_one(workdir: Path,
     assert store_standings(url) == []
     assert run_cli("list") == 0
     assert capsys.readouterr().out == f"no studies in {url}\n"
+
+
+KILLED_MID_WRITE = """
+import os, signal, sqlite3, sys
+connection = sqlite3.connect(sys.argv[1], isolation_level=None)
+connection.execute("PRAGMA cache_size = 10")  # spill: the file itself is half-written
+connection.execute("BEGIN IMMEDIATE")
+connection.execute("DELETE FROM trial_values")
+connection.execute("CREATE TABLE filler (x)")
+for _ in range(20000):
+    connection.execute("INSERT INTO filler VALUES (?)", ("x" * 200,))
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_a_store_whose_writer_was_killed_mid_write_reads_as_last_committed(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A command killed inside a write leaves a hot journal beside the SQLite file; the
+    read-only readers (``list``, the resume's check) read the last committed state, where
+    SQLite alone refuses them ("attempt to write a readonly database")."""
+    path = workdir / "studies" / "kraby.db"
+    url = sqlite_url(path)
+    build(url)
+    capsys.readouterr()
+    assert run_cli("list", f"storage={url}") == 0
+    before = capsys.readouterr().out
+    killed = subprocess.run([sys.executable, "-c", KILLED_MID_WRITE, str(path)], check=False)
+    assert killed.returncode == -9
+    assert Path(f"{path}-journal").stat().st_size > 0  # the hot journal is there
+    assert has_store(url) and study_exists(url, "states")
+    assert run_cli("list", f"storage={url}") == 0
+    assert capsys.readouterr().out == before
+    assert [shown(s) for s in store_standings(url)] == [shown(s) for s in optuna_standings(url)]
 
 
 def test_list_loads_neither_optuna_nor_hydra_nor_the_statistics_stack(workdir: Path) -> None:

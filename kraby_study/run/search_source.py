@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 from typing import Any, TextIO
 
 from omegaconf import DictConfig
-from optuna.trial import TrialState
+from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.errors import ConfigError
 from kraby_study.plan.settings import model_path, resolved_settings, tensorboard_run
@@ -178,9 +178,7 @@ class SearchSource(StudySource):
                 trials = self.ledger.trials()
                 waiting = any(t.state == TrialState.WAITING for t in trials)
                 if over or (not waiting and not self.exploring(trials)):
-                    count = 1 if over else self.recheck
-                    leader = (next_recheck(trials, count)
-                              if self.recheck and not (over and waiting) else None)
+                    leader = self._recheck_due(trials, over=over, waiting=waiting)
                     if leader is None:
                         return None
                     held = TrialAttrs.of(leader)
@@ -212,6 +210,16 @@ class SearchSource(StudySource):
                 model_path=spec.model_path))
             self._running[number] = Use(total=spec.steps * spec.seeds)
             return number, spec
+
+    def _recheck_due(self, trials: Sequence[FrozenTrial], *, over: bool,
+                     waiting: bool) -> FrozenTrial | None:
+        """The leading trial to recheck next. None when no rechecks are asked for, or when
+        the budget is used while a retry waits (``ask`` would run the retry, so nothing may
+        be queued); else the best trial not rechecked yet among the top one past the budget,
+        or among the top ``recheck`` once exploring has ended (None when all are)."""
+        if not self.recheck or (over and waiting):
+            return None
+        return next_recheck(trials, 1 if over else self.recheck)
 
     def _spec(self, key: str, trial_cfg: DictConfig, params: dict[str, Any]) -> TrialSpec:
         cfg = self.cfg

@@ -12,18 +12,21 @@ trials.
 
 The columns are those of Optuna's models (``optuna/storages/_rdb/models.py``, the schema of
 Optuna 3 and later); values and parameters are decoded as Optuna decodes them. Reading writes
-nothing: a SQLite file is opened read-only.
+nothing: a SQLite file is opened read-only, once the journal of a writer killed mid-transaction,
+if one is left, is rolled back (:func:`_rolled_back`).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import sqlite3
 from collections import defaultdict
 from collections.abc import Collection, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from enum import Enum
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import sqlalchemy as sa
@@ -131,7 +134,7 @@ class StoreReader:
         path = sqlite_path(url)
         if path is not None and not path.is_file():
             raise StoreError(f"no study store at {path}")
-        reading = reading_url(url)
+        reading = _reading_url(url)
         assert reading is not None
         self.url = url
         self._engine = sa.create_engine(
@@ -298,9 +301,10 @@ def _external(value: float, distribution: dict[str, Any]) -> Any:
 @contextmanager
 def read_only(url: str) -> Iterator[sa.Connection | None]:
     """A connection through the backend's read-only URL, which never creates or writes
-    anything; None when there is nothing to read (a SQLite file not there yet). Errors of the
-    database are the caller's to name."""
-    reading = reading_url(url)
+    anything (a killed writer's journal aside, :func:`_rolled_back`); None when there is
+    nothing to read (a SQLite file not there yet). Errors of the database are the caller's to
+    name."""
+    reading = _reading_url(url)
     if reading is None:
         yield None
         return
@@ -310,6 +314,38 @@ def read_only(url: str) -> Iterator[sa.Connection | None]:
             yield connection
     finally:
         engine.dispose()
+
+
+def _rolled_back(path: Path) -> None:
+    """Roll back the journal a writer killed mid-transaction left beside a SQLite file.
+
+    SQLite undoes such a hot journal on the next read of a connection that may write; a
+    read-only connection refuses the file until then ("attempt to write a readonly database"),
+    so a study whose command was killed while writing could be neither read nor resumed. The
+    rollback restores the last committed state, as the next writer would, and writes nothing
+    else. The journal of a writer still at work is not hot, and the read leaves it alone.
+    """
+    if not Path(f"{path}-journal").exists():
+        return
+    try:
+        connection = sqlite3.connect(f"file:{path}?mode=rw", uri=True, timeout=SQLITE_PATIENCE)
+    except sqlite3.Error:
+        return  # not writable here: the read-only open that follows names the problem
+    try:
+        connection.execute("SELECT count(*) FROM sqlite_master").fetchone()
+    except sqlite3.Error:
+        pass  # likewise
+    finally:
+        connection.close()
+
+
+def _reading_url(url: str) -> str | None:
+    """The backend's read-only URL (:func:`~kraby_study.store.url.reading_url`), a SQLite file's
+    journal rolled back first if a killed writer left one."""
+    path = sqlite_path(url)
+    if path is not None and path.exists():
+        _rolled_back(path)
+    return reading_url(url)
 
 
 def has_store(url: str) -> bool:

@@ -24,7 +24,7 @@ from kraby_study.records.attributes import StudyAttrs
 from kraby_study.store.backend import LOCK_BASE, Backend, backend_for, check_store_file
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.rows import read_only
-from kraby_study.store.tables import metadata
+from kraby_study.store.tables import drop_orphan_curves, metadata
 from kraby_study.store.url import check_url, sqlite_path
 
 # Heartbeats and stale-trial failing are marked experimental by Optuna; they are what several
@@ -53,6 +53,9 @@ class Store:
                                           **self.backend.storage_kwargs())
                 if create:
                     metadata.create_all(self.storage.engine)
+                if create and writer:
+                    with self.storage.engine.begin() as connection:
+                        drop_orphan_curves(connection)
         except (sa.exc.SQLAlchemyError, optuna.exceptions.OptunaError, RuntimeError,
                 ValueError) as err:
             self.close()

@@ -30,6 +30,22 @@ curve_points = sa.Table(
 )
 """One row per learning-curve bin per trial."""
 
+_trials = sa.table("trials", sa.column("trial_id"), sa.column("study_id"))
+"""Optuna's trials, as far as an orphan curve point is told by them."""
+
+
+def drop_orphan_curves(connection: sa.Connection) -> int:
+    """Delete the learning-curve points whose trial is no longer stored, and count them.
+
+    A study deleted with Optuna's own tools (``optuna delete-study``), which know nothing of
+    this table, leaves its points behind, and a later trial can be given a deleted trial's id
+    (SQLite reuses the highest ids): the points would then read as that trial's curve. A
+    command that writes calls this when it opens the store, before it creates any trial.
+    """
+    orphan = ~sa.exists().where(_trials.c.trial_id == curve_points.c.trial_id,
+                                _trials.c.study_id == curve_points.c.study_id)
+    return connection.execute(curve_points.delete().where(orphan)).rowcount
+
 
 def read_curves(connection: sa.Connection, study_id: int, numbers_of: Mapping[int, int],
                 numbers: Collection[int] | None = None) -> pd.DataFrame:
