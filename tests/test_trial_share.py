@@ -98,7 +98,7 @@ def test_a_search_without_a_share_keeps_the_definition_it_had_before_shares() ->
 @pytest.mark.parametrize("argv,message", [
     (["search.trial_share=0.25"], "set --cpu-budget too"),
     (["--cpu-budget", "100", "search.trial_share=0"], "must be in (0, 1]"),
-    (["--cpu-budget", "100", "search.trial_share=1.5"], "must be in (0, 1]"),
+    (["--cpu-budget", "100", "--trial-share", "1.5"], "must be in (0, 1]"),
     (["--cpu-budget", "100", "search.trial_share=0.5", "--objective",
       "final_reward,training_time"], "do not report"),
     (["--cpu-budget", "100", "search.trial_share=0.5", "--pruner", "wilcoxon",
@@ -121,7 +121,7 @@ def test_a_search_stops_its_dear_trials_and_keeps_its_enqueued_one(
     # A cap of a thousandth of a CPU second: every sampled trial is past it by its first
     # checkpoint (a quarter of its first seed), ppo=start, evaluated first, is not stopped.
     args = ["search=tiny", "--workers", "1", *TINY, "budget.seeds=1", "--cpu-budget", "1000",
-            "search.trial_share=0.000001"]
+            "--trial-share", "0.000001"]
     assert run_cli("optuna", "--dry-run", *args) == 0
     assert "a trial projected past 0 CPU s stopped" in capsys.readouterr().out
     assert run_cli("optuna", *args) == 0
