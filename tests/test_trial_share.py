@@ -11,6 +11,7 @@ import pytest
 from conftest import TINY, TINY_SEARCH, load, refused_before_work, run_cli
 from optuna.trial import TrialState
 
+from kraby_study.answers.search_evidence import trial_rows
 from kraby_study.config.compose import compose_config
 from kraby_study.plan.space import search_definition
 from kraby_study.records.attributes import StudyAttrs, TrialAttrs
@@ -122,3 +123,7 @@ def test_a_search_stops_its_dear_trials_and_keeps_its_enqueued_one(
     for trial in trials[1:]:
         assert trial.user_attrs["cost_stop"] > 0.001
         assert trial.user_attrs["pruned_at"] == 128  # the first checkpoint: 512 / 4
+    # The report's trial table says which trials were stopped for their cost.
+    rows = trial_rows(trials, ["learning_rate", "gamma"])
+    assert rows["cost_stop"].isna().tolist() == [True, False, False]
+    assert (rows["cost_stop"][1:] == [t.user_attrs["cost_stop"] for t in trials[1:]]).all()
