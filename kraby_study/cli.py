@@ -149,6 +149,10 @@ SEARCH_FLAGS = [
          "what its running ones used so far and what asking the sampler cost reach it (the "
          "running ones finish, so it overshoots), so two searches compare at the same budget "
          "(default: none, --trials alone)", "S", _positive_float),
+    Flag("--trial-share", "search.trial_share", "with --cpu-budget, the share of it one "
+         "trial may use, as search.trial_share=F: a trial projected at a checkpoint to use "
+         "more is stopped there and stored as pruned (rl-zoo3's settings and other enqueued "
+         "configurations, and rechecks, never are) (default: none)", "F", _positive_float),
     Flag("--recheck", "search.recheck", "before the search ends, retrain its K best trials "
          "on search.recheck_seeds (2) more seeds each, ranking each by all its seeds, and the "
          "next in line when one drops out of the top K, within --cpu-budget (exploring stops "

@@ -24,6 +24,23 @@ from kraby_study.store.store import study_exists
 TINY = ["budget=smoke", "budget.steps=512", "budget.curve_every=64", "ppo.n_envs=4",
         "ppo.n_steps=32", "ppo.n_epochs=2", "ppo.net_arch=[8]", "save_models=false"]
 
+TINY_SEARCH = """\
+name: tiny
+sampler: random
+pruner: none
+seed: 3
+startup_trials: 1
+checkpoints: 4
+objective: final_reward
+trials: 3
+enqueue: []
+params:
+  learning_rate: {path: ppo.learning_rate, type: float, low: 1.0e-4, high: 1.0e-2, log: true}
+  gamma: {path: ppo.gamma, type: float, low: 0.5, high: 0.99}
+"""
+"""A search space of two parameters: 3 trials, random, unpruned, nothing enqueued (write it
+as conf/search/tiny.yaml and run with search=tiny)."""
+
 FAST_HEARTBEAT = ["heartbeat_interval=1", "heartbeat_grace=4"]
 """A server notices a stopped command's trials within seconds."""
 
@@ -46,6 +63,16 @@ def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 def run_cli(*args: str) -> int:
     """Run the CLI in this process; returns its exit code."""
     return main(list(args))
+
+
+def refused_before_work(workdir: Path, capsys: pytest.CaptureFixture[str], *args: str) -> str:
+    """Run the CLI on bad input in ``workdir``: it must exit 2 with a one-line error and no
+    store made. Returns the error."""
+    assert run_cli(*args) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert not (workdir / "studies").exists()
+    return err
 
 
 def spawn_cli(*args: str, cwd: Path) -> subprocess.Popen[str]:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import optuna
 import pytest
-from conftest import TINY, load, run_cli
+from conftest import TINY, TINY_SEARCH, load, refused_before_work, run_cli
 from optuna.distributions import FloatDistribution
 from optuna.trial import TrialState, create_trial
 
@@ -15,21 +15,6 @@ from kraby_study.records.attributes import TrialResult
 from kraby_study.records.stored import Outcome
 from kraby_study.run import recheck as costs
 from kraby_study.run.recheck import combined, first_seed, leaders, next_recheck, reserve
-
-SPACE = """\
-name: tiny
-sampler: random
-pruner: none
-seed: 3
-startup_trials: 1
-checkpoints: 4
-objective: final_reward
-trials: 3
-enqueue: []
-params:
-  learning_rate: {path: ppo.learning_rate, type: float, low: 1.0e-4, high: 1.0e-2, log: true}
-  gamma: {path: ppo.gamma, type: float, low: 0.5, high: 0.99}
-"""
 
 
 def _trial(number: int, scores: list[float] | None, *, key: str | None = None,
@@ -112,7 +97,7 @@ def test_a_recheck_is_stored_with_the_seeds_of_its_trial() -> None:
 def space(workdir: Path) -> Path:
     folder = workdir / "conf" / "search"
     folder.mkdir(parents=True)
-    (folder / "tiny.yaml").write_text(SPACE)
+    (folder / "tiny.yaml").write_text(TINY_SEARCH)
     return workdir
 
 
@@ -191,10 +176,7 @@ def test_rechecks_come_out_of_the_cpu_budget(space: Path,
 def test_a_recheck_that_cannot_run_is_refused_before_anything_runs(
         workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str],
         message: str) -> None:
-    assert run_cli("optuna", *argv) == 2
-    err = capsys.readouterr().err
-    assert message in err and err.count("\n") == 1
-    assert not (workdir / "studies").exists()
+    assert message in refused_before_work(workdir, capsys, "optuna", *argv)
 
 
 @pytest.mark.parametrize("budget,exploring", [(130.0, True), (110.0, False), (None, True)])

@@ -435,10 +435,40 @@ def test_the_cost_replay_stops_trials_dearer_per_step_than_the_first_complete_on
         "the 1 pick among them")
 
 
-def test_the_cost_replay_refuses_a_cap_that_is_not_positive(tmp_path: Path) -> None:
+def test_the_cost_replay_of_a_share_stops_trials_projected_past_it_but_enqueued_ones(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Trials of 2 seeds x 100 env steps under a budget of 100 CPU s: a share of 0.25 stops a
+    trial projected past 25 CPU s, at its first checkpoint (25 env steps)."""
+    url = f"sqlite:///{tmp_path / 'c.db'}"
+    study = optuna.create_study(study_name="s", storage=url, direction="maximize")
+    study.set_user_attr("kraby_definition", {"steps": 100, "seeds": 2,
+                                             "search": {"checkpoints": 4}})
+    study.set_user_attr("kraby_cpu_budget", 100.0)
+    # (state, value, CPU s, env steps, enqueued as): CPU s per step 0.2 for t0.
+    trials = [("COMPLETE", 5.0, 40.0, 200, "ppo=zoo"),  # past 25, but enqueued: not
+              ("COMPLETE", 8.0, 20.0, 200, None),       # 20 projected: not
+              ("COMPLETE", 9.0, 30.0, 200, None),       # 30: stopped, 0.15 x 25 = 3.75 CPU s
+              ("PRUNED", None, 15.0, 100, None)]        # 0.15 x 200 = 30: stopped
+    for state, value, cpu, steps, enqueued in trials:
+        attrs = {"cpu_time": cpu, "env_steps": steps,
+                 **({} if enqueued is None else {"enqueued": enqueued})}
+        study.add_trial(optuna.trial.create_trial(
+            state=TrialState[state], value=value, user_attrs=attrs))
+    replay = _benchmark("cost_replay")
+    assert replay.main([url, "s", "--share", "0.25"]) == 0  # type: ignore[attr-defined]
+    out = capsys.readouterr().out
+    assert "| s | 0.2 | 2: t2 (0.7), t3 (0.7) | 45, 8 | 105 | 1 | yes (t2) |" in out
+    assert out.strip().splitlines()[-1].startswith(
+        "cost_replay: 1 search at share 0.25; it stops 2 of 4 trials; they used 45 of the 105")
+
+
+@pytest.mark.parametrize("rule", [["--cap", "0"], ["--share", "0"], ["--share", "1.5"],
+                                  ["--cap", "3", "--share", "0.5"], []])
+def test_the_cost_replay_refuses_a_rule_that_is_not_one_positive_cap(
+        tmp_path: Path, rule: list[str]) -> None:
     with pytest.raises(SystemExit) as stop:
         _benchmark("cost_replay").main(  # type: ignore[attr-defined]
-            [f"sqlite:///{tmp_path / 'c.db'}", "s", "--cap", "0"])
+            [f"sqlite:///{tmp_path / 'c.db'}", "s", *rule])
     assert stop.value.code == 2
 
 

@@ -42,7 +42,8 @@ class Search:
         data: The stored study.
         maximize: Whether higher objective values are better.
         trials: One row per counted trial: number, outcome, value, env_steps, wall_time,
-            pruned_at, failure, then one column per parameter.
+            pruned_at, cost_stop (the CPU seconds a trial stopped for its cost was projected
+            to use), failure, then one column per parameter.
         params: Parameter names, in first-seen order.
         distributions: A distribution per parameter (from the trials that used it).
         importances: Parameter importances (PED-ANOVA), or None with ``importance_note`` saying why.
@@ -156,15 +157,16 @@ def trial_rows(trials: list[FrozenTrial], params: list[str],
             "pruned_at": attrs.get("pruned_at", max(trial.intermediate_values)
                                    if state == Outcome.PRUNED and trial.intermediate_values
                                    else None),
+            "cost_stop": attrs.get("cost_stop"),
             "failure": attrs.get("failure", "") if state == Outcome.FAILED else "",
             **{name: trial.params.get(name) for name in params},
         })
     extra = ["cost", "enqueued"] if two else []
     frame = pd.DataFrame(rows, columns=["number", "trial", "outcome", "value", "seeds", *extra,
                                         "env_steps", "wall_time", "training_time",
-                                        "pruned_at", "failure", *params])
+                                        "pruned_at", "cost_stop", "failure", *params])
     for column in ("seeds", "env_steps", "wall_time", "training_time", "pruned_at",
-                   *extra[:1]):
+                   "cost_stop", *extra[:1]):
         frame[column] = pd.to_numeric(frame[column], errors="coerce").astype(float)
     return frame
 

@@ -194,6 +194,14 @@ class SearchConfig:
     One objective only."""
     recheck_seeds: int = 2
     """More seeds a rechecked trial trains (after its own: seeds budget.seeds, ...)."""
+    trial_share: float | None = None
+    """With ``cpu_budget``: the share of it one trial may use. At each checkpoint a trial's
+    CPU seconds so far and what it would still use at its own pace (to its last env step)
+    are projected; a trial projected past ``trial_share * cpu_budget`` is stopped there and
+    stored as pruned, with the projection as its ``cost_stop``. The configurations the search
+    evaluates first (``enqueue``) and rechecks are never stopped for cost. It acts at the
+    checkpoints, so not with two objectives or the wilcoxon pruner, which report none. null:
+    no trial is stopped for its cost."""
     wilcoxon_p: float = 0.1
     """The wilcoxon pruner's p threshold: a trial's remaining seeds are stopped when the
     one-sided Wilcoxon signed-rank test of its finished seeds against the best trial's same

@@ -60,6 +60,7 @@ def validate_search(cfg: DictConfig) -> None:
     if search.cpu_budget is not None and not float(search.cpu_budget) > 0:
         _fail(f"search.cpu_budget must be a positive number of CPU seconds (or null), "
               f"got {search.cpu_budget}")
+    _validate_trial_share(cfg)
     for name in ("startup_trials", "pruner_startup_trials"):
         if int(search[name]) < 0:
             _fail(f"search.{name} must be >= 0, got {search[name]}")
@@ -89,6 +90,28 @@ def validate_search(cfg: DictConfig) -> None:
     _validate_run_lengths(cfg)
 
 
+def _validate_trial_share(cfg: DictConfig) -> None:
+    """A trial's share of the CPU budget: a fraction in (0, 1], with a budget to share, in a
+    search whose trials report checkpoints (where the share is checked)."""
+    share = cfg.search.get("trial_share")
+    if share is None:
+        return
+    if not 0 < float(share) <= 1:
+        _fail(f"search.trial_share must be in (0, 1] (a share of search.cpu_budget), got {share}")
+    if search_cpu_budget(cfg) is None:
+        _fail("search.trial_share is a share of search.cpu_budget: set --cpu-budget too")
+    if len(objectives(cfg)) == 2 or pruner_name(cfg) == "wilcoxon":
+        _fail("search.trial_share acts at a trial's checkpoints, which a two-objective search "
+              "and the wilcoxon pruner do not report: leave it null there")
+
+
+def search_trial_cap(cfg: DictConfig) -> float | None:
+    """The CPU seconds one trial may be projected to use (``search.trial_share`` of
+    ``search.cpu_budget``), or None for no cap."""
+    share, budget = cfg.search.get("trial_share"), search_cpu_budget(cfg)
+    return None if share is None or budget is None else float(share) * budget
+
+
 def objectives(cfg: DictConfig) -> list[str]:
     """The search's objective names, its reward first, then any cost
     (:func:`kraby_study.records.definition.check_objective`); ConfigError for a bad one."""
@@ -107,15 +130,18 @@ def pruner_name(cfg: DictConfig) -> str:
 
 def method_text(cfg: DictConfig) -> str:
     """How a search chooses and stops its trials, as a dry run names it: the sampler, its seed
-    and when its model takes over, and the pruner (:func:`pruner_name`), e.g. ``sampler tpe
-    (search.seed 0; its model from trial 5 on), pruner median``."""
+    and when its model takes over, the pruner (:func:`pruner_name`) and any cap on one
+    trial's CPU seconds, e.g. ``sampler tpe (search.seed 0; its model from trial 5 on),
+    pruner median``."""
     sampler = str(cfg.search.sampler)
     start = int(cfg.search.startup_trials)
     # The first trials are the enqueued ones, then random draws, until the model takes over.
     model = {"tpe": f"; its model from trial {start} on",
              "gp": f"; its model after {start} complete trials"}.get(sampler, "")
+    cap = search_trial_cap(cfg)
+    stop = "" if cap is None else f", a trial projected past {cap:,.0f} CPU s stopped"
     return (f"sampler {sampler} (search.seed {int(cfg.search.seed)}{model}), "
-            f"pruner {pruner_name(cfg)}")
+            f"pruner {pruner_name(cfg)}{stop}")
 
 
 def search_cpu_budget(cfg: DictConfig) -> float | None:
@@ -332,6 +358,9 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
     # Only a two-objective search with a floor stores one: others keep the definition (and
     # the fingerprint) they had before floors existed.
     search.pop("floor", None)
+    # Likewise a share of the budget: stored only when set.
+    if search.get("trial_share", 0) is None:
+        search.pop("trial_share")
     floor = search_floor(cfg)
     if floor is not None:
         search["floor"] = floor

@@ -185,6 +185,10 @@ class TrialAttrs(TrialMeasures):
     """A search trial: CPU seconds the command's process spent asking the sampler for it (a
     Gaussian process's fit is dearer than TPE's); part of what the search spends under its
     CPU budget, not of the trial's own cpu_time."""
+    cost_stop: float | None = None
+    """A search trial stopped for its cost (``search.trial_share``): the CPU seconds it was
+    projected to use, to its last env step, at the checkpoint where it was stopped. It is
+    stored as pruned."""
 
     def training_time(self) -> float | None:
         """CPU seconds per seed (:meth:`TrialMeasures.training_time`). A recheck's CPU seconds

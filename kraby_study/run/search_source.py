@@ -24,6 +24,7 @@ from kraby_study.plan.space import (
     search_cpu_budget,
     search_definition,
     search_floor,
+    search_trial_cap,
     wilcoxon_seeds,
 )
 from kraby_study.plan.spec import TrialSpec, evaluation_of, fingerprint, seeding_of
@@ -86,6 +87,9 @@ class Use:
     """Env steps it has trained."""
     cpu: float = 0.0
     """CPU seconds it has used."""
+    capped: bool = True
+    """Whether it may be stopped for its cost (not a configuration the search evaluates
+    first, nor a recheck)."""
 
 
 class SearchSource(StudySource):
@@ -96,6 +100,7 @@ class SearchSource(StudySource):
         self.cfg = cfg
         self.total = int(cfg.search.trials)
         self.cpu_budget = search_cpu_budget(cfg)
+        self.trial_cap = search_trial_cap(cfg)
         self.space = distributions(cfg)
         self.recheck, self.recheck_seeds = recheck_plan(cfg)
         self._rechecks: dict[int, Any] = {}  # recheck trial -> the trial it rechecks
@@ -208,7 +213,8 @@ class SearchSource(StudySource):
             self.ledger.set_attrs(number, TrialAttrs(
                 key=spec.key, seed=spec.seed, settings=spec.settings, steps=spec.steps,
                 model_path=spec.model_path))
-            self._running[number] = Use(total=spec.steps * spec.seeds)
+            self._running[number] = Use(total=spec.steps * spec.seeds,
+                                        capped=of is None and "enqueued" not in trial.user_attrs)
             return number, spec
 
     def _recheck_due(self, trials: Sequence[FrozenTrial], *, over: bool,
@@ -252,8 +258,28 @@ class SearchSource(StudySource):
                        seed_scores=False, label=f"{spec.label} recheck, {seeds}")
 
     def checkpoint(self, number: int, step: int, value: float) -> bool:
-        """Report an intermediate value to the pruner; False stops the trial."""
-        return self.ledger.checkpoint(number, step, value)
+        """Report an intermediate value to the pruner; False stops the trial: the pruner
+        stops it, or it is projected to use more than its share of the CPU budget
+        (:meth:`projected_past_cap`)."""
+        if not self.ledger.checkpoint(number, step, value):
+            return False
+        projected = self.projected_past_cap(number)
+        if projected is None:
+            return True
+        self.ledger.set_attrs(number, TrialAttrs(cost_stop=round(projected, 1)))
+        return False
+
+    def projected_past_cap(self, number: int) -> float | None:
+        """The CPU seconds a running trial would use to its last env step (what it has used
+        and :func:`~kraby_study.run.recheck.to_spend`), when that passes the search's cap on
+        one trial (``search.trial_share`` of the budget); None when it does not, when there
+        is no cap, or for a trial the cap spares (an enqueued configuration, a recheck)."""
+        use = self._running.get(number)
+        if self.trial_cap is None or use is None or not use.capped:
+            return None
+        projected = use.cpu + to_spend(use.done, use.total, use.cpu,
+                                       cpu_per_step(self.ledger.trials()))
+        return projected if projected > self.trial_cap else None
 
     def requeue(self, number: int, spec: TrialSpec, reason: str) -> None:
         """Give back a trial that will not finish in this command, to run again."""
@@ -278,7 +304,8 @@ class SearchSource(StudySource):
 
 
 def pruner_label(cfg: DictConfig) -> str:
-    """The pruner as the start line names it; the wilcoxon pruner with its threshold."""
+    """The pruner as the start line names it; the wilcoxon pruner with its threshold, and
+    the cap on one trial's CPU seconds (``search.trial_share``) where there is one."""
     pruner = pruner_name(cfg)
     if pruner == "wilcoxon":
         p = float(cfg.search.wilcoxon_p)
@@ -288,7 +315,12 @@ def pruner_label(cfg: DictConfig) -> str:
         floor = search_floor(cfg)
         below = f", trials below ppo={floor}'s score infeasible" if floor else ""
         return f"objectives {' and '.join(objectives(cfg))}, no pruner{below}"
-    return "no pruner" if pruner == "none" else f"{pruner} pruner"
+    name = "no pruner" if pruner == "none" else f"{pruner} pruner"
+    cap = search_trial_cap(cfg)
+    if cap is not None:
+        name += (f", a trial projected past {cap:,.0f} CPU s stopped "
+                 f"(search.trial_share {float(cfg.search.trial_share):g})")
+    return name
 
 
 def take_opening(ledger: StudyLedger) -> int:
@@ -369,15 +401,21 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
 
 
 def record_budget_end(source: SearchSource, stream: TextIO) -> None:
-    """Say what a search under a CPU budget used and, when the budget stopped it before its
+    """Say what a search under a CPU budget used (and how many trials it stopped for their
+    cost, under ``search.trial_share``) and, when the budget stopped it before its
     total, store the trials it ran as its plan, so listing and the report count it complete.
     A search with rechecks ends its exploring before the budget is used, to pay for them; that
     is stored too, so a later command under the same budget does not explore again."""
-    ended = len([t for t in source.counted() if t.state != TrialState.WAITING])
+    counted_trials = [t for t in source.counted() if t.state != TrialState.WAITING]
+    ended = len(counted_trials)
     stopped = (source.over_budget() or source.explored) and ended < source.total
+    dear = sum(1 for t in counted_trials if "cost_stop" in t.user_attrs)
+    capped = ("" if source.trial_cap is None else
+              f"; {dear} stopped past {source.trial_cap:,.0f} CPU s (search.trial_share)")
     print(f"search {source.ledger.name}: {source.spent():,.0f} of its "
           f"{source.cpu_budget or 0:,.0f} CPU s used, {ended} of {source.total} trials"
-          + (" (stopped by the CPU budget)" if stopped else ""), file=stream, flush=True)
+          + (" (stopped by the CPU budget)" if stopped else "") + capped,
+          file=stream, flush=True)
     if stopped:
         source.ledger.update(StudyAttrs(planned=ended, explored=(
             source.cpu_budget if source.explored else None)))
