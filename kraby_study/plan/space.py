@@ -112,6 +112,13 @@ def search_trial_cap(cfg: DictConfig) -> float | None:
     return None if share is None or budget is None else float(share) * budget
 
 
+def trial_cap_text(cfg: DictConfig) -> str:
+    """The cap on one trial's CPU seconds as a search's lines name it after its pruner,
+    ``, a trial projected past 300 CPU s stopped``; empty without one."""
+    cap = search_trial_cap(cfg)
+    return "" if cap is None else f", a trial projected past {cap:,.0f} CPU s stopped"
+
+
 def objectives(cfg: DictConfig) -> list[str]:
     """The search's objective names, its reward first, then any cost
     (:func:`kraby_study.records.definition.check_objective`); ConfigError for a bad one."""
@@ -138,10 +145,8 @@ def method_text(cfg: DictConfig) -> str:
     # The first trials are the enqueued ones, then random draws, until the model takes over.
     model = {"tpe": f"; its model from trial {start} on",
              "gp": f"; its model after {start} complete trials"}.get(sampler, "")
-    cap = search_trial_cap(cfg)
-    stop = "" if cap is None else f", a trial projected past {cap:,.0f} CPU s stopped"
     return (f"sampler {sampler} (search.seed {int(cfg.search.seed)}{model}), "
-            f"pruner {pruner_name(cfg)}{stop}")
+            f"pruner {pruner_name(cfg)}{trial_cap_text(cfg)}")
 
 
 def search_cpu_budget(cfg: DictConfig) -> float | None:

@@ -25,6 +25,7 @@ from kraby_study.plan.space import (
     search_definition,
     search_floor,
     search_trial_cap,
+    trial_cap_text,
     wilcoxon_seeds,
 )
 from kraby_study.plan.spec import TrialSpec, evaluation_of, fingerprint, seeding_of
@@ -316,11 +317,10 @@ def pruner_label(cfg: DictConfig) -> str:
         below = f", trials below ppo={floor}'s score infeasible" if floor else ""
         return f"objectives {' and '.join(objectives(cfg))}, no pruner{below}"
     name = "no pruner" if pruner == "none" else f"{pruner} pruner"
-    cap = search_trial_cap(cfg)
-    if cap is not None:
-        name += (f", a trial projected past {cap:,.0f} CPU s stopped "
-                 f"(search.trial_share {float(cfg.search.trial_share):g})")
-    return name
+    capped = trial_cap_text(cfg)
+    if capped:
+        capped += f" (search.trial_share {float(cfg.search.trial_share):g})"
+    return name + capped
 
 
 def take_opening(ledger: StudyLedger) -> int:
