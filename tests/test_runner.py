@@ -77,6 +77,9 @@ class FakeSource:
         self.checkpoints.append((number, step, value))
         return self.answers.get(number, True)
 
+    def stopped_why(self, number: int) -> str | None:
+        return None
+
     def using(self, number: int, steps: int, cpu: float) -> None:
         self.cpu[number] = cpu
 

@@ -115,6 +115,10 @@ def test_a_search_stops_its_dear_trials_and_keeps_its_enqueued_one(
     out = capsys.readouterr().out
     assert "(search.trial_share 1e-06)" in out
     assert "3 of 3 trials; 2 stopped past 0 CPU s (search.trial_share)" in out
+    # Each stopped trial's progress line says why it was pruned.
+    stopped = [line for line in out.splitlines() if "pruned at 128 env steps:" in line]
+    assert len(stopped) == 2
+    assert all("past the cap of 0 (search.trial_share)" in line for line in stopped)
     trials = load(workdir / "studies" / "kraby.db", "tiny").trials
     assert [t.state for t in trials] == [TrialState.COMPLETE, TrialState.PRUNED,
                                          TrialState.PRUNED]

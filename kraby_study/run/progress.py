@@ -44,10 +44,11 @@ def one_line(text: str, limit: int = REASON_CHARS) -> str:
     return text if len(text) <= limit else text[: limit - 3].rstrip() + "..."
 
 
-def describe(result: TrialResult, cost: bool = False) -> str:
+def describe(result: TrialResult, cost: bool = False, why: str | None = None) -> str:
     """How a trial ended, in a few words: ``complete, score -0.0123 (12 s)`` and the like;
     with ``cost`` (a two-objective search) its cost too: ``complete, score -0.0123, cost
-    8.41 CPU s/seed (12 s)``."""
+    8.41 CPU s/seed (12 s)``; ``why``: why its source stopped a pruned trial, when not its
+    pruner (``pruned at 4,096 env steps: <why>``)."""
     if result.outcome == Outcome.COMPLETE:
         score = "" if result.final_score is None else f", score {result.final_score:.4g}"
         seconds = result.training_time()
@@ -56,7 +57,7 @@ def describe(result: TrialResult, cost: bool = False) -> str:
         return f"complete{score} ({result.wall_time or 0:.0f} s)"
     if result.outcome == Outcome.PRUNED:
         where = "" if result.pruned_at is None else f" at {result.pruned_at:,} env steps"
-        return f"pruned{where}"
+        return f"pruned{where}" + (f": {why}" if why else "")
     if result.outcome == Outcome.FAILED:
         return f"failed ({one_line(result.failure)})" if result.failure else "failed"
     return str(result.outcome)
@@ -140,9 +141,10 @@ class Progress:
         if self.bar is not None and self.clock() - self._last_draw >= REDRAW_SECONDS:
             self._draw()
 
-    def finish(self, label: str, result: TrialResult, cost: bool = False) -> None:
+    def finish(self, label: str, result: TrialResult, cost: bool = False,
+               why: str | None = None) -> None:
         """A trial ended: complete, failed or pruned; ``cost``: show its cost (a
-        two-objective search's trial)."""
+        two-objective search's trial); ``why``: why its source stopped it (:func:`describe`)."""
         so_far, _ = self.running.pop(label, (0, 0))
         trained = max(result.env_steps or 0, so_far)
         self.ended_steps += trained
@@ -156,7 +158,7 @@ class Progress:
             self.failed += 1
         if self.bar is not None:
             self.bar.update(1)
-        self._line(f"[{self.done}/{self.total}] {label}: {describe(result, cost)}")
+        self._line(f"[{self.done}/{self.total}] {label}: {describe(result, cost, why)}")
 
     def interrupt(self, label: str, reason: str) -> None:
         """A trial stopped without ending (its worker died, or Ctrl-C): not done."""

@@ -41,6 +41,10 @@ class TrialSource(Protocol):
     def checkpoint(self, number: int, step: int, value: float) -> bool:
         """Record an intermediate value; False prunes the trial."""
 
+    def stopped_why(self, number: int) -> str | None:
+        """Why the source itself stopped a trial at a checkpoint (not its pruner), in a few
+        words for the trial's progress line; None when it did not."""
+
     def using(self, number: int, steps: int, cpu: float) -> None:
         """Note the env steps a running trial has trained and the CPU seconds it has used so
         far."""
@@ -196,9 +200,10 @@ class _Run:
             self.submit(event.number, spec)
 
     def finish(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
+        why = self.source.stopped_why(number)
         self.source.record(number, spec, result)
         self.summary.count(result.outcome, result.failure)
-        self.progress.finish(spec.label, result, cost=spec.cost is not None)
+        self.progress.finish(spec.label, result, cost=spec.cost is not None, why=why)
 
     def stop(self, why: str = "stopped by the user") -> None:
         """Ctrl-C (or the executor's machines lost): stop the workers and give their trials

@@ -43,6 +43,10 @@ class StudySource:
         """Record an intermediate value; False prunes the trial (sweeps never prune)."""
         return True
 
+    def stopped_why(self, number: int) -> str | None:
+        """Why this source stopped a trial itself (a search's cost cap); None here."""
+        return None
+
     def using(self, number: int, steps: int, cpu: float) -> None:
         """Note the env steps a running trial has trained and the CPU seconds it has used so
         far (only a search under a CPU budget counts them)."""
