@@ -91,6 +91,8 @@ class Use:
     capped: bool = True
     """Whether it may be stopped for its cost (not a configuration the search evaluates
     first, nor a recheck)."""
+    cost_stop: float | None = None
+    """The CPU seconds it was projected to use when it was stopped for its cost."""
 
 
 class SearchSource(StudySource):
@@ -106,7 +108,6 @@ class SearchSource(StudySource):
         self.recheck, self.recheck_seeds = recheck_plan(cfg)
         self._rechecks: dict[int, Any] = {}  # recheck trial -> the trial it rechecks
         self._running: dict[int, Use] = {}  # trial this command runs -> what it has used
-        self._cost_stops: dict[int, float] = {}  # trial stopped for its cost -> projection
         # Exploring ended for the rechecks: it does not start again, in this command nor in a
         # later one under the same budget.
         self._explored = (self.cpu_budget is not None and bool(self.recheck)
@@ -269,16 +270,16 @@ class SearchSource(StudySource):
         if projected is None:
             return True
         self.ledger.set_attrs(number, TrialAttrs(cost_stop=round(projected, 1)))
-        self._cost_stops[number] = projected
+        self._running[number] = replace(self._running[number], cost_stop=projected)
         return False
 
     def stopped_why(self, number: int) -> str | None:
         """A trial stopped for its cost: ``projected to use 412 CPU s, past the cap of 300
         (search.trial_share)``; None for any other."""
-        projected = self._cost_stops.get(number)
-        if projected is None or self.trial_cap is None:
+        use = self._running.get(number)
+        if use is None or use.cost_stop is None:
             return None
-        return (f"projected to use {projected:,.0f} CPU s, past the cap of "
+        return (f"projected to use {use.cost_stop:,.0f} CPU s, past the cap of "
                 f"{self.trial_cap:,.0f} (search.trial_share)")
 
     def projected_past_cap(self, number: int) -> float | None:
@@ -296,7 +297,6 @@ class SearchSource(StudySource):
     def requeue(self, number: int, spec: TrialSpec, reason: str) -> None:
         """Give back a trial that will not finish in this command, to run again."""
         self._running.pop(number, None)
-        self._cost_stops.pop(number, None)
         super().requeue(number, spec, reason)
 
     def record(self, number: int, spec: TrialSpec, result: TrialResult) -> None:
@@ -305,7 +305,6 @@ class SearchSource(StudySource):
         floor is not measured). Optuna's samplers rank feasible trials first. A recheck is
         stored with the seeds of the trial it rechecks (:func:`combined`)."""
         self._running.pop(number, None)  # its stored cpu_time counts from now on
-        self._cost_stops.pop(number, None)
         if number in self._rechecks:
             result = combined(self._rechecks[number], result)
         floor = search_floor(self.cfg)
