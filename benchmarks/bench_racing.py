@@ -11,7 +11,7 @@ Two parts:
   within the margin of the fixed design's best by the fixed design's own IQMs (all seeds;
   the margin in score units: the fraction x the fixed best's |IQM|), and the fixed design's
   tie set (the best value and those not shown worse at margin 0). A replay runs rounds in
-  lockstep: a live race may also run up to one round ahead on idle workers (docs/studies.md,
+  lockstep: a live race may also run up to one round ahead on idle workers (docs/guide/studies.md,
   Racing).
 - ``--simulations N``: the race's family-wise error under the global null (every value from
   one distribution, so any drop is false) and its savings and error when one value is 1 or 2 sd

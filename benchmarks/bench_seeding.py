@@ -9,7 +9,7 @@ correlation of the scores of runs s and s + k (Pearson, 95 % Fisher-z interval) 
 of equal variances (two-sided F, Brown-Forsythe). Under offset, the runs of one study share
 episodes, so their spread leaves out what the episodes add; the ratio estimates that share.
 
-The stores of docs/statistics.md (Seeds), 30 seeds each at the quick budget::
+The stores of docs/reference/statistics.md (Seeds), 30 seeds each at the quick budget::
 
     kraby-study confirm --baseline ppo=tuned --seeds 30 budget=quick seeding=offset \\
         confirm.seed=0 --storage sqlite:///seeding_offset.db save_models=false

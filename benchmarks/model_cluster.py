@@ -3,7 +3,7 @@
 Run: python benchmarks/model_cluster.py --store camp.db --calibration cal.db
          --ray-overhead S --head-ms MS [--stage-start S] [--nodes 1,4,16,64]
 
-Inputs, each measured elsewhere (docs/benchmarks.md names the commands):
+Inputs, each measured elsewhere (docs/benchmarks/index.md names the commands):
 
 - Trial times: a run of the documented campaign at a small budget (``--store``: `kraby-study
   run campaign=documented budget=quick budget.steps=8192 budget.seeds=2 workers=1 shards=1`),
@@ -11,7 +11,8 @@ Inputs, each measured elsewhere (docs/benchmarks.md names the commands):
   8,192 and 32,768 steps (``--store`` and ``--calibration``). The two budgets give a run's
   fixed CPU seconds and its seconds per step; each value's run is extrapolated to 250,000
   steps and scaled so that the two configurations land on their CPU seconds per run measured
-  at the full budget (``--full-tuned-cpu`` 63.0, ``--full-campaign-cpu`` 86.9, docs/results.md).
+  at the full budget (``--full-tuned-cpu`` 63.0, ``--full-campaign-cpu`` 86.9,
+  docs/results/index.md).
   A run's CPU seconds are taken as its wall time on a core of its own. From the gamma stage
   on, runs are anchored to the published end settings' measured run (``--anchor-from``): the
   small run's own selections (fewer epochs, larger batches) are cheaper than the published

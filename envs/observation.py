@@ -27,7 +27,7 @@ from gymnasium import spaces
 from .task import TARGET_CENTRE, TARGET_HALF_EXTENTS, WORKSPACE_HIGH, WORKSPACE_LOW
 
 OBSERVATIONS: tuple[str, ...] = ("default", "with_tip", "with_tip_to_target", "sin_angles")
-"""Observation variants, in the order of docs/robot.md's observation study."""
+"""Observation variants, in the order of docs/reference/robot.md's observation study."""
 
 TIP_TO_TARGET_SCALE = 0.3
 """Metres mapped to 1 in the tip-to-target vector."""

@@ -1,6 +1,6 @@
 """The Kraby leg as a PyBullet body: physical constants, URDF loading and the ground plane.
 
-Every number here comes from docs/robot.md; the kinematic chain itself lives in
+Every number here comes from docs/reference/robot.md; the kinematic chain itself lives in
 ``assets/kraby_leg.urdf``.
 """
 

@@ -27,8 +27,8 @@ RESET_OPTION_KEYS = ("joint_angles", "target")
 def reset_angle_bounds(reset_angle_range: float) -> tuple[np.ndarray, np.ndarray]:
     """Per-joint interval the start angles are drawn from.
 
-    docs/robot.md draws every joint in [-range, range], which for the default pi/4 is wider
-    than the coxa's +-0.46 limits. We draw from the intersection of that interval with
+    docs/reference/robot.md draws every joint in [-range, range], which for the default pi/4 is
+    wider than the coxa's +-0.46 limits. We draw from the intersection of that interval with
     each joint's limits: still uniform, and always a legal pose. Clipping instead would
     pile about 41 % of the coxa starts onto its two limits.
 

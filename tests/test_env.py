@@ -81,7 +81,7 @@ def test_urdf_joints_limits_and_masses_match_robot_facts(client):
     masses = [p.getDynamicsInfo(leg.body_id, link, physicsClientId=client)[0] for link in links]
     assert sum(masses) == pytest.approx(0.163, abs=1e-6)
     tip = p.getDynamicsInfo(leg.body_id, leg.tip_link, physicsClientId=client)
-    assert tip[1] == pytest.approx(0.7)  # lateral friction from docs/robot.md
+    assert tip[1] == pytest.approx(0.7)  # lateral friction from docs/reference/robot.md
     assert tip[9] == pytest.approx(10000.0) and tip[8] == pytest.approx(1000.0)
 
 
@@ -155,7 +155,7 @@ def test_start_angles_stay_within_joint_limits(env):
         angles.append(observation[0:6:2] * math.pi / 2)
     angles = np.array(angles)
     assert np.all(angles >= JOINT_LOWER - 1e-9) and np.all(angles <= JOINT_UPPER + 1e-9)
-    # The coxa covers its whole range; the others keep docs/robot.md's +-pi/4.
+    # The coxa covers its whole range; the others keep docs/reference/robot.md's +-pi/4.
     assert angles[:, 0].min() < -0.4 and angles[:, 0].max() > 0.4
     assert np.abs(angles[:, 1:]).max() <= math.pi / 4 + 1e-9
     assert np.abs(angles[:, 1:]).max() > 0.7

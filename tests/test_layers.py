@@ -1,6 +1,7 @@
 """The data flows one way: every module imports only from its own layer or the layers below.
 
-The layer order is written here and in docs/architecture.md ("Layers"); keep the two alike.
+The layer order is written here and in docs/reference/architecture.md ("Layers"); keep the two
+alike.
 """
 
 from __future__ import annotations
@@ -41,7 +42,8 @@ def layer_of(module: str) -> int:
         for prefix in prefixes:
             if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > length:
                 best, length = index, len(prefix)
-    assert best >= 0, f"{module} is in no layer: add it to LAYERS and docs/architecture.md"
+    assert best >= 0, (f"{module} is in no layer: add it to LAYERS and "
+                       "docs/reference/architecture.md")
     return best
 
 
@@ -102,7 +104,7 @@ def test_every_module_imports_only_its_own_layer_or_below() -> None:
 
 
 def test_only_the_env_seam_imports_the_leg() -> None:
-    """Every use of an environment goes through kraby_study.env (docs/environments.md)."""
+    """Every use of an environment goes through kraby_study.env (docs/guide/environments.md)."""
     direct = [f"{path.relative_to(ROOT)}:{line}"
               for module, path in modules().items()
               if module.startswith("kraby_study.") and not module.startswith("kraby_study.env")
@@ -193,7 +195,7 @@ def import_cycles() -> list[list[str]]:
 
 def test_no_modules_import_each_other_in_a_loop() -> None:
     """A loop of imports (env's adapters and their registry, say) hides which module is the
-    lower one; the registry stands apart from the adapters (docs/architecture.md)."""
+    lower one; the registry stands apart from the adapters (docs/reference/architecture.md)."""
     assert import_cycles() == []
 
 

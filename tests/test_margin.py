@@ -185,7 +185,7 @@ def test_the_noisy_cheap_candidate_is_not_selected() -> None:
 
 
 def test_campaign_and_tuned_at_the_full_budget_are_not_equivalent() -> None:
-    # docs/results.md: 10 seeds each, -0.0140 (sd 0.0032) against ppo=tuned's -0.0216
+    # docs/results/index.md: 10 seeds each, -0.0140 (sd 0.0032) against ppo=tuned's -0.0216
     # (sd 0.0041). The default margin is 0.2 x the campaign's |IQM| (0.0029 here), below their
     # difference 0.0076, so tuned can never be shown within it: p_equivalent >= 0.5 whatever
     # the seeds' noise.

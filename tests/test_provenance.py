@@ -192,8 +192,8 @@ def trained(workdir: Path, name: str, **env: str) -> tuple[float, list[float], d
 
 
 def test_a_seed_is_bit_for_bit_on_one_instruction_set_and_not_across_two(workdir: Path) -> None:
-    """What "reproducible" means (docs/reproducibility.md): the same settings and seed give the
-    same numbers to the bit on one CPU and software, and other numbers when torch's kernels
+    """What "reproducible" means (docs/reference/reproducibility.md): the same settings and seed
+    give the same numbers to the bit on one CPU and software, and other numbers when torch's kernels
     run another instruction set (ATEN_CPU_CAPABILITY=default: no SIMD, as on an older CPU),
     since they then add in another order. The record says which set a trial ran."""
     import torch

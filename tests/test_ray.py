@@ -314,7 +314,7 @@ def test_a_node_without_the_project_fails_its_trial_in_one_line(
     assert trial.state == TrialState.FAIL
     reason = str(trial.user_attrs["failure"])
     assert reason.startswith("error: Python package 'kraby_study' is not installed on Ray node ")
-    assert f"(node id {node[:8]}): install kraby-study there (docs/ray.md)" in reason
+    assert f"(node id {node[:8]}): install kraby-study there (docs/guide/clusters.md)" in reason
     assert len(reason.splitlines()) == 1
 
 

@@ -284,7 +284,7 @@ def test_the_reserve_replay_cuts_exploring_where_a_dear_running_trial_would_take
     assert stop.value.code == 2 and "no study 'nope'" in capsys.readouterr().err
 
 
-# Published confirmed means (docs/results.md, Pendulum-v1 at 1,200 CPU s, sampler seeds 0-9):
+# Published confirmed means (docs/results/index.md, Pendulum-v1 at 1,200 CPU s, sampler seeds 0-9):
 # TPE without the pruner, and random search.
 UNPRUNED = ["-163.8", "-168.5", "-151.1", "-151.9", "-153.6", "-179.3", "-154.1", "-152.6",
             "-162.0", "-200.6"]

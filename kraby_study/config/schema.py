@@ -32,7 +32,7 @@ class LegEnvConfig:
 
 @dataclass
 class GymEnvConfig:
-    """``env=gym``: any registered Gymnasium environment, by its id (docs/environments.md)."""
+    """``env=gym``: any registered Gymnasium environment, by its id (docs/guide/environments.md)."""
 
     id: str = MISSING
     """The registered id, e.g. Pendulum-v1 (an id of a package of ``packages`` too)."""
@@ -118,7 +118,7 @@ class StudyConfig:
     ``${winner:NAME}``, ``best``): final_score (highest mean final score), auc (highest mean
     AUC), fastest_equivalent (lowest mean training time among the best and the values shown
     equivalent to it, within compare.margin) or fastest_tied (the same among the values not
-    shown worse, the rule of earlier releases). See docs/campaigns.md."""
+    shown worse, the rule of earlier releases). See docs/guide/campaigns.md."""
 
 
 @dataclass
@@ -206,7 +206,7 @@ class SearchConfig:
     """The wilcoxon pruner's p threshold: a trial's remaining seeds are stopped when the
     one-sided Wilcoxon signed-rank test of its finished seeds against the best trial's same
     seeds gives p below it. With n seeds p is at least 1/2^n, so 0.1 acts from the 4th seed
-    on and needs budget.seeds >= 5 (see docs/benchmarks.md, Pruning)."""
+    on and needs budget.seeds >= 5 (see docs/benchmarks/index.md, Pruning)."""
     warmup: float = 0.5
     """Fraction of the first seed during which no trial is pruned: the first updates' reward
     says little about a configuration (it is mostly the untrained policy's). Not read by the
@@ -222,7 +222,7 @@ class SearchConfig:
     evaluation, the mean reward of the deterministic policy on a fixed set of targets (reset
     options). Cost (minimised): training_time, CPU seconds per seed (the worker's and its
     leg-stepping processes'), mean over the trial's seeds. Two objectives make a front of
-    trials (docs/studies.md)."""
+    trials (docs/guide/studies.md)."""
     eval_episodes: int | None = None
     """Episodes of each run's evaluation (the evaluation objective, and a confirm of an
     evaluation search); null: a stored study's own number, 200 for a new one."""
@@ -246,7 +246,7 @@ class SearchConfig:
 
 @dataclass
 class ReportConfig:
-    """How ``report`` computes its statistics (see docs/statistics.md)."""
+    """How ``report`` computes its statistics (see docs/reference/statistics.md)."""
 
     bootstrap: int = 2000
     """Bootstrap resamples of the bootstrap-t interval of a mean from 5 seeds on (final score,
@@ -262,7 +262,7 @@ class ReportConfig:
 
 @dataclass
 class CompareConfig:
-    """How values are compared with the best (see docs/statistics.md, Four answers)."""
+    """How values are compared with the best (see docs/reference/statistics.md, Four answers)."""
 
     margin: float = 0.2
     """The smallest difference in IQM final score that matters, as a fraction of the best
@@ -277,7 +277,7 @@ class CompareConfig:
 
 @dataclass
 class RacingConfig:
-    """Racing a sweep's or a confirm study's seeds (see docs/studies.md, Racing)."""
+    """Racing a sweep's or a confirm study's seeds (see docs/guide/studies.md, Racing)."""
 
     enabled: bool = False
     """Run seeds in rounds: a value leaves once shown worse than the best (by more than
@@ -348,7 +348,7 @@ class CampaignConfig:
 
 @dataclass
 class RayConfig:
-    """Where ``executor=ray`` runs trials (see docs/architecture.md, Executors)."""
+    """Where ``executor=ray`` runs trials (see docs/reference/architecture.md, Executors)."""
 
     address: str | None = None
     """null: start a Ray instance on this machine for the command; ``auto`` or ``host:port``:

@@ -1,7 +1,7 @@
 """Where the answers are decided: every band, answer, verdict and selection of kraby-study.
 
 Every statistic is over seeds: one value per complete seed (its final score, its AUC, ...).
-docs/statistics.md says what each one means and why it was chosen.
+docs/reference/statistics.md says what each one means and why it was chosen.
 
 - :mod:`comparison`: the best value and every other value's answer at the margin (best,
   equivalent, worse, undecided), one comparison per study that the verdict, the tables, the

@@ -80,7 +80,7 @@ MIN_SEEDS = 2
 """Fewest complete seeds a value needs to be in the family (at least 2)."""
 MARGIN = 0.2
 """Default ``compare.margin``: the margin as a fraction of the best value's |mean final score|
-(docs/statistics.md justifies it against this project's data)."""
+(docs/reference/statistics.md justifies it against this project's data)."""
 POWER = 0.8
 """The power at which :attr:`Comparison.resolvable` is the smallest margin the seeds resolve."""
 SATTERTHWAITE_FROM = 4

@@ -5,7 +5,7 @@ From 5 seeds on, the 95 % equal-tailed studentised bootstrap (bootstrap-t) inter
 With 2 to 4 seeds, the 95 % Hall skewness-corrected t interval (:func:`hall_interval`; Hall
 1992). The learning-curve bands, hundreds of intervals a value, are Hall's intervals at every n
 (:func:`describe`). The interquartile mean (IQM) has the Tukey-McLaughlin trimmed-t interval.
-See docs/statistics.md for why each was chosen."""
+See docs/reference/statistics.md for why each was chosen."""
 
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ Every value runs the same seeds, and a seed can move the scores of all values to
 same initial weights and action-noise stream). With ``RaceRules.paired`` (``racing.paired``)
 each pair of values is compared by a paired t-test on the seeds both have ended: seeds are
 blocks, as instances are in F-Race (Birattari et al. 2002), whose Friedman test blocks on them.
-It pays only where that shared part is large: on the four quick studies of docs/benchmarks.md
+It pays only where that shared part is large: on the four quick studies of docs/benchmarks/index.md
 it saved no run, so the default stays Welch's unpaired tests, the report's own.
 
 Each look is one more chance of a false answer, so the looks share the error: alpha is spent

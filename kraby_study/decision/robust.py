@@ -3,7 +3,7 @@
 The four answers (:mod:`kraby_study.decision.comparison`) are claims about each value's
 interquartile mean (IQM: the 25 % trimmed mean of its seeds' final scores, as rliable reports
 it), not its mean. No test of a mean holds its level at a few seeds when a value's seeds
-sometimes fail and the spreads differ (docs/statistics.md, "Answers that hold when seeds
+sometimes fail and the spreads differ (docs/reference/statistics.md, "Answers that hold when seeds
 fail"): a sample that drew no failure carries no sign of it, and a mean moves with every
 failure, however rare. The IQM moves little with the failures a value has at most a quarter
 of the time; those are counted apart (:mod:`kraby_study.decision.failed_seeds`).

@@ -114,7 +114,7 @@ LEGACY_EVAL_SET = "fixed"
 """The evaluation set of every study stored before runs drew their own: its definition has no
 ``eval_set``."""
 EVAL_EPISODES = 200
-"""Evaluation episodes per run of a new study (docs/statistics.md: their standard error
+"""Evaluation episodes per run of a new study (docs/reference/statistics.md: their standard error
 against the margin on Pendulum-v1 and the leg)."""
 LEGACY_EVAL_EPISODES = 16
 """Evaluation episodes of a study stored before ``eval_episodes`` was stored (searches always

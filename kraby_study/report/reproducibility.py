@@ -38,11 +38,12 @@ CHECKED = ("cpu", "cpu_capability", "cores", "platform", "kraby_study", "python"
 hostname, the Ray node, the folder and the command line may differ freely)."""
 CPU_MODELS = ("; the same settings and seed give the same numbers bit for bit only on one CPU "
               "model with the same software, so a run of this study repeated on another of "
-              "these CPU models agrees in distribution, not to the bit (docs/reproducibility.md)")
+              "these CPU models agrees in distribution, not to the bit "
+              "(docs/reference/reproducibility.md)")
 """What the warning on trials of several CPU models adds."""
 EXPLAINED = {"cpu": CPU_MODELS,
              "cpu_capability": "; torch's kernels then sum in another order, so the same seed "
-                               "gives other numbers (docs/reproducibility.md)"}
+                               "gives other numbers (docs/reference/reproducibility.md)"}
 """What a warning on a field adds: what the difference does to the seeds' numbers."""
 
 

@@ -272,7 +272,7 @@ def _cannot_start(err: Exception) -> str | None:
     missing = _MISSING.search(last)
     if missing:
         return (f"Python package {missing[1].split('.')[0]!r} is not installed on Ray node "
-                f"{node}: install kraby-study there (docs/ray.md)")
+                f"{node}: install kraby-study there (docs/guide/clusters.md)")
     return f"a trial cannot start on Ray node {node}: {last}"
 
 
