@@ -8,6 +8,7 @@ from the schema while building (docs/hooks/config_reference.py).
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -56,3 +57,16 @@ def test_broken_anchor_fails_the_build(tmp_path: Path) -> None:
     result = build(config, tmp_path / "site")
     assert result.returncode != 0
     assert "does not contain an anchor '#no-such-section'" in result.stderr
+
+
+def test_readme_links_resolve() -> None:
+    """The README is read on its own, outside the site: each relative link names a file."""
+    text = (ROOT / "README.md").read_text()
+    targets = re.findall(r"\]\(([^)\s]+)\)", text)
+    missing = [
+        target for target in targets
+        if not re.match(r"[a-z]+:", target)
+        and not target.startswith("reports/")  # drawn by the main job, not committed
+        and not (ROOT / target.split("#")[0]).exists()
+    ]
+    assert targets and not missing, missing

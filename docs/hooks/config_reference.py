@@ -73,9 +73,10 @@ def field_docstrings(module: Any) -> dict[str, dict[str, str]]:
 
 
 def type_text(annotation: Any) -> str:
-    """A field's type as a reader writes it (``int | None``, ``list[int]``)."""
+    """A field's type as a reader writes it (``int or None``, ``list[int]``)."""
     text = annotation if isinstance(annotation, str) else getattr(annotation, "__name__", "")
-    return text or str(annotation)
+    # A table cell cannot hold "|", even in code: "int | None" reads "int or None".
+    return (text or str(annotation)).replace(" | ", " or ")
 
 
 def default_text(field: dataclasses.Field) -> str:
@@ -127,7 +128,7 @@ def render_class(schema: Any, prefix: str, cls: type, docs: dict[str, str]) -> l
         if not meaning and is_group(hints.get(field.name)):
             meaning = f"The `{field.name}` group (below)."
         lines.append(
-            f"| `{prefix}{field.name}` | `{cell(type_text(raw[field.name]))}` "
+            f"| `{prefix}{field.name}` | {cell(type_text(raw[field.name]))} "
             f"| {cell(default_text(field))} | {cell(meaning)} |"
         )
     return lines
