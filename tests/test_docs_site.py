@@ -70,3 +70,31 @@ def test_readme_links_resolve() -> None:
         and not (ROOT / target.split("#")[0]).exists()
     ]
     assert targets and not missing, missing
+
+
+def test_configuration_page_lists_every_schema_group(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The generated page covers each field of each schema dataclass, and refuses to build
+    when a new dataclass is not given a section."""
+    import dataclasses
+    import importlib.util
+
+    from kraby_study.config import schema
+
+    spec = importlib.util.spec_from_file_location(
+        "config_reference", ROOT / "docs/hooks/config_reference.py")
+    assert spec is not None and spec.loader is not None
+    hook = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hook)
+    page = hook.render(schema)
+    for _, prefix, name in hook.SECTIONS:
+        for field in dataclasses.fields(getattr(schema, name)):
+            assert f"`{prefix}{field.name}`" in page
+
+    @dataclasses.dataclass
+    class Unlisted:
+        size: int = 1
+
+    Unlisted.__module__ = schema.__name__
+    monkeypatch.setattr(schema, "Unlisted", Unlisted, raising=False)
+    with pytest.raises(ValueError, match="add Unlisted to SECTIONS"):
+        hook.render(schema)

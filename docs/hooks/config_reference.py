@@ -135,7 +135,13 @@ def render_class(schema: Any, prefix: str, cls: type, docs: dict[str, str]) -> l
 
 
 def render(schema: Any) -> str:
-    """The whole page, from the schema module."""
+    """The whole page, from the schema module; a schema dataclass left out of SECTIONS fails
+    the build, so a new group cannot go unlisted."""
+    groups = {name for name, value in vars(schema).items()
+              if dataclasses.is_dataclass(value) and value.__module__ == schema.__name__}
+    missing = sorted(groups - {name for _, _, name in SECTIONS})
+    if missing:
+        raise ValueError(f"docs/hooks/config_reference.py: add {', '.join(missing)} to SECTIONS")
     docs = field_docstrings(schema)
     lines = [INTRO]
     for heading, prefix, name in SECTIONS:
