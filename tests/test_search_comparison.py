@@ -23,8 +23,11 @@ TINY = ["budget.steps=1024", "budget.seeds=1", "budget.curve_every=128", "search
 
 
 def _benchmark(name: str) -> object:
-    """The module of ``benchmarks/NAME.py``."""
-    path = Path(__file__).parents[1] / "benchmarks" / f"{name}.py"
+    """The module of ``benchmarks/NAME.py``, or of ``experiments/NAME.py`` for a replay of one
+    past experiment."""
+    root = Path(__file__).parents[1]
+    path = next(folder / f"{name}.py" for folder in (root / "benchmarks", root / "experiments")
+                if (folder / f"{name}.py").exists())
     spec = importlib.util.spec_from_file_location(name, path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)

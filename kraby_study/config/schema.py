@@ -1,7 +1,7 @@
 """The typed configuration schema Hydra composes into.
 
 The dataclasses are registered in Hydra's ConfigStore, so a misspelt key or a value of the wrong
-type fails while the config is composed; :mod:`kraby_study.config.validate` then refuses
+type fails while the config is composed; `kraby_study.config.validate` then refuses
 impossible values before anything runs.
 """
 
@@ -365,8 +365,8 @@ class KrabyConfig:
     """Everything a command needs: composed from conf/config.yaml and the command line."""
 
     env: Any = MISSING
-    """The environment: a :class:`LegEnvConfig` (env=leg) or a :class:`GymEnvConfig`
-    (env=gym), typed by the option chosen."""
+    """The environment: a [`LegEnvConfig`][LegEnvConfig] (env=leg) or a
+    [`GymEnvConfig`][GymEnvConfig] (env=gym), typed by the option chosen."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
     budget: BudgetConfig = field(default_factory=BudgetConfig)
     study: StudyConfig | None = None

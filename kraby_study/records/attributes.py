@@ -52,7 +52,7 @@ class StudyKind(StrEnum):
 
 class SelectRule(StrEnum):
     """How a finished sweep's value is selected (``study.select``); see
-    :mod:`kraby_study.decision.selection` for each rule's statistics."""
+    `kraby_study.decision.selection` for each rule's statistics."""
 
     FINAL_SCORE = "final_score"
     """The best: the highest IQM of the final scores (the mean below 4 seeds)."""
@@ -155,7 +155,7 @@ class TrialResult(TrialMeasures):
 @dataclass(kw_only=True)
 class TrialAttrs(TrialMeasures):
     """The user attributes kraby-study stores on a trial: what it is (below) and what it
-    measured (:class:`TrialMeasures`); every field optional on read."""
+    measured ([`TrialMeasures`][TrialMeasures]); every field optional on read."""
 
     key: str | None = None
     """Identity of the planned run within its study, stable across attempts (see the key
@@ -176,8 +176,8 @@ class TrialAttrs(TrialMeasures):
     trains the seeds after the trial's own and holds the scores of both, so it replaces the
     trial (same key)."""
     provenance: str | None = None
-    """Key of what made it (:func:`provenance_key`): the record itself is stored once per study
-    under ``kraby_provenance:<key>``."""
+    """Key of what made it ([`provenance_key`][provenance_key]): the record itself is stored once
+    per study under ``kraby_provenance:<key>``."""
     enqueued: str | None = None
     """The configuration a new search evaluated first (``search.enqueue``), e.g. ppo=tuned;
     kept by its later attempts."""
@@ -191,9 +191,9 @@ class TrialAttrs(TrialMeasures):
     stored as pruned."""
 
     def training_time(self) -> float | None:
-        """CPU seconds per seed (:meth:`TrialMeasures.training_time`). A recheck's CPU seconds
-        are its own seeds' (its env steps over the steps a seed), while its scores hold the
-        original trial's too: it is divided by the seeds it trained."""
+        """CPU seconds per seed ([`TrialMeasures.training_time`][TrialMeasures.training_time]).
+        A recheck's CPU seconds are its own seeds' (its env steps over the steps a seed), while
+        its scores hold the original trial's too: it is divided by the seeds it trained."""
         time = super().training_time()
         if time is None or self.recheck_of is None or not self.steps or not self.env_steps:
             return time
@@ -237,9 +237,9 @@ class StudyAttrs:
     """A search's sampler seed."""
     openings: int | None = None
     """How many commands have started on a search: the next one's sampler draws from a child
-    of (seed, openings), so no two commands draw alike (:mod:`kraby_study.run.sampling`)."""
+    of (seed, openings), so no two commands draw alike (`kraby_study.run.sampling`)."""
     select: str | None = None
-    """A sweep's selection rule (:mod:`kraby_study.decision.selection`); None: final_score. Not part
+    """A sweep's selection rule (`kraby_study.decision.selection`); None: final_score. Not part
     of the definition: choosing another rule changes no run."""
     inputs: list[dict[str, Any]] | None = None
     """Settings taken from earlier studies' selected values: setting, value, study, rule."""
@@ -249,7 +249,7 @@ class StudyAttrs:
     race: dict[str, Any] | None = None
     """A raced study's standing, rewritten after each of its runs: rounds decided, whether the
     race is over, runs used and, per value, its seeds ended, the round it was dropped after
-    and the p that dropped it (:mod:`kraby_study.decision.race`)."""
+    and the p that dropped it (`kraby_study.decision.race`)."""
 
     @staticmethod
     def stored_names() -> dict[str, str]:

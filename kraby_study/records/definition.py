@@ -21,7 +21,7 @@ REWARDS = ("final_reward", "evaluation")
 the deterministic policy's mean return over the run's evaluation episodes."""
 COSTS = ("training_time",)
 """A search's costs, minimised: ``training_time`` is CPU seconds per seed
-(:meth:`TrialMeasures.training_time`)."""
+([`TrialMeasures.training_time`][kraby_study.records.attributes.TrialMeasures.training_time])."""
 
 
 def objective_names(objective: Any) -> list[str]:

@@ -1,5 +1,5 @@
-"""A stored trial as the rules read it (:class:`StoredTrial`), its outcome, its run's key and
-which attempts count."""
+"""A stored trial as the rules read it ([`StoredTrial`][StoredTrial]), its outcome, its run's key
+and which attempts count."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ class StateName(Protocol):
 
 class StoredTrial(Protocol):
     """What the rules below read of a stored trial: Optuna's FrozenTrial has it all, a light row
-    of :mod:`kraby_study.store.rows` the part ``list`` needs."""
+    of `kraby_study.store.rows` the part ``list`` needs."""
 
     @property
     def number(self) -> int: ...

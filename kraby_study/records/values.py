@@ -126,7 +126,7 @@ def ranking(trial: StoredTrial, maximize: bool = True) -> tuple[float, int, floa
 
 def best_trial(trials: Iterable[T], maximize: bool = True, objectives: int = 1) -> T | None:
     """The complete trial with the best score (a search's best); of equal scores the one on
-    more seeds, then the cheaper (:func:`ranking`); None when none is complete.
+    more seeds, then the cheaper ([`ranking`][ranking]); None when none is complete.
 
     kraby-study maximises; ``maximize=False`` serves foreign studies that minimise. Trials
     count when they have ``objectives`` values, by the first: 2 for a two-objective search's

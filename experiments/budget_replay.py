@@ -1,6 +1,6 @@
 """Replay stored budgeted searches under the rule that counts running trials' CPU.
 
-Run: python benchmarks/budget_replay.py URL [URL ...]
+Run: python experiments/budget_replay.py URL [URL ...]
 
 Since 2026-11-29 a search under ``--cpu-budget`` starts no trial once its ended trials' CPU
 seconds and what its running trials have used so far reach the budget; before, it counted

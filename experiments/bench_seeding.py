@@ -17,7 +17,7 @@ The stores of docs/reference/statistics.md (Seeds), 30 seeds each at the quick b
         confirm.seed=0 --storage sqlite:///seeding_streams.db save_models=false
     kraby-study confirm ... --seeds 60 confirm.seed=30 --storage sqlite:///seeding_offset_b.db
     kraby-study confirm ... --seeds 60 confirm.seed=30 --storage sqlite:///seeding_streams_b.db
-    python benchmarks/bench_seeding.py \\
+    python experiments/bench_seeding.py \\
         --offset sqlite:///seeding_offset.db sqlite:///seeding_offset_b.db \\
         --streams sqlite:///seeding_streams.db sqlite:///seeding_streams_b.db
 """

@@ -4,7 +4,7 @@ the evaluation episodes of its seed's own evaluation stream (apart from its trai
 beside the trial's training score; then the mean and standard deviation of both per value (a
 confirm study's configuration, a sweep's value).
 
-Run: python benchmarks/eval_models.py --storage sqlite:///studies/kraby.db --study-name NAME
+Run: python experiments/eval_models.py --storage sqlite:///studies/kraby.db --study-name NAME
 [--episodes 10]
 
 This is the measure rl-zoo3's benchmark table publishes (its evaluation's mean return), for

@@ -1,6 +1,6 @@
 """Replay a cost cap on stored searches: would stopping dear trials early free the budget?
 
-Run: python benchmarks/cost_replay.py URL STUDY [STUDY ...] (--cap C | --share F) [--good X]
+Run: python experiments/cost_replay.py URL STUDY [STUDY ...] (--cap C | --share F) [--good X]
 
 A search's samplers do not see what a trial costs, and a CPU budget can go to a few dear
 trials. A cost cap would stop a trial at a checkpoint once its CPU seconds per env step pass C

@@ -1,6 +1,6 @@
 """Replay the median pruner on stored searches that ran without one.
 
-Run: python benchmarks/pruner_replay.py URL STUDY [STUDY ...] [--good X]
+Run: python experiments/pruner_replay.py URL STUDY [STUDY ...] [--good X]
 
 A search run with ``search.pruner=none`` trains every trial to its end and still stores its
 intermediate values (the mean training reward at each checkpoint). This script asks what the

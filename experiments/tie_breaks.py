@@ -1,6 +1,6 @@
 """Benchmark analysis: which of a search's trials tied at its top score confirm best.
 
-Run: python benchmarks/tie_breaks.py --storage URL --arms NAME [NAME] --seeds 0 1 2
+Run: python experiments/tie_breaks.py --storage URL --arms NAME [NAME] --seeds 0 1 2
 
 Where a reward has a ceiling (CartPole-v1's 500), many trials of a search reach it on their
 search seeds; the pick among them was the first by trial number (Optuna's best trial), and is
@@ -31,7 +31,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import optuna  # noqa: E402
 from paired_picks import signed  # noqa: E402
 

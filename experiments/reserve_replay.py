@@ -1,6 +1,6 @@
 """Replay stored rechecked searches: where each rule of the rechecks' reserve ends exploring.
 
-Run: python benchmarks/reserve_replay.py URL [--recheck 3] [--recheck-seeds 3] [--with-next]
+Run: python experiments/reserve_replay.py URL [--recheck 3] [--recheck-seeds 3] [--with-next]
          [--studies NAME ...]
 
 A search under ``--recheck K`` and ``--cpu-budget`` stops exploring once the budget holds what

@@ -1,6 +1,6 @@
 """A model, not a measurement: the documented set's wall time on N nodes of 2 cores.
 
-Run: python benchmarks/model_cluster.py --store camp.db --calibration cal.db
+Run: python experiments/model_cluster.py --store camp.db --calibration cal.db
          --ray-overhead S --head-ms MS [--stage-start S] [--nodes 1,4,16,64]
 
 Inputs, each measured elsewhere (docs/benchmarks/index.md names the commands):

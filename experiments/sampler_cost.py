@@ -1,6 +1,6 @@
 """Benchmark: what a sampler's suggestions cost, replayed on stored searches.
 
-Run: python benchmarks/sampler_cost.py --storage URL STUDY [STUDY ...]
+Run: python experiments/sampler_cost.py --storage URL STUDY [STUDY ...]
          [--samplers gp tpe random] [--startup 5]
 
 A search's sampler runs in the command's own process, so its CPU seconds are not in a trial's

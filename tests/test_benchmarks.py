@@ -1,0 +1,103 @@
+"""Every script in benchmarks/ runs at a smoke size and prints its result line.
+
+A benchmark is measured, not asserted: these tests only keep the scripts working as the code
+under them changes (each runs in a fresh folder, as a user would start it, and must exit 0
+and print the line its page quotes). Each script is named on a page of docs/benchmarks/.
+Scripts that take more than a few seconds are in the slow tier; those that need a PostgreSQL
+server skip without KRABY_TEST_POSTGRES_URL.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCHMARKS = ROOT / "benchmarks"
+SERVER = os.environ.get("KRABY_TEST_POSTGRES_URL")
+
+slow = pytest.mark.slow
+postgres = [pytest.mark.postgres,
+            pytest.mark.skipif(not SERVER, reason="KRABY_TEST_POSTGRES_URL is not set")]
+
+# (script, smoke arguments, a line its output must hold): the smallest run that still goes
+# through every step of the script. The leg needs 1,024 steps and Pendulum-v1 1,600 before an
+# episode can end in the scored last tenth of a run.
+SMOKE = [
+    pytest.param("paired_picks.py", ["--seeds", "0", "1", "2", "--first-means", "1", "2", "3",
+                                     "--second-means", "0", "2", "1"], "paired_picks: first",
+                 id="paired_picks"),
+    pytest.param("bench_racing.py", ["--simulations", "2", "--smoke"],
+                 "max family-wise error of a race", id="bench_racing"),
+    pytest.param("bench_report.py", ["--trials", "5", "--points", "10"], "write_report:",
+                 marks=slow, id="bench_report"),
+    pytest.param("bench_env.py", ["--steps", "20", "--n-envs", "2"], "batched vs DummyVecEnv",
+                 marks=slow, id="bench_env"),
+    pytest.param("bench_train.py", ["--steps", "1024", "--skip-workers"], "goals: training speed",
+                 marks=slow, id="bench_train"),
+    pytest.param("bench_gym.py", ["--env", "Pendulum-v1", "--steps", "1600", "--repeats", "1"],
+                 "Pendulum-v1: median ratio", marks=slow, id="bench_gym"),
+    pytest.param("bench_eval_agreement.py",
+                 ["--seeds", "2", "--episodes", "2", "--workers", "1", "env=gym",
+                  "env.id=Pendulum-v1", "ppo=zoo", "budget=zoo", "budget.steps=1600"],
+                 "agreement:", marks=slow, id="bench_eval_agreement"),
+    pytest.param("bench_search.py",
+                 ["--env-id", "CartPole-v1", "--cpu-budget", "2", "--sampler-seeds", "0",
+                  "--confirm-seeds", "2", "--workers", "1", "budget.steps=4000",
+                  "budget.seeds=1"], "bench_search:", marks=slow, id="bench_search"),
+    pytest.param("bench_pruning.py", ["--trials", "3", "--seeds", "1", "--steps", "1024",
+                                      "--sampler-seeds", "0", "--jobs", "1"],
+                 "noise of the objective", marks=slow, id="bench_pruning"),
+    pytest.param("bench_error_rates.py", ["--simulations", "10", "--coverage-simulations", "20",
+                                          "--race-simulations", "5", "--workers", "1"],
+                 "max family-wise error", marks=slow, id="bench_error_rates"),
+    pytest.param("bench_skewed_spreads.py", ["--simulations", "10", "--workers", "1"],
+                 "on 1 worker(s)", marks=slow, id="bench_skewed_spreads"),
+    pytest.param("bench_startup.py", ["--repeats", "1"], "first trial line", marks=slow,
+                 id="bench_startup"),
+    pytest.param("bench_head.py", ["--trials", "16", "--slots", "2"],
+                 "| SQLite file | stub pool |", marks=slow, id="bench_head"),
+    pytest.param("bench_postgres.py", ["--smoke"], "| 2 |", marks=[slow, *postgres],
+                 id="bench_postgres"),
+    pytest.param("bench_ray.py", ["--rounds", "1", "--steps", "1024"], "| ray |", marks=slow,
+                 id="bench_ray"),
+    pytest.param("bench_ray_fault.py", ["--steps", "1024", "--seeds", "1", "--after", "2"],
+                 "node lost at", marks=slow, id="bench_ray_fault"),
+]
+
+
+@pytest.mark.parametrize(("script", "args", "expected"), SMOKE)
+def test_benchmark_runs_at_smoke_size(script: str, args: list[str], expected: str,
+                                      tmp_path: Path) -> None:
+    result = subprocess.run([sys.executable, str(BENCHMARKS / script), *args], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=900)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output[-3000:]
+    assert expected in result.stdout, output[-3000:]
+
+
+def test_every_benchmark_is_smoke_tested_and_documented() -> None:
+    scripts = {path.name for path in BENCHMARKS.glob("*.py")}
+    tested = {param.values[0] for param in SMOKE}
+    assert scripts == tested
+    pages = "".join(page.read_text() for page in (ROOT / "docs/benchmarks").glob("*.md")
+                    if page.name != "index.md")
+    assert [name for name in sorted(scripts) if name not in pages] == []
+
+
+EXPERIMENTS = sorted(path.name for path in (ROOT / "experiments").glob("*.py"))
+
+
+@slow
+@pytest.mark.parametrize("script", EXPERIMENTS)
+def test_experiment_still_starts(script: str, tmp_path: Path) -> None:
+    """The one-off analyses in experiments/ need the stores of their experiment to run; each
+    still imports what it uses and parses its arguments, and is listed in the folder's index."""
+    result = subprocess.run([sys.executable, str(ROOT / "experiments" / script), "--help"],
+                            cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert f"`{script}`" in (ROOT / "experiments/README.md").read_text()
