@@ -169,7 +169,8 @@ def campaign_preview(campaign: Campaign) -> list[StagePreview]:
     """
     out = []
     for stage in campaign.stages:
-        lookup = StoreWinners(names={s.study: s.name for s in campaign.before(stage)})
+        lookup = StoreWinners(names={s.study: s.name for s in campaign.before(stage)},
+                              recorders=[s.name for s in campaign.stages])
         try:
             plan = expand_study(resumed_stage(campaign, stage, lookup))
         except Unfinished:
