@@ -137,9 +137,9 @@ mean's intervals cover 0.87 to 0.91 there) and a failing-seed mixture."""
 def old_rule(scores: dict[int, np.ndarray]) -> list[int]:
     """The replaced rule: Holm over each value's two-sided Welch p against the best.
 
-    The Welch tests (Welch-Satterthwaite df, as ``welch_p``) are computed here in one
-    vectorised call: one ``scipy.stats.ttest_ind`` per pair cost most of the benchmark's time.
-    Simulated samples always spread, so ``welch_p``'s constant-sample rule never applies.
+    The Welch tests (Welch-Satterthwaite df) are computed here in one vectorised call: one
+    ``scipy.stats.ttest_ind`` per pair cost most of the benchmark's time. Simulated samples
+    always spread, so no constant-sample rule is needed.
     """
     best = max(scores, key=lambda g: float(np.mean(scores[g])))
     others = [g for g in scores if g != best]
