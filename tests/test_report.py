@@ -682,7 +682,7 @@ def test_the_final_score_figure_shades_the_four_answers(
     monkeypatch.setattr(sweep_plots, "_shade_answers",
                         lambda ax, answers: shaded.append(list(answers)) or draw(ax, answers))
     sweep = layout_report.studies[0].sweep
-    sweep_plots.final_score(sweep, tmp_path / "final_score.png")
+    sweep_plots.draw_final_score(sweep, tmp_path / "final_score.png")
     assert shaded == [["best", "equivalent", "worse", "undecided"]]
     assert set(sweep_plots.ANSWER_SHADES) == {"best", "equivalent", "undecided"}  # worse: none
 

@@ -482,7 +482,7 @@ def failed_items(sweep: Sweep) -> list[str]:
             f"{r['failure'] or r['outcome']}" for _, r in failed.iterrows()]
 
 
-def _tables(sweep: Sweep, folder: Path) -> list[Path]:
+def _write_tables(sweep: Sweep, folder: Path) -> list[Path]:
     summary = sweep.summary.copy()
     summary.insert(0, "parameter", sweep.parameter or "-")
     trials = sweep.trials.drop(columns=["value_index"]).rename(columns={"value": sweep.name})
@@ -622,12 +622,12 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
     folder.mkdir(parents=True, exist_ok=True)
     report = StudyReport(name=sweep.data.name, kind=sweep.data.kind, folder=folder,
                          status=sweep.status(), finished=sweep.finished)
-    figures: list[tuple[str, Any]] = [("learning_curves", sweep_plots.learning_curves),
-                                      ("final_score", sweep_plots.final_score),
-                                      ("wallclock", sweep_plots.wallclock)]
+    figures: list[tuple[str, Any]] = [("learning_curves", sweep_plots.draw_learning_curves),
+                                      ("final_score", sweep_plots.draw_final_score),
+                                      ("wallclock", sweep_plots.draw_wallclock)]
     if len(sweep.values) > 1:
-        figures.append(("training_time", sweep_plots.training_time))
-        figures += [(stem, getattr(sweep_plots, stem)) for stem in NEW_FIGURES]
+        figures.append(("training_time", sweep_plots.draw_training_time))
+        figures += [(stem, getattr(sweep_plots, f"draw_{stem}")) for stem in NEW_FIGURES]
     images: list[Block] = []
     if (sweep.trials["outcome"] == Outcome.COMPLETE).any():
         with styled():
@@ -644,7 +644,7 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
                 images.append(Image(f"{rel}/{path.name}", stem.replace("_", " "), caption))
     else:
         report.notes.append("no complete run yet: no figures")
-    tables = _tables(sweep, folder)
+    tables = _write_tables(sweep, folder)
     said = Items(verdict_lines(sweep))
     _, winner = confirm_blocks(sweep)
     warning = resolution_text(sweep)

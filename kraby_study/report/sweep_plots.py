@@ -96,7 +96,7 @@ def late_limits(bands: pd.DataFrame, start: float) -> tuple[float, float, list[i
     return low - pad, high + pad, below
 
 
-def learning_curves(sweep: Sweep, path: Path) -> Path:
+def draw_learning_curves(sweep: Sweep, path: Path) -> Path:
     """Mean reward against environment steps, whole training and zoomed on its last quarter."""
     fig, (whole, zoom) = new_figure(WIDE, ncols=2)
     last = float(sweep.bands["step"].max()) if not sweep.bands.empty else 1.0
@@ -118,7 +118,7 @@ def learning_curves(sweep: Sweep, path: Path) -> Path:
     return save(fig, path)
 
 
-def wallclock(sweep: Sweep, path: Path) -> Path:
+def draw_wallclock(sweep: Sweep, path: Path) -> Path:
     """Mean reward against the wall-clock time at which the seeds reached each step."""
     fig, (ax,) = new_figure((WIDE[0] * 0.75, WIDE[1]))
     _draw_bands(ax, sweep, "wall_time")
@@ -206,7 +206,7 @@ def _two_lines(label: str) -> str:
     return label.replace(" (", "\n(", 1)
 
 
-def training_time(sweep: Sweep, path: Path) -> Path:
+def draw_training_time(sweep: Sweep, path: Path) -> Path:
     """Training time of each run against the value, with mean and interval."""
     fig, (ax,) = new_figure(SINGLE)
     _seeds_and_means(ax, sweep, sweep.time_attr,
@@ -247,7 +247,7 @@ def _shade_answers(ax: Axes, answers: pd.Series) -> None:
         ax.margins(y=0.15)
 
 
-def final_score(sweep: Sweep, path: Path) -> Path:
+def draw_final_score(sweep: Sweep, path: Path) -> Path:
     """Final score of each seed against the value, with each value's IQM (what the answers are
     about) and its interval; each value's column shaded by its answer against the best (best,
     equivalent, undecided; worse unshaded), the answer written above it."""
@@ -267,7 +267,7 @@ def final_score(sweep: Sweep, path: Path) -> Path:
     return save(fig, path)
 
 
-def sample_efficiency(sweep: Sweep, path: Path) -> Path:
+def draw_sample_efficiency(sweep: Sweep, path: Path) -> Path:
     """AUC (mean reward over the whole learning curve) of each seed against the value."""
     several = len(sweep.values) > 1
     fig, (ax,) = new_figure(SINGLE if several else (SINGLE[0] * 0.6, SINGLE[1]))
@@ -290,7 +290,7 @@ def _threshold_text(sweep: Sweep) -> str:
     return f"threshold: mean episode reward >= {sweep.threshold:.4g} ({how})"
 
 
-def time_to_threshold(sweep: Sweep, path: Path) -> Path:
+def draw_time_to_threshold(sweep: Sweep, path: Path) -> Path:
     """Env steps (a) and seconds (b) until each seed's curve first reached the threshold:
     every seed that reached it, the mean over those seeds with its interval, and how many of
     the complete seeds reached it; values where none did are marked."""
@@ -338,7 +338,7 @@ def time_to_threshold(sweep: Sweep, path: Path) -> Path:
     return save(fig, path)
 
 
-def improvement(sweep: Sweep, path: Path) -> Path:
+def draw_improvement(sweep: Sweep, path: Path) -> Path:
     """Probability of improvement of the best value over each other value, with its Newcombe
     score-type interval, against the value; a line at 0.5 (no improvement either way)."""
     fig, (ax,) = new_figure(SINGLE)
