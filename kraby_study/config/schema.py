@@ -228,8 +228,7 @@ class SearchConfig:
     eval_set: str | None = None
     """Where a run's evaluation episodes come from: run (its own, drawn from its seed's
     evaluation stream, so a confirm's fresh seeds never meet its search's episodes) or fixed
-    (one set every run shares, as studies stored before); null: a stored study's own, run for
-    a new one."""
+    (one set every run shares); null: a stored study's own, run for a new one."""
     params: dict[str, ParamSpace] = field(default_factory=dict)
     """The space: Optuna parameter name -> range."""
     enqueue: list[str] | None = field(default_factory=lambda: ["tuned", "start"])
