@@ -253,7 +253,7 @@ class TrialAttrs(TrialMeasures):
     kept by its later attempts."""
     suggest_cpu: float | None = None
     """A search trial: CPU seconds the command's process spent asking the sampler for it (a
-    Gaussian process's fit is dearer than TPE's); part of what the search spends under its
+    Gaussian process's fit costs more than TPE's); part of what the search spends under its
     CPU budget, not of the trial's own cpu_time."""
     cost_stop: float | None = None
     """A search trial stopped for its cost (``search.trial_share``): the CPU seconds it was
