@@ -3,7 +3,7 @@
 - Family-wise error under the global null (every value drawn from one distribution, so any
   "worse than the best" is false) over a grid of shapes, values x seeds, with unequal n and
   unequal variances (among them 2 or 3 values of 2 to 4 seeds with sd 1 against 10): the
-  answers' step-down at margin 0 (``comparison.compare_with_best(...).worse``, the IQM's
+  answers' step-down at margin 0 (``comparison.compare(..., 0.0).worse``, the IQM's
   tests; nothing below 4 seeds), the tie's closed Holm-Welch step-down of means with min(n) -
   1 df for every pair, and the rule the step-down replaced (Holm over each value's two-sided
   Welch test against the best).
@@ -62,7 +62,6 @@ from kraby_study.decision.comparison import (
     ANSWER_FROM,
     MARGIN,
     compare,
-    compare_with_best,
     holm,
 )
 from kraby_study.decision.coverage import COVERAGE_PATH
@@ -138,9 +137,9 @@ mean's intervals cover 0.87 to 0.91 there) and a failing-seed mixture."""
 def old_rule(scores: dict[int, np.ndarray]) -> list[int]:
     """The replaced rule: Holm over each value's two-sided Welch p against the best.
 
-    The Welch tests (Welch-Satterthwaite df, as ``welch_p``) are computed here in one
-    vectorised call: one ``scipy.stats.ttest_ind`` per pair cost most of the benchmark's time.
-    Simulated samples always spread, so ``welch_p``'s constant-sample rule never applies.
+    The Welch tests (Welch-Satterthwaite df) are computed here in one vectorised call: one
+    ``scipy.stats.ttest_ind`` per pair cost most of the benchmark's time. Simulated samples
+    always spread, so no constant-sample rule is needed.
     """
     best = max(scores, key=lambda g: float(np.mean(scores[g])))
     others = [g for g in scores if g != best]
@@ -158,7 +157,7 @@ def old_rule(scores: dict[int, np.ndarray]) -> list[int]:
 def min_df_rule(scores: dict[int, np.ndarray]) -> list[int]:
     """The step-down as it was before: min(n_i, n_j) - 1 df for every pair, also at equal n.
 
-    The same closed Holm step-down as ``compare_with_best`` (pi_g = (k - 1) min_j p(j > g),
+    The same closed Holm step-down as ``compare`` at margin 0 (pi_g = (k - 1) min_j p(j > g),
     Holm over the pi_g, the best never worse), written out here with the old df rule.
     """
     groups = list(scores)
@@ -189,7 +188,7 @@ def family_wise(job: tuple[str, list[int], list[float], int, int]
     new = before = old = 0
     for _ in range(simulations):
         scores = draw(rng, ns, sds)
-        new += bool(compare_with_best(scores).worse)
+        new += bool(compare(scores, 0.0).worse)
         before += bool(min_df_rule(scores))
         old += bool(old_rule(scores))
     return name, new / simulations, before / simulations, old / simulations
@@ -203,7 +202,7 @@ def power(job: tuple[int, int, int, int]) -> tuple[str, float, float, float]:
     new = before = old = 0
     for _ in range(simulations):
         scores = draw(rng, [n] * k, [1.0] * k, [1.0] + [0.0] * (k - 1))
-        new += len(set(compare_with_best(scores).worse) - {0})
+        new += len(set(compare(scores, 0.0).worse) - {0})
         before += len(set(min_df_rule(scores)) - {0})
         old += len(set(old_rule(scores)) - {0})
     calls = simulations * (k - 1)
@@ -298,7 +297,7 @@ def fastest(simulations: int, seed: int) -> dict[str, float]:
         old += means[0] < means[1] or (np.isnan(means[1]) and not np.isnan(means[0]))
         restricted = {g: (float(np.mean(np.minimum(t, end))) if len(r) else math.nan)
                       for g, (t, r) in enumerate(zip(times, reached, strict=True))}
-        result = verdict({0: [0.0] * 3, 1: [0.0] * 10}, {}, restricted, {}, {})
+        result = verdict(compare({0: [0.0] * 3, 1: [0.0] * 10}, 0.0), {}, restricted, {})
         new += result.fastest == 0
         decided += result.fastest is not None
     return {"old (mean over seeds that reached)": old / simulations,
@@ -468,24 +467,22 @@ def race_selection(job: tuple[int, int, str, str, int, int, float]
             used / (simulations * k * n), truncated / simulations)
 
 
-def noisy_cheap(job: tuple[int, int, int, float]) -> tuple[int, float, float, float]:
+def noisy_cheap(job: tuple[int, int, int, float]) -> tuple[int, float, float]:
     """The reviewer's front (issue 35): six candidates, five of the best mean with sd 1, and a
-    cheap one 1.5 sd below them with sd 3. P(the cheap one is selected) by fastest_tied (among
-    the values not shown worse) and by fastest_equivalent (among those shown within the
-    margin, 1 sd here), and how often it is the best, which every rule then selects; selecting
-    it is wrong, it is beyond the margin."""
+    cheap one 1.5 sd below them with sd 3. P(the cheap one is selected) by fastest_equivalent
+    (among those shown within the margin, 1 sd here), and how often it is the best, which
+    every rule then selects; selecting it is wrong, it is beyond the margin."""
     n, simulations, seed, fraction = job
     rng = np.random.default_rng(seed)
-    tied = evidence = best = 0
+    evidence = best = 0
     for _ in range(simulations):
         scores = {g: LOCATION + rng.normal(size=n) for g in range(5)}
         scores[5] = LOCATION - 1.5 + 3.0 * rng.normal(size=n)
         result = compare(scores, fraction)
         # It is the cheapest, so each rule selects it when it admits it, or when it is best.
-        tied += result.best == 5 or 5 in result.tied
         evidence += result.best == 5 or 5 in result.equivalent
         best += result.best == 5
-    return n, tied / simulations, evidence / simulations, best / simulations
+    return n, evidence / simulations, best / simulations
 
 
 def table(frame: pd.DataFrame) -> str:
@@ -613,7 +610,7 @@ def main() -> None:
     cheap = [noisy_cheap((n, sims, SEED + 1500 + n, margin)) for n in (3, 10)]
     print("\nThe noisy cheap candidate: six front trials, the cheap one 1.5 sd below the five "
           f"others with three times their sd; P(it is selected) ({sims:,} simulations each):")
-    print(table(pd.DataFrame(cheap, columns=["seeds", "fastest_tied", "fastest_equivalent",
+    print(table(pd.DataFrame(cheap, columns=["seeds", "fastest_equivalent",
                                              "final_score (it is the best)"])))
     race_frame = pd.DataFrame(raced, columns=["values x seeds", "noise", "means",
                                               "margin (sd)", "P(selection outside the margin)",

@@ -10,7 +10,7 @@ Two parts:
   ``--rule``, among the values not dropped, on the seeds the race ran) and whether it lies
   within the margin of the fixed design's best by the fixed design's own IQMs (all seeds;
   the margin in score units: the fraction x the fixed best's |IQM|), and the fixed design's
-  tie set (the best value and those not shown worse at margin 0). A replay runs rounds in
+  best set (the best value and those shown equivalent to it). A replay runs rounds in
   lockstep: a live race may also run up to one round ahead on idle workers (docs/guide/studies.md,
   Racing).
 - ``--simulations N``: the race's family-wise error under the global null (every value from
@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kraby_study.decision.comparison import MARGIN, compare_with_best
+from kraby_study.decision.comparison import MARGIN, compare
 from kraby_study.decision.measures import auc
 from kraby_study.decision.race import race
 from kraby_study.decision.robust import iqm
@@ -67,7 +67,7 @@ class Replay:
     raced_runs: int
     dropped: list[str]
     raced_selection: str
-    fixed_tie_set: list[str]
+    fixed_best_set: list[str]
     settled: list[str]
     """Values the race settled as equivalent, with the round (value@round)."""
     margin: float
@@ -83,8 +83,8 @@ class Replay:
 
     @property
     def inside(self) -> bool:
-        """The raced selection is in the fixed design's tie set."""
-        return self.raced_selection in self.fixed_tie_set
+        """The raced selection is in the fixed design's best set."""
+        return self.raced_selection in self.fixed_best_set
 
 
 def replay_store(url: str, min_seeds: int, alpha: float, paired: bool = False,
@@ -152,12 +152,12 @@ def replay_study(ledger, min_seeds: int, alpha: float,  # noqa: ANN001
                     points = curves[curves["number"] == numbers[v][order[i]]]
                     if len(points):
                         aucs[v].append(auc(points["mean_reward"].to_numpy(dtype=float)))
-        return select(rule, final, aucs, secs, margin=margin)
+        return select(rule, compare(final, margin), aucs, secs)
 
     raced = pick({v: used[v] for v in state.candidates})
     full = {v: [x for x in by_round[v].values() if not math.isnan(x)] for v in by_round}
-    fixed = compare_with_best(full)
-    tie_set = [fixed.best, *fixed.tied] if fixed.best is not None else []
+    fixed = compare(full, margin)
+    best_set = [fixed.best, *fixed.equivalent] if fixed.best is not None else []
     iqms = {v: float(iqm(np.asarray(x))) if len(x) else math.nan for v, x in full.items()}
     best_iqm = iqms[fixed.best] if fixed.best is not None else math.nan
     units = margin * abs(best_iqm)
@@ -169,7 +169,7 @@ def replay_study(ledger, min_seeds: int, alpha: float,  # noqa: ANN001
         raced_runs=sum(used.values()),
         dropped=[f"{label[v]}@{d.round}" for v, d in state.dropped.items()],
         raced_selection=label[raced] if raced is not None else "-",
-        fixed_tie_set=[label[v] for v in tie_set],
+        fixed_best_set=[label[v] for v in best_set],
         settled=[f"{label[v]}@{d.round}" for v, d in state.settled.items()],
         margin=units, within=bool(gap <= units + 1e-12), gap=gap,
         seed_share=seed_share(scores[~np.isnan(scores).any(axis=1)]))
@@ -265,21 +265,21 @@ def main() -> None:
               "best's |IQM|):\n")
         print("| study | values x seeds | fixed runs | raced runs | share | dropped (after "
               "round) | settled equivalent (after round) | raced selection | fixed best minus "
-              "it (margin, score units) | within the margin | fixed tie set | seed share |")
+              "it (margin, score units) | within the margin | fixed best set | seed share |")
         print("|---|---|---:|---:|---:|---|---|---|---|---|---|---:|")
         for r in replays:
             print(f"| {r.study} | {r.values} x {r.seeds} | {r.fixed_runs} | {r.raced_runs} | "
                   f"{100 * r.raced_runs / r.fixed_runs:.0f} % | {', '.join(r.dropped) or '-'} "
                   f"| {', '.join(r.settled) or '-'} | {r.raced_selection} | {r.gap:.4g} "
                   f"({r.margin:.3g}) | {'yes' if r.within else 'NO'} | "
-                  f"{', '.join(r.fixed_tie_set)} | {r.seed_share:.2f} |")
+                  f"{', '.join(r.fixed_best_set)} | {r.seed_share:.2f} |")
         fixed = sum(r.fixed_runs for r in replays)
         raced = sum(r.raced_runs for r in replays)
         if replays:
             print(f"\ntogether: {raced} of {fixed} runs ({100 * raced / fixed:.0f} %); raced "
                   f"selection within the margin of the fixed best in "
                   f"{sum(r.within for r in replays)} of {len(replays)} studies, inside the "
-                  f"fixed tie set in {sum(r.inside for r in replays)} "
+                  f"fixed best set in {sum(r.inside for r in replays)} "
                   f"({time.perf_counter() - start:.1f} s)")
         else:
             print("no complete fixed-design sweep in the store")

@@ -190,7 +190,7 @@ CONFIRM_FLAGS = [
          "score, the cheapest, the rest evenly in cost order) or the sweep's best values, as "
          "confirm.top=K (default 5)", "K", _positive_int),
     Flag("--select", "confirm.select", "the confirm study's selection rule, as "
-         "confirm.select=RULE: final_score, auc, fastest_equivalent or fastest_tied (default: "
+         "confirm.select=RULE: final_score, auc or fastest_equivalent (default: "
          "fastest_equivalent for a two-objective search, final_score otherwise; a stored "
          "confirm keeps its own)", "RULE"),
     Flag("--seeds", "confirm.seeds", "fresh seeds per configuration, none used by the study, as "
@@ -677,7 +677,7 @@ def build_parser() -> argparse.ArgumentParser:
         "front and out of the sampler's good trials, so the search looks for settings as good "
         "as the floor at less cost. list, best and the report show the front; "
         "best writes its cheapest trial shown equivalent to the best score (within "
-        "compare.margin; a search stored before keeps fastest_tied), and confirm --study-name "
+        "compare.margin), and confirm --study-name "
         "retrains --top trials spread along it.\n\n" + EPILOG)
     for name in ("run", "optuna", "confirm"):
         parsers[name].add_argument(

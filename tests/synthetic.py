@@ -266,10 +266,9 @@ RACE_FINALS: dict[float, list[float | None]] = {
 }
 """Final scores by seed (None: failed). 0.3 is far below the others over the first four
 seeds, so the look after round 4 drops it; its fifth seed, run ahead of the round, failed, and
-its sixth was queued and withdrawn. The survivors' later seeds spread so widely that, on all
-seeds, 0.3 could not be told from the best by the tie's Welch test of means: without the race
-it would be tied, and as the fastest (10 s against 60 s and 100 s) the fastest_tied rule would
-select it."""
+its sixth was queued and withdrawn. The survivors' later seeds spread so widely that neither
+is shown within the margin of the other: the fastest (0.3 at 10 s, then 0.2 at 60 s, against
+100 s) cannot buy the selection."""
 RACE_WALL = {0.1: 100.0, 0.2: 60.0, 0.3: 10.0}
 
 

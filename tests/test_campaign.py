@@ -12,6 +12,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import optuna
 import pytest
 import yaml
 from conftest import (
@@ -77,7 +78,7 @@ CAMPAIGNS = {
     "tri": {"name": "tri", "description": "Three smoke stages.", "start": {"ppo.gamma": 0.9},
             "stages": [{"study": "s_gamma", "documented": 0.99},
                        {"study": "s_clip", "documented": 0.3},
-                       {"study": "s_ent", "select": "fastest_tied", "documented": 0.0}]},
+                       {"study": "s_ent", "select": "fastest_equivalent", "documented": 0.0}]},
     "long": {"name": "long", "start": {"ppo.gamma": 0.9},
              "stages": [{"study": "s_gamma"}, {"study": "s_clip4"}, {"study": "s_ent"}]},
     "fwd": {"name": "fwd", "stages": [{"study": "s_fwd"}, {"study": "s_clip"}]},
@@ -148,7 +149,7 @@ def test_each_stage_runs_with_the_values_the_earlier_stages_selected(inside: Pat
         {"setting": "ppo.gamma", "value": gamma, "study": "tri-s_gamma", "rule": "final_score"},
         {"setting": "ppo.clip_range", "value": clip, "study": "tri-s_clip",
          "rule": "final_score"}]
-    assert attrs.select == "fastest_tied"
+    assert attrs.select == "fastest_equivalent"
     assert attrs.campaign is not None and attrs.campaign["stage"] == 3
 
 
@@ -169,6 +170,65 @@ def test_rerunning_a_finished_campaign_runs_nothing(inside: Path,
     assert "3/3 stages finished" in out and out.count("0 to run") == 3
 
 
+def _as_chosen_by_the_retired_rule(folder: Path) -> Path:
+    """A copy of the campaign's store in ``folder`` in which the clip stage was selected by
+    fastest_tied, the retired rule: its own stored rule and the later stage's record of the
+    value it took from it say so (as a store of that rule holds them)."""
+    copy = folder / "studies" / "kraby.db"
+    copy.parent.mkdir(parents=True)
+    shutil.copy(db(Path.cwd()), copy)
+    url = sqlite_url(copy)
+    optuna.load_study(study_name="tri-s_clip", storage=url).set_user_attr(
+        "kraby_select", "fastest_tied")
+    later = optuna.load_study(study_name="tri-s_ent", storage=url)
+    inputs = [dict(taken, rule="fastest_tied") if taken["study"] == "tri-s_clip" else taken
+              for taken in later.user_attrs["kraby_inputs"]]
+    later.set_user_attr("kraby_inputs", inputs)
+    return copy
+
+
+def test_later_stages_keep_the_value_they_ran_on_and_the_report_names_its_rule(
+        inside: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    clip = selected(inside, "tri-s_clip")
+    copy = _as_chosen_by_the_retired_rule(tmp_path / "store")
+    storage = f"storage={sqlite_url(copy)}"
+    def clip_row(seeds: str) -> dict[str, str]:
+        report = tmp_path / f"report{seeds}"
+        assert run_cli("report", "--no-policy", "--out", str(report), storage,
+                       f"report.min_seeds={seeds}") == 0
+        with open(report / "tri" / "campaign.csv", newline="") as handle:
+            return {r["study"]: r for r in csv.DictReader(handle)}["tri-s_clip"]
+
+    # The stage stored with the retired rule is answered by today's, which agrees here.
+    row = clip_row("2")
+    assert (row["rule"], row["selected"]) == ("fastest_tied", f"{clip:g}")
+    assert row["notes"].startswith(f"later stages ran on {clip:g}, selected by fastest_tied; "
+                                   f"today's rule fastest_equivalent selects {clip:g}, the same")
+    # At 3 seeds a value, today's rule selects nothing from these 2-seed stages; the stages
+    # that ran on their values keep them, so the finished campaign still runs nothing.
+    assert run_cli("run", "campaign=tri", *TINY, SEEDS, storage, "report.min_seeds=3") == 0
+    out = capsys.readouterr().out
+    assert "3/3 stages finished" in out and out.count("0 to run") == 3
+    row = clip_row("3")
+    assert (row["rule"], row["selected"]) == ("fastest_tied", f"{clip:g}")
+    assert row["notes"].startswith(f"later stages ran on {clip:g}, selected by fastest_tied; "
+                                   "today's rule selects nothing yet")
+    text = (tmp_path / "report2" / "index.md").read_text()
+    assert "fastest_tied: a retired rule, kept where later stages ran on its choice" in text
+    # The rerun kept the later stage's record of what it ran on, rule and all.
+    later = optuna.load_study(study_name="tri-s_ent", storage=sqlite_url(copy))
+    assert {"setting": "ppo.clip_range", "value": clip, "study": "tri-s_clip",
+            "rule": "fastest_tied"} in later.user_attrs["kraby_inputs"]
+
+
+def test_a_config_naming_the_retired_rule_is_refused_in_one_line(
+        inside: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert run_cli("run", "study=s_gamma", "study.select=fastest_tied", *TINY, SEEDS) == 2
+    err = capsys.readouterr().err
+    assert "study.select: fastest_tied is retired; use fastest_equivalent" in err
+    assert err.count("\n") == 1
+
+
 def test_the_report_writes_the_campaign_table_and_one_selected_row_per_study(
         inside: Path, tmp_path: Path) -> None:
     out = tmp_path / "report"
@@ -176,7 +236,7 @@ def test_the_report_writes_the_campaign_table_and_one_selected_row_per_study(
     with open(out / "tri" / "campaign.csv", newline="") as handle:
         rows = list(csv.DictReader(handle))
     assert [r["study"] for r in rows] == ["tri-s_gamma", "tri-s_clip", "tri-s_ent"]
-    assert [r["rule"] for r in rows] == ["final_score", "final_score", "fastest_tied"]
+    assert [r["rule"] for r in rows] == ["final_score", "final_score", "fastest_equivalent"]
     assert [r["documented"] for r in rows] == ["0.99", "0.3", "0"]
     for row in rows:
         value = selected(inside, row["study"])

@@ -288,6 +288,9 @@ def test_a_confirm_of_an_evaluation_search_scores_on_a_test_set_the_search_never
                                              seed=trial.user_attrs["seed"])
         assert rescored.mean == pytest.approx(trial.value, rel=1e-6)
         assert trial.user_attrs["eval_errors"] == [pytest.approx(rescored.error, rel=1e-6)]
+        # Each run's evaluation return sd: the sd over those episodes' returns.
+        sd = float(np.std(rescored.returns, ddof=1))
+        assert trial.user_attrs["eval_sds"] == [pytest.approx(sd, rel=1e-6)]
     # The report shows the training reward beside the evaluation score, per configuration.
     assert run_cli("report", "--study-name", "evaluated-confirm", "--no-policy",
                    f"out={workdir / 'reports'}") == 0
@@ -298,8 +301,16 @@ def test_a_confirm_of_an_evaluation_search_scores_on_a_test_set_the_search_never
     assert summary["final_mean"].tolist() != summary["train_mean"].tolist()
     page = (folder / "summary.md").read_text()
     assert "Scored by evaluation" in page and "the training reward (" in page
-    assert "evaluation se (eval_se)" in page and "own seed's evaluation stream" in page
+    assert "eval_se: the evaluation standard error" in page
+    assert "eval_sd: the evaluation return sd" in page and "own seed's evaluation stream" in page
     assert summary["eval_se"].notna().all()
+    # The sd of the returns is the se times sqrt(episodes), run by run and so value by value
+    # (both are root mean squares over the seeds).
+    assert summary["eval_sd"].tolist() == pytest.approx(
+        (summary["eval_se"] * np.sqrt(EVAL_EPISODES)).tolist(), rel=1e-4)
+    runs = pd.read_csv(folder / "trials.csv")
+    assert runs["eval_sd"].notna().all()
+    assert "eval_sd by value: " in page
     provenance = (folder / "reproducibility.md").read_text()
     assert "no test episode is one the source study scored a run on" in provenance
     index = (workdir / "reports" / "index.md").read_text()

@@ -4,7 +4,6 @@ selected; the old behaviour at margin 0; races that settle; bad input refused.""
 
 from __future__ import annotations
 
-import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -13,7 +12,7 @@ from scipy import stats
 from synthetic import percentile_p, yuen_p
 
 from kraby_study.config.compose import compose_config
-from kraby_study.decision.comparison import Answer, CompareOptions, compare, compare_with_best, holm
+from kraby_study.decision.comparison import Answer, CompareOptions, compare
 from kraby_study.decision.front import Point, front_choice
 from kraby_study.decision.race import race
 from kraby_study.decision.selection import RULES, select
@@ -105,83 +104,47 @@ def test_fewer_than_four_seeds_get_no_answer() -> None:
     result = compare(final, 0.2)
     assert result.answers == {"A": Answer.BEST, "B": Answer.UNDECIDED, "C": Answer.UNDECIDED}
     assert result.unanswered == ["B", "C"] and "fewer than 4 seeds" in result.unanswered_text()
-    # The tie of earlier releases (Welch's step-down of means) still reads them: C is not tied.
-    assert result.tied == ["B"]
     # A fourth seed answers them.
     final = {g: [*x, float(np.mean(x))] for g, x in final.items()}
     answered = compare(final, 0.2)
     assert answered.answers["C"] == Answer.WORSE and answered.unanswered == []
 
 
-def _beats(x: list[float], y: list[float]) -> float:
-    """One-sided Welch p of "x above y" as earlier releases computed it from 4 seeds on."""
-    a, b = np.asarray(x), np.asarray(y)
-    if len(a) == len(b):
-        return float(stats.ttest_ind(a, b, equal_var=False, alternative="greater").pvalue)
-    se = math.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b))
-    return float(stats.t.sf((a.mean() - b.mean()) / se, min(len(a), len(b)) - 1))
-
-
-def test_margin_zero_is_the_step_down_of_earlier_releases() -> None:
-    # The tie of earlier releases, at any margin: Holm over pi_g = (k - 1) min_j p(j > g), p the
-    # one-sided Welch test of means with Welch-Satterthwaite's df at equal n (SciPy's own) and
-    # min(n) - 1 at unequal n. The best and the answers are the IQM's.
+def test_margin_zero_answers_worse_by_the_iqm_step_down_and_nothing_equivalent() -> None:
+    # At margin 0 the answers' step-down shows values below the best IQM, and no value is
+    # equivalent: fastest_equivalent has nothing to trade for time, so it selects the best.
     rng = np.random.default_rng(35)
     for shape in ([4] * 4, [5] * 6, [10] * 3, [4, 6, 10], [5, 5, 8, 12]):
         final = {g: list(rng.normal(0.3 * g, 1.0, n)) for g, n in enumerate(shape)}
         k = len(final)
-        pi = [min(1.0, (k - 1) * min(_beats(final[j], final[g]) for j in final if j != g))
-              for g in final]
-        adjusted = holm(pi)
         best = max(final, key=lambda g: stats.trim_mean(final[g], 0.25))
-        old_tied = [g for g in final if g != best and adjusted[g] >= 0.05]
-        for result in (compare(final, 0.0), compare_with_best(final), compare(final, 0.2)):
-            assert result.best == best and result.tied == old_tied
-            for g in final:
-                if g != best:
-                    assert result.p_adjusted[g] == pytest.approx(adjusted[g], rel=1e-9)
-            assert result.worse == [g for g in final if g != best and result.p_worse[g] < 0.05]
-        assert compare(final, 0.0).equivalent == []
-        # Every rule selects at margin 0 what the rules selected before; fastest_equivalent
-        # has nothing to trade for time, so it selects the best.
+        result = compare(final, 0.0)
+        assert result.best == best and result.equivalent == []
+        assert result.worse == [g for g in final if g != best and result.p_worse[g] < 0.05]
         seconds = {g: [10.0 * (k - g)] for g in final}
-        fastest = min([best, *old_tied], key=lambda g: seconds[g][0])
-        assert select("fastest_tied", final, {}, seconds, margin=0.0) == fastest
-        assert select("fastest_equivalent", final, {}, seconds, margin=0.0) == best
-        assert select("final_score", final, {}, seconds, margin=0.0) == best
+        assert select("fastest_equivalent", result, {}, seconds) == best
+        assert select("final_score", result, {}, seconds) == best
 
 
 def test_the_noisy_cheap_candidate_is_not_selected() -> None:
     # A front of two trials on 10 seeds: the best, -0.0140 with sd 0.001 at 20 CPU s per seed,
     # and a cheap one (8 CPU s) truly 0.004 worse, beyond the margin 0.2 x 0.0140 = 0.0028,
-    # whose seeds spread seven times as far. Its spread hides the difference from the
-    # step-down at margin 0 (fastest_tied admits it) but shows no equivalence either.
+    # whose seeds spread seven times as far. Its spread hides the difference, but it shows no
+    # equivalence either: the cheap trial is not selected.
     rng = np.random.default_rng(48)
     unit = rng.normal(size=10)
     unit = (unit - unit.mean()) / unit.std(ddof=1)
     best, cheap = list(-0.0140 + 0.001 * unit), list(-0.0180 + 0.007 * unit[::-1])
     seeds = {0: best, 1: cheap}
     front = [Point(1, float(np.mean(cheap)), 8.0), Point(0, float(np.mean(best)), 20.0)]
-    # By hand: se = sqrt((0.001^2 + 0.007^2) / 10) = 0.002236; Welch-Satterthwaite's df
-    # (2.5e-5)^2 / ((1e-7)^2 / 9 + (4.9e-6)^2 / 9) = 9.37; k - 1 = 1.
-    se = math.sqrt((0.001 ** 2 + 0.007 ** 2) / 10)
-    df = (0.001 ** 2 / 10 + 0.007 ** 2 / 10) ** 2 / (
-        (0.001 ** 2 / 10) ** 2 / 9 + (0.007 ** 2 / 10) ** 2 / 9)
     result = compare(seeds, 0.2)
-    # Worse at margin 0: Holm over two pi's, the smallest x 2: 2 x t.sf(0.004 / se, df).
-    assert result.p_adjusted[1] == pytest.approx(2 * stats.t.sf(0.004 / se, df), rel=1e-6)
-    assert result.p_adjusted[1] > 0.05  # not shown worse: the old rule's "tie"
     # Equivalent: the IQM contrast 1.2 x T_best - T_cheap is about 1.2 x (-0.0140) + 0.0180 =
     # 0.0012 > 0: no evidence at all (p > 0.5).
     assert result.p_equivalent[1] > 0.5
     assert result.answers[1] == Answer.UNDECIDED
-    tied = front_choice(front, seeds, "fastest_tied")
-    evidence = front_choice(front, seeds, "fastest_equivalent")
-    assert tied is not None and tied.chosen.key == 1  # spread bought the tie
+    evidence = front_choice(front, seeds, "fastest_equivalent", CompareOptions())
     assert evidence is not None and evidence.chosen.key == 0
-    times = {0: [20.0], 1: [8.0]}
-    assert select("fastest_tied", seeds, {}, times) == 1
-    assert select("fastest_equivalent", seeds, {}, times) == 0
+    assert select("fastest_equivalent", result, {}, {0: [20.0], 1: [8.0]}) == 0
 
 
 def test_campaign_and_tuned_at_the_full_budget_are_not_equivalent() -> None:
@@ -202,14 +165,14 @@ def test_campaign_and_tuned_at_the_full_budget_are_not_equivalent() -> None:
 
 
 def test_rules_are_named_objects() -> None:
-    assert [str(name) for name in RULES] == ["final_score", "auc", "fastest_equivalent",
-                                             "fastest_tied"]
+    assert [str(name) for name in RULES] == ["final_score", "auc", "fastest_equivalent"]
     assert all(rule.description and rule.name == name for name, rule in RULES.items())
     # A value with too few seeds is never selected, by any rule (one clamp, in the comparison).
     final = {0: [1.0], 1: [0.5, 0.6, 0.55]}
     for name in RULES:
-        assert select(name, final, {0: [9.0], 1: [1.0] * 3}, {0: [1.0], 1: [9.0] * 3}) == 1
-    assert compare(final, min_seeds=1).min_seeds == 2
+        assert select(name, compare(final, 0.2), {0: [9.0], 1: [1.0] * 3},
+                      {0: [1.0], 1: [9.0] * 3}) == 1
+    assert compare(final, 0.2, min_seeds=1).min_seeds == 2
 
 
 def test_a_race_settles_what_is_shown_equivalent_and_ends() -> None:

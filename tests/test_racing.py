@@ -35,7 +35,7 @@ from optuna.trial import TrialState
 
 from kraby_study.answers.raced import race_of
 from kraby_study.config.compose import compose_config
-from kraby_study.decision.comparison import compare_with_best, paired_greater_matrix
+from kraby_study.decision.comparison import compare
 from kraby_study.decision.race import race
 from kraby_study.plan.spec import RaceRules, TrialSpec
 from kraby_study.plan.sweep import expand_study
@@ -74,7 +74,7 @@ def test_a_value_far_below_the_others_is_dropped_after_round_min_seeds() -> None
         assert yuen.pvalue < 1 / 2000
     assert state.dropped[2].p == pytest.approx(3 * 2 / 2000)
     # The race's p is the report's at that look.
-    look = compare_with_best(first, alpha=rules.look_alpha)
+    look = compare(first, 0.0, alpha=rules.look_alpha)
     assert look.worse == [2] and state.dropped[2].p == pytest.approx(look.p_worse[2])
     # Round 5 is decided (every value left has it); round 6 is not run yet.
     assert state.rounds == 5 and not state.over and state.survivors == [0, 1]
@@ -119,7 +119,7 @@ def test_drops_follow_the_step_down_round_by_round() -> None:
     for r in range(rules.min_seeds, 11):
         if len(alive) <= 1:
             break
-        look = compare_with_best({v: list(x[v, :r]) for v in alive}, alpha=rules.look_alpha)
+        look = compare({v: list(x[v, :r]) for v in alive}, 0.0, alpha=rules.look_alpha)
         for v in look.worse:
             expected[v] = r
         alive = [v for v in alive if v not in expected]
@@ -140,24 +140,6 @@ def test_failed_runs_count_as_ended_without_a_score() -> None:
     state = race([0, 1, 2], runs, RaceRules(seeds=5))
     # Round 4 is decided; value 1 has no score, so it is never tested (never dropped).
     assert state.rounds == 4 and 1 not in state.dropped and 2 in state.dropped
-
-
-def test_the_paired_p_is_scipys_paired_t_test_on_the_common_seeds() -> None:
-    a = [0.31, 0.52, 0.18, 0.44, 0.27]
-    b = [0.25, 0.50, 0.11, 0.40, 0.29]
-    c = [0.30, math.nan, 0.20, 0.41, math.nan]  # seeds 1 and 4 failed
-    p = paired_greater_matrix([np.array(a), np.array(b), np.array(c)])
-    assert p[0, 1] == pytest.approx(
-        scipy.stats.ttest_rel(a, b, alternative="greater").pvalue, rel=1e-12)
-    common = [0, 2, 3]
-    assert p[2, 0] == pytest.approx(scipy.stats.ttest_rel(
-        [c[i] for i in common], [a[i] for i in common], alternative="greater").pvalue, rel=1e-12)
-    # Fewer than two common seeds: no test.
-    assert math.isnan(paired_greater_matrix([np.array([1.0, math.nan]),
-                                             np.array([0.0, 2.0])])[0, 1])
-    # Differences without spread: a sure answer either way.
-    q = paired_greater_matrix([np.array([1.0, 2.0, 3.0]), np.array([0.5, 1.5, 2.5])])
-    assert q[0, 1] == 0.0 and q[1, 0] == 1.0
 
 
 def _yuen_dependent_p(a: list[float], b: list[float]) -> float:
@@ -200,7 +182,7 @@ def test_a_paired_race_drops_a_value_a_seed_effect_hides_from_welch() -> None:
     assert yuen > 1 / 2000
     assert paired.dropped[2].p == pytest.approx(6 * yuen, rel=1e-9)
     assert paired.dropped[2].p < rules.look_alpha
-    look = compare_with_best(first, alpha=rules.look_alpha, paired=True)
+    look = compare(first, 0.0, alpha=rules.look_alpha, paired=True)
     assert look.worse == [2] and paired.dropped[2].p == pytest.approx(look.p_worse[2])
 
 
@@ -214,8 +196,8 @@ def test_a_paired_look_pairs_only_the_seeds_both_values_ended() -> None:
     # shares 3 seeds with 0, too few for an answer; after round 5 it shares 0, 1, 3 and 4.
     assert state.rounds == 5 and 1 not in state.dropped and state.dropped[2].round == 5
     common = [0, 1, 3, 4]
-    look = compare_with_best({v: [runs[v][i] for i in common] for v in (0, 2)},
-                             alpha=rules.look_alpha, paired=True)
+    look = compare({v: [runs[v][i] for i in common] for v in (0, 2)}, 0.0,
+                   alpha=rules.look_alpha, paired=True)
     assert state.dropped[2].p == pytest.approx(look.p_worse[2])
     # 100 sd apart, the bootstrap is at its floor and Yuen's p decides, Holm x 2 for 2 values.
     assert state.dropped[2].p == pytest.approx(2 * _yuen_dependent_p(

@@ -12,7 +12,8 @@ import pytest
 from optuna.distributions import FloatDistribution, IntDistribution
 from optuna.trial import FrozenTrial, TrialState, create_trial
 
-from kraby_study.answers.seed_scores import samples
+from kraby_study.answers.seed_scores import samples, sweep_comparison
+from kraby_study.decision.comparison import CompareOptions
 from kraby_study.decision.selection import select
 from kraby_study.records.attributes import StudyAttrs, TrialAttrs
 from kraby_study.records.stored import (
@@ -139,7 +140,8 @@ def test_value_key_compares_numbers_by_value_and_the_rest_by_json() -> None:
 def chosen(trials: list[FrozenTrial], name: str, values: list[Any]) -> tuple[Any, float] | None:
     """The value the final_score rule selects, and its mean; None when none is complete."""
     found = samples(trials, pd.DataFrame(columns=["number", "step", "mean_reward"]), name, values)
-    vi = select("final_score", found.final, found.aucs, found.seconds)
+    vi = select("final_score", sweep_comparison(found.final, (), CompareOptions()), found.aucs,
+                found.seconds)
     return None if vi is None else (values[vi], sum(found.final[vi]) / len(found.final[vi]))
 
 

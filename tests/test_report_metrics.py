@@ -153,8 +153,8 @@ def test_curve_bands_are_hall_intervals_per_value_and_step() -> None:
     rewards = {(0, 100): [1.0, 2.0, 3.0, 10.0], (0, 200): [4.0, 4.0, 4.0, 4.0],
                (1, 100): [0.5], (1, 200): [2.0, 4.0, 9.0]}
     curves = pd.DataFrame([(vi, step, r, 1.0) for (vi, step), rs in rewards.items() for r in rs],
-                          columns=["vi", "step", "mean_reward", "wall_time"])
-    bands = curve_bands(curves).set_index(["vi", "step"])
+                          columns=["value_index", "step", "mean_reward", "wall_time"])
+    bands = curve_bands(curves).set_index(["value_index", "step"])
     for key, values in rewards.items():
         row = bands.loc[key]
         assert row["n"] == len(values) and row["wall_time"] == 1.0
@@ -202,39 +202,19 @@ def test_a_single_seed_has_no_intervals(report: ReportIndex) -> None:
     row = _summary(report.out).loc[0.1]
     assert row["complete"] == 1
     assert row["iqm"] == csv_approx(0.5) and row["auc_mean"] == csv_approx(0.3125)
-    for column in ("iqm_low", "iqm_high", "auc_low", "auc_high", "final_iqr", "p_vs_best",
-                   "p_holm", "p_improvement_low", "p_improvement_high"):
+    for column in ("iqm_low", "iqm_high", "auc_low", "auc_high", "final_iqr", "p_worse",
+                   "p_equivalent", "p_improvement_low", "p_improvement_high"):
         assert math.isnan(row[column]), column
     assert row["p_improvement"] == csv_approx(1.0)  # every best seed beats 0.5
-    assert pd.isna(row["mark"])  # neither best nor tied: an empty cell
+    assert row["answer"] == "left out"  # one seed: in no comparison
 
 
-def test_holm_ties_and_probability_of_improvement(report: ReportIndex) -> None:
+def test_answers_and_probability_of_improvement(report: ReportIndex) -> None:
     summary = _summary(report.out)
     best = FINALS[0.01]
-    raw = {v: stats.ttest_ind(best, FINALS[v], equal_var=False).pvalue for v in (0.001, 0.3)}
-    family = {v: np.asarray(FINALS[v]) for v in (0.001, 0.01, 0.3)}  # 0.1 has one seed
-
-    def beats(j: float, g: float) -> float:
-        # One-sided Welch: SciPy's (Welch-Satterthwaite df) at equal n, min(n) - 1 df otherwise.
-        x, y = family[j], family[g]
-        if len(x) == len(y):
-            return stats.ttest_ind(x, y, equal_var=False, alternative="greater").pvalue
-        se = math.sqrt(x.var(ddof=1) / len(x) + y.var(ddof=1) / len(y))
-        return stats.t.sf((x.mean() - y.mean()) / se, min(len(x), len(y)) - 1)
-
-    pi = {g: min(1.0, 2 * min(beats(j, g) for j in family if j != g)) for g in family}
-    # Holm over the three "is a best" hypotheses: 0.3 first (x3), then 0.001 (x2), capped.
-    assert pi[0.3] < pi[0.001] < pi[0.01]
-    holm = {0.3: min(1.0, 3 * pi[0.3])}
-    holm[0.001] = max(holm[0.3], min(1.0, 2 * pi[0.001]))
-    for value in (0.001, 0.3):
-        assert summary.loc[value, "p_vs_best"] == pytest.approx(raw[value], rel=1e-4)
-        assert summary.loc[value, "p_holm"] == pytest.approx(holm[value], rel=1e-4)
-    # 0.3 differs from the best on the raw test, but not under the step-down: a tie.
-    assert summary.loc[0.3, "p_vs_best"] < 0.05 <= summary.loc[0.3, "p_holm"]
-    assert list(summary["mark"].fillna("")) == ["tie", "best", "", "tie"]
-    assert math.isnan(summary.loc[0.01, "p_holm"])
+    # 0.01 has the highest IQM; 0.001 and 0.3 are compared with it at 4 and 3 seeds (0.3 has
+    # fewer than 4: undecided by rule); 0.1 has one seed, fewer than report.min_seeds.
+    assert list(summary["answer"]) == ["undecided", "best", "left out", "undecided"]
     for value in (0.001, 0.3):
         pairs = [(b > y) + 0.5 * (b == y) for b in best for y in FINALS[value]]
         row = summary.loc[value]
@@ -253,8 +233,7 @@ def test_holm_ties_and_probability_of_improvement(report: ReportIndex) -> None:
     assert summary.loc[0.3, "p_improvement"] == csv_approx(1.0)
     assert math.isnan(summary.loc[0.01, "p_improvement"])
     text = (report.out / "learning_rate" / "summary.md").read_text()
-    # The tie of earlier releases named once, beside the answers' tests.
-    assert "closed Holm step-down over one-sided Welch t-tests" in text
+    assert "Welch" not in text and "closed Holm step-down against the margin" in text
     assert "percentile bootstrap of the IQM contrast" in text and "P(best > value)" in text
     assert text.count("95 % Newcombe score-type interval (Newcombe 2006, method 5)") == 1
     assert "BCa" not in text  # P(improvement) and the IQM do not bootstrap any more
@@ -295,7 +274,7 @@ def test_three_figures_are_drawn_and_listed(report: ReportIndex) -> None:
 def test_confirm_study(report: ReportIndex) -> None:
     summary = pd.read_csv(report.out / "confirm_ppo_search" / "summary.csv")
     assert summary["value"].tolist() == ["tuned", "t7", "t12"]  # the order given, not sorted
-    assert summary["mark"].fillna("").tolist()[1] == "best"
+    assert summary["answer"].fillna("").tolist()[1] == "best"
     winner = ("ppo_search's winner t12 is not the confirmed winner: t7 has the best IQM final "
               "score on 3 fresh seeds.")
     text = (report.out / "confirm_ppo_search" / "summary.md").read_text()
@@ -339,6 +318,7 @@ def test_threshold_option_changes_reach(store_url: str, report: ReportIndex,
 def test_summary_intervals_are_bootstrap_t_from_five_seeds() -> None:
     # Value "six": 6 complete seeds (right-skewed scores, times and AUCs): the bootstrap-t
     # interval with report.bootstrap resamples. Value "three": 3 seeds, Hall's interval.
+    from kraby_study.decision.comparison import compare
     from kraby_study.decision.intervals import bootstrap_t_interval
     from kraby_study.decision.summary import SEED_COLUMNS, add_curve_metrics, summarise
 
@@ -348,9 +328,9 @@ def test_summary_intervals_are_bootstrap_t_from_five_seeds() -> None:
         [(10 * vi + i, f"k{vi}{i}", i, vi, vi, Outcome.COMPLETE, score,
           times[vi][i], 1000.0, "", None)
          for vi, scores in finals.items() for i, score in enumerate(scores)],
-        columns=["number", "key", "seed", "vi", "value", "outcome", "final_score",
+        columns=["number", "key", "seed", "value_index", "value", "outcome", "final_score",
                  "wall_time", "env_steps", "failure", "model_path"])
-    summary = summarise(trials, ["six", "three"], bootstrap=500)
+    summary = summarise(trials, ["six", "three"], compare(finals, 0.2), bootstrap=500)
     for column, samples in (("final", finals), ("time", times)):
         assert (summary.loc[0, f"{column}_low"], summary.loc[0, f"{column}_high"]) == (
             pytest.approx(bootstrap_t_interval(samples[0], resamples=500), rel=1e-12))
@@ -370,6 +350,7 @@ def test_summary_intervals_are_bootstrap_t_from_five_seeds() -> None:
 def test_a_value_no_test_reaches_has_no_p_and_says_why() -> None:
     # "three" has 3 seeds, far below the best: no pair with it is tested, so it is undecided
     # with empty p's and a note; "six", as far below on 6 seeds, is tested and worse.
+    from kraby_study.decision.comparison import compare
     from kraby_study.decision.summary import summarise, untested_note
 
     finals = {0: [-1.0, -1.02, -0.98, -1.01, -0.99, -1.0],
@@ -377,9 +358,9 @@ def test_a_value_no_test_reaches_has_no_p_and_says_why() -> None:
     trials = pd.DataFrame(
         [(10 * vi + i, f"k{vi}{i}", i, vi, vi, Outcome.COMPLETE, score, 10.0, 1000.0, "", None)
          for vi, scores in finals.items() for i, score in enumerate(scores)],
-        columns=["number", "key", "seed", "vi", "value", "outcome", "final_score",
+        columns=["number", "key", "seed", "value_index", "value", "outcome", "final_score",
                  "wall_time", "env_steps", "failure", "model_path"])
-    summary = summarise(trials, ["best", "six", "three"], bootstrap=200)
+    summary = summarise(trials, ["best", "six", "three"], compare(finals, 0.2), bootstrap=200)
     assert list(summary["answer"]) == ["best", "worse", "undecided"]
     assert summary.loc[1, "p_worse"] < 0.05 and summary.loc[1, "note"] == ""
     assert np.isnan(summary.loc[2, "p_worse"]) and np.isnan(summary.loc[2, "p_equivalent"])

@@ -11,7 +11,7 @@ import pytest
 from conftest import bootstrap_t_reference, hall_bounds, newcombe_bounds
 from scipy import stats
 
-from kraby_study.decision.comparison import ALPHA, holm
+from kraby_study.decision.comparison import compare, holm
 from kraby_study.decision.intervals import (
     BAND_NAME,
     INTERVAL_NAME,
@@ -33,7 +33,7 @@ from kraby_study.decision.measures import (
     p_improvement,
     p_improvement_interval,
 )
-from kraby_study.decision.verdict import HOLM_NAME, Verdict, compare_to_best, verdict
+from kraby_study.decision.verdict import Verdict, empty_verdict, verdict
 
 NAN = math.nan
 SPREAD = [3.1, 0.4, 2.2, 5.9, 1.7, 4.4, 2.8, 3.6, 0.9, 5.1]
@@ -90,7 +90,6 @@ def test_interval_names_name_the_method_and_the_procedure() -> None:
                                     "equal-tailed studentised bootstrap (bootstrap-t)")
     assert "2,000 resamples" in INTERVAL_NAME and "Hall's skewness-corrected t" in INTERVAL_NAME
     assert BAND_NAME.startswith("95 % Hall skewness-corrected t interval of the mean")
-    assert "closed Holm step-down" in HOLM_NAME and "alpha = 0.05" in HOLM_NAME
 
 
 # Sample efficiency and time to a threshold -----------------------------------------------------
@@ -412,58 +411,46 @@ def test_p_improvement_interval_edge_cases_without_warnings() -> None:
             newcombe_bounds(0.5, 2, 2), abs=1e-9)
 
 
-def test_compare_to_best_takes_the_first_of_tied_means() -> None:
-    best, pvalues = compare_to_best({0: [1.0, 3.0], 1: [1.5, 2.5], 2: [], 3: [0.0, 1.0]})
-    assert best == 0
-    assert set(pvalues) == {0, 1, 3} and math.isnan(pvalues[0])
-    assert pvalues[1] == pytest.approx(1.0)
-
-
 # The verdict -------------------------------------------------------------------------------------
 
 
 def test_verdict_on_constructed_groups() -> None:
     final = {0: [1.0, 2.0, 3.0], 1: [4.0, 5.0, 6.0], 2: [4.5, 5.0, 5.5], 3: [5.0]}
     result = verdict(
-        final,
+        compare(final, 0.0),
         auc_means={0: 1.0, 1: 3.0, 2: 3.0, 3: 2.0},
         seconds={0: NAN, 1: 50.0, 2: 40.0, 3: 40.0},
         iqrs={0: 1.0, 1: 1.0, 2: 0.5, 3: 0.0},
-        p_holm={0: 0.001, 1: NAN, 2: ALPHA, 3: NAN},
     )
-    # Means 2, 5, 5, 5: group 1 is the first of three best means.
+    # IQMs 2, 5, 5 (group 3 has one seed, out of the family): group 1 is the first best.
     assert result.best == 1
-    # Group 2's p = ALPHA is not significant; group 3 has no test; group 0 is worse.
-    assert result.tied == [2]
     assert result.most_sample_efficient == 1  # 3.0 twice: the first
     assert result.fastest == 2  # 40 s twice: the first; group 0 never reached (NaN)
     assert result.most_repeatable == 2  # group 3's IQR 0 is from one seed only
-    assert result == Verdict(best=1, tied=[2], most_sample_efficient=1, fastest=2,
-                             most_repeatable=2)
+    assert result == Verdict(best=1, most_sample_efficient=1, fastest=2, most_repeatable=2)
 
 
 def test_verdict_ties_go_to_the_first_group() -> None:
-    result = verdict({5: [1.0, 2.0], 2: [1.5, 1.5]}, auc_means={5: 1.0, 2: 1.0},
-                     seconds={5: 9.0, 2: 9.0}, iqrs={5: 0.5, 2: 0.5}, p_holm={2: 0.9})
-    assert result == Verdict(best=5, tied=[2], most_sample_efficient=5, fastest=5,
-                             most_repeatable=5)
+    result = verdict(compare({5: [1.0, 2.0], 2: [1.5, 1.5]}, 0.0), auc_means={5: 1.0, 2: 1.0},
+                     seconds={5: 9.0, 2: 9.0}, iqrs={5: 0.5, 2: 0.5})
+    assert result == Verdict(best=5, most_sample_efficient=5, fastest=5, most_repeatable=5)
 
 
 def test_verdict_ignores_nan() -> None:
     final = {0: [NAN, NAN], 1: [1.0, NAN, 2.0], 2: [0.0, NAN]}
-    result = verdict(final, auc_means={0: NAN, 1: NAN}, seconds={0: NAN, 1: NAN, 2: NAN},
-                     iqrs={0: NAN, 1: 0.5, 2: 0.0}, p_holm={0: NAN, 2: NAN})
+    result = verdict(compare(final, 0.0), auc_means={0: NAN, 1: NAN},
+                     seconds={0: NAN, 1: NAN, 2: NAN}, iqrs={0: NAN, 1: 0.5, 2: 0.0})
     assert result.best == 1  # mean 1.5 over its two complete seeds
-    assert result.tied == []
     assert result.most_sample_efficient is None
     assert result.fastest is None
     assert result.most_repeatable == 1  # group 2 has one complete seed
-    empty = verdict({}, {}, {}, {}, {})
-    assert empty == Verdict(best=None, tied=[], most_sample_efficient=None, fastest=None,
+    empty = verdict(compare({}, 0.0), {}, {}, {})
+    assert empty == Verdict(best=None, most_sample_efficient=None, fastest=None,
                             most_repeatable=None)
+    assert empty_verdict() == empty
 
 
 def test_verdict_is_frozen() -> None:
-    result = verdict({0: [1.0]}, {}, {}, {}, {})
+    result = verdict(compare({0: [1.0]}, 0.0), {}, {}, {})
     with pytest.raises(dataclasses.FrozenInstanceError):
         result.best = 1  # type: ignore[misc]

@@ -1,5 +1,5 @@
 """Two-objective searches (a reward and a cost): the study's directions, the front and the
-choices made from it (hand-worked), the confirm study's fastest_tied, the report's front, and
+choices made from it (hand-worked), a confirm study's fastest_equivalent, the report's front, and
 the bad input refused."""
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from optuna.study import StudyDirection
 from kraby_study.answers.search_front import front_lines, search_front
 from kraby_study.answers.selected import front_selection, selected_value
 from kraby_study.config.compose import compose_config
-from kraby_study.decision.comparison import welch_greater_p
-from kraby_study.decision.front import Point, cheapest_tied, pareto_front, spread
+from kraby_study.decision.comparison import CompareOptions
+from kraby_study.decision.front import Point, front_choice, pareto_front, spread
 from kraby_study.errors import ConfigError
 from kraby_study.plan.confirm import ConfirmedStudy, confirm_rule
 from kraby_study.plan.space import search_definition
@@ -68,28 +68,27 @@ def test_the_spread_takes_both_ends_and_evenly_spaced_places_in_cost_order() -> 
     assert spread([], 3) == []
 
 
-def test_the_cheapest_trial_tied_with_the_best_score_is_selected() -> None:
+def test_the_cheapest_trial_equivalent_to_the_best_score_is_selected() -> None:
     front = [Point(3, 0.5, 1.0), Point(1, 0.995, 5.0), Point(0, 1.0, 10.0)]
-    seeds = {0: [1.00, 1.01, 0.99], 1: [0.985, 0.995, 1.005], 3: [0.50, 0.51, 0.49]}
-    # By hand: every sd is 0.01, so se = sqrt(2 x 0.0001 / 3) = 0.00816; 3 seeds a side take
-    # min(n) - 1 = 2 df. 0 against 1: t = 0.005 / 0.00816 = 0.61, one-sided p = 0.30, Holm's
-    # pi = 2 p = 0.60: tied. 0 against 3: t = 61, p ~ 1e-4, pi ~ 3e-4 < 0.05: worse.
-    assert welch_greater_p(seeds[0], seeds[1]) == pytest.approx(0.301, abs=0.005)
-    choice = cheapest_tied(front, seeds)
+    # Four seeds each, sd about 0.005: trial 1 within the margin (0.2 x 1.0) of trial 0, trial
+    # 3 half the score.
+    seeds = {0: [1.00, 1.005, 0.995, 1.0], 1: [0.99, 0.995, 1.0, 0.995],
+             3: [0.50, 0.505, 0.495, 0.5]}
+    choice = front_choice(front, seeds, "fastest_equivalent", CompareOptions())
     assert choice is not None and choice.tested
-    assert (choice.best.key, choice.tied, choice.chosen.key) == (0, [1], 1)
-    assert choice.rule == "fastest_tied" and "not shown worse" in choice.rule_text
-    # Nothing tied: the best score is the cheapest tied with itself.
-    apart = {0: [1.00, 1.01, 0.99], 1: [0.90, 0.91, 0.89], 3: [0.50, 0.51, 0.49]}
-    assert cheapest_tied(front, apart).chosen.key == 0  # type: ignore[union-attr]
+    assert (choice.best.key, choice.equivalent, choice.chosen.key) == (0, [1], 1)
+    assert choice.rule == "fastest_equivalent" and "shown equivalent" in choice.rule_text
+    # At margin 0 nothing is equivalent: the best score is the cheapest of its own set.
+    at_zero = front_choice(front, seeds, "fastest_equivalent", CompareOptions(margin=0.0))
+    assert at_zero is not None and at_zero.chosen.key == 0
 
 
-def test_with_one_seed_a_trial_no_tie_is_tested_and_the_rule_falls_back_to_the_best() -> None:
+def test_with_one_seed_a_trial_no_test_is_made_and_the_rule_falls_back_to_the_best() -> None:
     front = [Point(3, 0.5, 1.0), Point(0, 1.0, 10.0)]
-    choice = cheapest_tied(front, {0: [1.0], 3: [0.5]})
+    choice = front_choice(front, {0: [1.0], 3: [0.5]}, "fastest_equivalent", CompareOptions())
     assert choice is not None and not choice.tested and choice.chosen.key == 0
     assert "falls back to final_score" in choice.rule_text
-    assert cheapest_tied([], {}) is None
+    assert front_choice([], {}, "fastest_equivalent", CompareOptions()) is None
 
 
 # The floor, on constructed trials ---------------------------------------------------------------
@@ -144,13 +143,14 @@ def test_a_floor_not_yet_measured_leaves_every_trial_eligible() -> None:
 
 
 def test_a_retried_trial_is_known_on_the_front_by_its_own_number() -> None:
-    # Trial 3 was interrupted and retried: attempt 7 holds it now, under its key t3. The front,
-    # best's lines and the selection name it trial 3, as every other command does, not 7.
-    retried = _Trial(7, [0.95, 4.0], {"key": "t3", "retry_of": 3, "settings": {"n_epochs": 3},
-                                      "scores": [0.95, 0.96, 0.94]})
+    # Trial 3 was interrupted and retried: attempt 7 holds it now, under its key t3, with the
+    # best score (it beats trial 2 on both). The front, best's lines and the selection name it
+    # trial 3, as every other command does, not 7.
+    retried = _Trial(7, [1.05, 4.0], {"key": "t3", "retry_of": 3, "settings": {"n_epochs": 3},
+                                      "scores": [1.05, 1.06, 1.04]})
     trials = [t for t in _trials() if t.number != 3] + [retried]
     found = search_front(trials)
-    assert [p.key for p in found.front] == [1, 3, 2]
+    assert [p.key for p in found.front] == [1, 3]
     chosen = front_selection("two", {"search": {}}, trials)
     assert chosen is not None and chosen.description.startswith("trial 3 of search 'two'")
     assert chosen.settings == {"n_epochs": 3}
@@ -170,7 +170,7 @@ def test_only_a_two_objective_search_with_a_floor_stores_one() -> None:
     assert stored_floor(search_definition(compose_config([]))) is None
 
 
-# fastest_tied on a confirm study of constructed scores ------------------------------------------
+# A confirm study stored with the retired rule, on constructed scores -----------------------------
 
 
 @dataclass
@@ -194,9 +194,10 @@ class _Run:
         return [self.value]
 
 
-def test_fastest_tied_on_a_confirm_study_takes_the_cheapest_arm_in_cpu_seconds() -> None:
-    # t3 is best, t5 is tied with it (its seeds overlap t3's), t7 is far worse. In CPU seconds
-    # t5 is the cheapest tied arm; in wall-clock seconds (other work on the machine) t3 would be.
+def test_a_confirm_stored_with_fastest_tied_selects_by_fastest_equivalent_in_cpu_s() -> None:
+    # t3 is best, t5 within the margin of it, t7 far worse. In CPU seconds t5 is the cheapest
+    # equivalent arm; in wall-clock seconds (other work on the machine) t3 would be. A study
+    # stored with the retired rule fastest_tied is answered by today's rule.
     arms = {"t3": ([1.0, 1.02, 0.98, 1.0], 10.0, 1.0), "t5": ([0.99, 1.01, 0.97, 1.01], 4.0, 9.0),
             "t7": ([0.5, 0.52, 0.48, 0.5], 1.0, 1.0)}
     runs = [_Run(number=len(arms) * i + j, value=score, params={"config": label},
@@ -204,9 +205,11 @@ def test_fastest_tied_on_a_confirm_study_takes_the_cheapest_arm_in_cpu_seconds()
             for j, (label, (scores, cpu, wall)) in enumerate(arms.items())
             for i, score in enumerate(scores)]
     definition = {"kind": "confirm", "parameter": "config", "values": list(arms)}
-    chosen = selected_value(StudyAttrs(kind="confirm", definition=definition,
-                                       select="fastest_tied"), runs, lambda _: None)
-    assert chosen is not None and chosen.value == "t5" and chosen.rule == "fastest_tied"
+    for stored in ("fastest_tied", "fastest_equivalent"):
+        chosen = selected_value(StudyAttrs(kind="confirm", definition=definition,
+                                           select=stored), runs, lambda _: None)
+        assert chosen is not None and chosen.value == "t5"
+        assert chosen.rule == "fastest_equivalent" and chosen.answer == "equivalent"
     best = selected_value(StudyAttrs(kind="confirm", definition=definition), runs,
                           lambda _: None)
     assert best is not None and best.value == "t3"
@@ -312,8 +315,8 @@ def test_the_report_draws_the_front(folder: Path) -> None:
     assert (out / "pareto.png").stat().st_size > 0
     with (out / "pareto.csv").open() as handle:
         rows = list(csv.DictReader(handle))
-    assert rows and list(rows[0])[:7] == ["trial", "score", "cost", "enqueued", "best", "tied",
-                                          "selected"]
+    assert rows and list(rows[0])[:7] == ["trial", "score", "cost", "enqueued", "best",
+                                          "equivalent", "selected"]
     assert {"learning_rate", "n_epochs"} <= set(rows[0])
     assert sum(r["selected"] == "True" for r in rows) == 1
     assert float(rows[0]["score"]) >= max(float(r["score"]) for r in rows)
@@ -337,8 +340,8 @@ def test_confirm_retrains_the_front_and_selects_the_cheapest_equivalent(
     assert run_cli("best", "--study-name", "two-confirm") == 0
     assert "selected by fastest_equivalent" in capsys.readouterr().out
     # Re-selection without retraining: another rule read instead of the stored one.
-    assert run_cli("best", "--study-name", "two-confirm", "compare.select=fastest_tied") == 0
-    assert "selected by fastest_tied" in capsys.readouterr().out
+    assert run_cli("best", "--study-name", "two-confirm", "compare.select=auc") == 0
+    assert "selected by auc" in capsys.readouterr().out
     assert study.user_attrs["kraby_select"] == "fastest_equivalent"
     assert run_cli("report", "--study-name", "two-confirm", "--no-policy") == 0
     summary = (folder / "reports" / "two-confirm" / "summary.md").read_text()
@@ -373,7 +376,7 @@ def test_a_confirm_rule_that_is_not_one_is_refused(workdir: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     assert run_cli("confirm", "--baseline", "ppo=tuned", "--select", "cheapest") == 2
     err = capsys.readouterr().err
-    assert "confirm.select must be one of final_score, auc, fastest_tied" in err
+    assert "confirm.select must be one of final_score, auc, fastest_equivalent" in err
     assert err.count("\n") == 1 and not (workdir / "studies").exists()
 
 

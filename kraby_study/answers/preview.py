@@ -40,7 +40,7 @@ class Measured:
 
 
 @dataclass(frozen=True)
-class Held:
+class StoredSoFar:
     """What a store holds for a dry run: each named study's tally, and its measured rate."""
 
     tallies: dict[str, Tally] = field(default_factory=dict)
@@ -48,7 +48,7 @@ class Held:
     measured: Measured = field(default_factory=Measured)
 
 
-def held(url: str, counts: Sequence[Count]) -> Held:
+def read_stored(url: str, counts: Sequence[Count]) -> StoredSoFar:
     """The stored outcomes of the counted studies and the store's measured rate; a store not
     made yet (no SQLite file, or no tables) holds nothing, and is not created.
 
@@ -58,7 +58,7 @@ def held(url: str, counts: Sequence[Count]) -> Held:
             (as the real command would refuse it); one line.
     """
     if not has_store(url):
-        return Held()
+        return StoredSoFar()
     planned = {c.study: c.trials for c in counts}
     definitions = {c.study: c.definition for c in counts}
     tallies: dict[str, Tally] = {}
@@ -76,7 +76,7 @@ def held(url: str, counts: Sequence[Count]) -> Held:
                     trials += 1
                     steps += int(attrs["env_steps"])
                     seconds += float(attrs["wall_time"])
-    return Held(tallies=tallies, measured=Measured(trials, steps, seconds))
+    return StoredSoFar(tallies=tallies, measured=Measured(trials, steps, seconds))
 
 
 def check_definition(url: str, name: str, stored: StudyAttrs,
@@ -114,7 +114,7 @@ def remaining_trials(count: Count, stored: Tally | None) -> int:
     return max(count.trials - (stored.ended if stored else 0), 0)
 
 
-def remaining_steps(counts: Sequence[Count], found: Held) -> int:
+def remaining_steps(counts: Sequence[Count], found: StoredSoFar) -> int:
     """Env steps still to train over every counted study."""
     return sum(remaining_trials(c, found.tallies.get(c.study)) * c.steps_per_trial
                for c in counts)
@@ -169,7 +169,8 @@ def campaign_preview(campaign: Campaign) -> list[StagePreview]:
     """
     out = []
     for stage in campaign.stages:
-        lookup = StoreWinners(names={s.study: s.name for s in campaign.before(stage)})
+        lookup = StoreWinners(names={s.study: s.name for s in campaign.before(stage)},
+                              recorders=[s.name for s in campaign.stages])
         try:
             plan = expand_study(resumed_stage(campaign, stage, lookup))
         except Unfinished:
@@ -191,7 +192,7 @@ def preview_lines(url: str, counts: Sequence[Count], workers: int | None,
     Raises:
         ConfigError or StoreError: The store cannot be read; one line.
     """
-    found = held(url, counts)
+    found = read_stored(url, counts)
     lines = ["plan (dry run: nothing is trained or written):"]
     for count in counts:
         lines += count_lines(count, found.tallies.get(count.study))

@@ -203,8 +203,8 @@ def is_two_objective(data: StudyData) -> bool:
 
 def front_table(search: Search) -> pd.DataFrame:
     """The front's trials, best score first: number, score, cost, the configuration it was
-    enqueued as, whether it is the best score, admitted by the rule beside it (``tied``: shown
-    equivalent under fastest_equivalent, not shown worse under fastest_tied) or selected, its
+    enqueued as, whether it is the best score, admitted by the rule beside it (``equivalent``: shown
+    equivalent under fastest_equivalent) or selected, its
     answer against the best score, and its parameters (pareto.csv)."""
     assert search.front is not None
     choice = search.front.choice
@@ -216,12 +216,12 @@ def front_table(search: Search) -> pd.DataFrame:
             "trial": point.key, "score": point.score, "cost": point.cost,
             "enqueued": row["enqueued"],
             "best": choice is not None and point.key == choice.best.key,
-            "tied": choice is not None and point.key in choice.tied,
+            "equivalent": choice is not None and point.key in choice.equivalent,
             "selected": choice is not None and point.key == choice.chosen.key,
             "answer": answer_of(choice, point.key),
             **{name: row[name] for name in search.params}})
-    return pd.DataFrame(out, columns=["trial", "score", "cost", "enqueued", "best", "tied",
-                                      "selected", "answer", *search.params])
+    return pd.DataFrame(out, columns=["trial", "score", "cost", "enqueued", "best",
+                                      "equivalent", "selected", "answer", *search.params])
 
 
 def answer_of(choice: FrontChoice[int] | None, key: int) -> str:

@@ -55,8 +55,9 @@ def seed_scores(trial: StoredTrial) -> list[float]:
 
 def front_rule(stored: str | None, options: CompareOptions | None = None) -> SelectRule:
     """The rule a search's front is selected by: ``compare.select`` when given, else the rule
-    the search stored (a new two-objective search stores fastest_equivalent), else
-    fastest_tied, the rule of searches stored before rules were stored.
+    the search stored (a two-objective search stores fastest_equivalent), else
+    fastest_equivalent; a retired stored name is answered by today's rule
+    (:meth:`SelectRule.of`).
 
     Raises:
         ConfigError: ``compare.select`` names a rule a front cannot take (auc: a search
@@ -68,11 +69,11 @@ def front_rule(stored: str | None, options: CompareOptions | None = None) -> Sel
             raise ConfigError(f"compare.select={rule} cannot select from a front: use one of "
                               f"{', '.join(FRONT_RULES)}")
         return rule
-    return SelectRule.of(stored) if stored is not None else SelectRule.FASTEST_TIED
+    return SelectRule.of(stored) if stored is not None else SelectRule.FASTEST_EQUIVALENT
 
 
 def search_front(trials: Sequence[StoredTrial], floor: str | None = None,
-                 rule: str = SelectRule.FASTEST_TIED,
+                 rule: str = SelectRule.FASTEST_EQUIVALENT,
                  options: CompareOptions | None = None) -> SearchFront:
     """The front of a two-objective search's counted trials, and its selection.
 
@@ -82,7 +83,7 @@ def search_front(trials: Sequence[StoredTrial], floor: str | None = None,
             complete, trials scoring below it are left out of the front (and so of the
             selection and of ``confirm``); they stay among ``points``.
         rule: The front's rule (:func:`front_rule`).
-        options: The comparison's margin and seeds.
+        options: The comparison's margin and seeds; None: the defaults.
     """
     points = [Point(known_number(t), float(score(t)), float(cost(t)))  # type: ignore[arg-type]
               for t in trials if outcome(t) == Outcome.COMPLETE and score(t) is not None
@@ -92,8 +93,8 @@ def search_front(trials: Sequence[StoredTrial], floor: str | None = None,
     front = pareto_front(feasible)
     on_front = {p.key for p in front}
     samples = {known_number(t): seed_scores(t) for t in trials if known_number(t) in on_front}
-    return SearchFront(points=points, front=front,
-                       choice=front_choice(front, samples, rule, options), floor=floor,
+    choice = front_choice(front, samples, rule, options or CompareOptions())
+    return SearchFront(points=points, front=front, choice=choice, floor=floor,
                        floor_score=measured)
 
 

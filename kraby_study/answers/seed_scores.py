@@ -1,6 +1,8 @@
 """The seed scores of a stored sweep, read once from its trials: each value's final scores, AUCs
-and training times (:class:`Samples`), the numbers every decision reads, and the value a
-study's rule selects from them (:func:`selected_index`)."""
+and training times (:class:`Samples`), the numbers every decision reads, and the study's one
+comparison of them (:func:`sweep_comparison`): the only place a sweep, confirm or single-run
+study is compared, whoever reads its answers (the report, ``best``, ``list``,
+``${winner:...}``, campaigns)."""
 
 from __future__ import annotations
 
@@ -9,12 +11,8 @@ from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from kraby_study.decision.comparison import (
-    MARGIN,
-    MIN_SEEDS,
-)
+from kraby_study.decision.comparison import CompareOptions, Comparison, compare
 from kraby_study.decision.measures import curve_rewards, seed_samples
-from kraby_study.decision.selection import select
 from kraby_study.records.attributes import StudyKind, TrialAttrs
 from kraby_study.records.stored import Outcome, StoredTrial, outcome
 from kraby_study.records.values import (
@@ -39,7 +37,7 @@ class Samples:
 
 
 def time_measure(kind: str | None) -> str:
-    """The training time fastest_tied compares, as a trial attribute: CPU seconds on a confirm
+    """The training time fastest_equivalent compares, as a trial attribute: CPU seconds on a confirm
     study (a two-objective search's cost is CPU seconds per seed, and other work on the
     machine moves it little), wall-clock seconds on a sweep (as the documented studies
     compared them)."""
@@ -57,11 +55,11 @@ def samples(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: st
     for trial in trials:
         if outcome(trial) != Outcome.COMPLETE or trial.value is None:
             continue
-        vi = index.get(value_key(swept_value(trial, name, values)))
-        if vi is None:
+        value_index = index.get(value_key(swept_value(trial, name, values)))
+        if value_index is None:
             continue
         spent = getattr(TrialAttrs.of(trial), time_attr)
-        runs.append((vi, trial.number, float(trial.value),
+        runs.append((value_index, trial.number, float(trial.value),
                      math.nan if spent is None else float(spent)))
     final, aucs, seconds = seed_samples(runs, curve_rewards(curves) if curves is not None else {})
     return Samples(values=list(values), final=final, aucs=aucs, seconds=seconds)
@@ -77,13 +75,11 @@ def swept_values(kind: str, definition: Mapping[str, Any],
     return name, ordered_values(planned, found, sort=kind != "confirm")
 
 
-def selected_index(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: str,
-                   values: Sequence[Any], rule: str, min_seeds: int = MIN_SEEDS,
-                   dropped: Collection[int] = (), time_attr: str = "wall_time",
-                   margin: float = MARGIN) -> int | None:
-    """Index in ``values`` of the value ``rule`` selects among the complete runs; None when
-    no value has ``min_seeds`` complete seeds. ``dropped``: indices in ``values`` of the values
-    a race dropped as worse (:func:`kraby_study.answers.raced.dropped_indices`), never
-    selected."""
-    found = samples(trials, curves, name, values, time_attr)
-    return select(rule, found.final, found.aucs, found.seconds, min_seeds, dropped, margin)
+def sweep_comparison(final: Mapping[int, Sequence[float]], dropped: Collection[int],
+                     options: CompareOptions, tests: bool = True) -> Comparison[int]:
+    """A swept or single-run study's one comparison of its values' final scores (by index),
+    the values a race dropped as worse (``dropped``) left out, under the command's margin,
+    alpha and seeds; ``tests`` False: the best and the family only, for a rule that reads no
+    test (:attr:`kraby_study.decision.selection.Rule.tests`)."""
+    return compare({i: v for i, v in final.items() if i not in dropped}, options.margin,
+                   alpha=options.alpha, min_seeds=options.min_seeds, tests=tests)

@@ -22,9 +22,14 @@ from kraby_study.answers.search_front import (
     front_short,
     search_front,
 )
-from kraby_study.answers.seed_scores import samples, swept_values, time_measure
-from kraby_study.decision.comparison import CompareOptions, compare, seeds_needed
-from kraby_study.decision.selection import RULES, mean_by_value
+from kraby_study.answers.seed_scores import (
+    samples,
+    sweep_comparison,
+    swept_values,
+    time_measure,
+)
+from kraby_study.decision.comparison import CompareOptions, seeds_needed
+from kraby_study.decision.selection import RULES, select
 from kraby_study.errors import StoreError
 from kraby_study.records.attributes import SelectRule, StudyAttrs, StudyKind, TrialAttrs
 from kraby_study.records.definition import stored_floor, two_objectives
@@ -103,9 +108,9 @@ def selection_of(ledger: StudyLedger, options: CompareOptions | None = None
     env_keys = searched_env_keys(definition)
     params = ", ".join(f"{k}={value_label(v)}" for k, v in trial.params.items())
     value = float(score(trial))  # type: ignore[arg-type]
-    held = TrialAttrs.of(trial)
-    seeds = (f" over {len(held.scores or [])} seeds (rechecked)"
-             if held.recheck_of is not None else "")
+    trial_attrs = TrialAttrs.of(trial)
+    seeds = (f" over {len(trial_attrs.scores or [])} seeds (rechecked)"
+             if trial_attrs.recheck_of is not None else "")
     return Selection(short=trial_short(trial),
                      description=f"trial {known_number(trial)} of {attrs.kind or 'study'} "
                                  f"{ledger.name!r}: score {value:.4g}{seeds} ({params})",
@@ -203,11 +208,8 @@ def selected_value(attrs: StudyAttrs, trials: Sequence[StoredTrial], curves: Cur
     # A raced study selects among the values its race kept: one dropped as worse never is.
     dropped = dropped_indices(attrs.definition, trials, values)
     found = samples(trials, frame, name, values, time_measure(attrs.kind))
-    comparison = compare({vi: v for vi, v in found.final.items() if vi not in dropped},
-                         options.margin, options.alpha, options.min_seeds,
-                         tests=RULES[rule].tests)
-    index = RULES[rule].select(comparison, mean_by_value(found.aucs),
-                               mean_by_value(found.seconds))
+    comparison = sweep_comparison(found.final, dropped, options, tests=RULES[rule].tests)
+    index = select(rule, comparison, found.aucs, found.seconds)
     if index is None:
         return None
     key = value_key(values[index])
@@ -232,7 +234,7 @@ def answer_text(chosen: SweepSelection) -> str:
     """The selection's answer against the best with the margin in score units, for the rules
     that read the answers (``; the best itself (margin 0.0028 in score units)``), and the
     warning when the margin is below what the seeds resolve; empty for the other rules."""
-    if chosen.rule not in (SelectRule.FASTEST_EQUIVALENT, SelectRule.FASTEST_TIED):
+    if chosen.rule != SelectRule.FASTEST_EQUIVALENT:
         return ""
     answer = ("the best itself" if chosen.answer == "best"
               else f"answered {chosen.answer} against the best")

@@ -7,11 +7,13 @@ Figures and metrics draw from the complete runs only; failed runs are counted an
 still to come are counted as pending, and nothing is dropped without a trace. A confirm study
 is a sweep whose values are the labels of the configurations it retrains (in the order given).
 
-Every decision (the summary's answers and marks, the verdict, the ``selected`` column) reads
-one :class:`kraby_study.decision.comparison.Comparison`, made once per study from the seed
-scores of the runs' table (:func:`kraby_study.decision.summary.seed_scores`): the numbers
-``best``, ``${winner:...}`` and campaigns read from the trials
-(:func:`kraby_study.answers.seed_scores.samples`)."""
+Every decision (the summary's answers, the verdict, the ``selected`` column) reads one
+:class:`kraby_study.decision.comparison.Comparison`, made once per study by
+:func:`kraby_study.answers.seed_scores.sweep_comparison` from the seed scores of the runs'
+table (:func:`kraby_study.decision.summary.seed_scores`): the numbers ``best``,
+``${winner:...}`` and campaigns read from the trials
+(:func:`kraby_study.answers.seed_scores.samples`) and compare there too. The report reads the
+decision as typed rows (:class:`kraby_study.decision.summary.ValueSummary`)."""
 
 from __future__ import annotations
 
@@ -23,23 +25,31 @@ import numpy as np
 import pandas as pd
 
 from kraby_study.answers.raced import race_runs
-from kraby_study.answers.seed_scores import swept_values, time_measure
+from kraby_study.answers.seed_scores import sweep_comparison, swept_values, time_measure
 from kraby_study.answers.selected import study_rule
 from kraby_study.answers.study_data import StudyData
 from kraby_study.decision.comparison import MARGIN, MIN_SEEDS, CompareOptions, Comparison
 from kraby_study.decision.intervals import BOOTSTRAP_REPETITIONS
 from kraby_study.decision.race import Drop, RaceRuns, StudyRace
-from kraby_study.decision.summary import SEED_COLUMNS, decide_sweep
-from kraby_study.decision.verdict import Verdict
-from kraby_study.records.attributes import SelectRule, StudyKind
+from kraby_study.decision.summary import (
+    SEED_COLUMNS,
+    ValueSummary,
+    decide_sweep,
+    seed_scores,
+    summary_frame,
+)
+from kraby_study.decision.verdict import Verdict, empty_verdict
+from kraby_study.records.attributes import RUN_MEASURES, SelectRule, StudyKind
 from kraby_study.records.definition import scored_by_evaluation
 from kraby_study.records.stored import Outcome, outcome, tally
 from kraby_study.records.values import swept_value, value_key, value_label
 
 SINGLE_LABEL = "all seeds"
-TRIAL_COLUMNS = ["number", "key", "seed", "vi", "value", "outcome", "final_score",
-                 "train_reward", "eval_error", "wall_time", "cpu_time", "env_steps", "failure",
-                 "model_path"]
+TRIAL_COLUMNS = ["number", "key", "seed", "value_index", "value", "outcome", "final_score",
+                 *(m.name for m in RUN_MEASURES), "wall_time", "cpu_time", "env_steps",
+                 "failure", "model_path"]
+"""The run table's columns: what a run is, its final score, its per-run measures
+(:data:`kraby_study.records.attributes.RUN_MEASURES`) and what it cost."""
 
 
 @dataclass
@@ -52,11 +62,11 @@ class Sweep:
         name: The setting's short name (the Optuna parameter), or "all seeds".
         values: The swept values in figure order (by value when all are numbers).
         labels: How each value is written.
-        trials: One row per counted run (columns ``TRIAL_COLUMNS``); ``vi`` indexes values.
-        curves: Curve points of the complete runs, with their ``vi`` and ``seed``.
+        trials: One row per counted run (columns ``TRIAL_COLUMNS``); ``value_index`` indexes values.
+        curves: Curve points of the complete runs, with their ``value_index`` and ``seed``.
         bands: Per value and step: n, mean, sd, low, high of the reward; mean wall time.
-        summary: One row per value (:func:`kraby_study.decision.summary.summarise` and
-            ``add_curve_metrics``).
+        rows: What the evidence says of each value, typed
+            (:class:`kraby_study.decision.summary.ValueSummary`), in value order.
         seeds: One row per complete run (columns ``SEED_COLUMNS``): its final score, its
             first curve point's reward, its AUC, when it first reached the threshold and its
             curve's last point (env steps and seconds).
@@ -81,15 +91,15 @@ class Sweep:
     trials: pd.DataFrame
     curves: pd.DataFrame
     bands: pd.DataFrame
-    summary: pd.DataFrame
+    rows: list[ValueSummary]
     seeds: pd.DataFrame = field(default_factory=lambda: pd.DataFrame(columns=SEED_COLUMNS))
     threshold: float = math.nan
     threshold_default: bool = True
     untrained: float = math.nan
     bootstrap: int = BOOTSTRAP_REPETITIONS
-    verdict: Verdict = field(default_factory=lambda: Verdict(None, [], None, None, None))
+    verdict: Verdict = field(default_factory=empty_verdict)
     min_seeds: int = MIN_SEEDS
-    """Fewest complete seeds a value needs to be best, tied or any answer of the verdict."""
+    """Fewest complete seeds a value needs to be best or any answer of the verdict."""
     rule: str = SelectRule.FINAL_SCORE
     """The study's selection rule (its stored one, or ``compare.select``); the summary's
     ``selected`` column marks the value it selects once no run is pending."""
@@ -102,6 +112,11 @@ class Sweep:
     failure_line: float = math.nan
     """The final score below which a seed failed (:mod:`kraby_study.decision.failed_seeds`); NaN
     when not defined."""
+
+    @property
+    def summary(self) -> pd.DataFrame:
+        """The rows as one table (summary.csv's columns; :func:`summary_frame`)."""
+        return summary_frame(self.rows)
 
     @property
     def dropped(self) -> dict[int, Drop]:
@@ -122,8 +137,8 @@ class Sweep:
 
     @property
     def time_attr(self) -> str:
-        """The trial column the summary's training time describes: the one fastest_tied
-        compares (:func:`kraby_study.decision.selection.time_measure`)."""
+        """The trial column the summary's training time describes: the one
+        fastest_equivalent compares (:func:`kraby_study.answers.seed_scores.time_measure`)."""
         return time_measure(self.kind)
 
     @property
@@ -153,8 +168,7 @@ class Sweep:
     @property
     def best(self) -> int | None:
         """Index of the best value (highest IQM final score), if any run is complete."""
-        marked = self.summary.index[self.summary["mark"] == "best"]
-        return int(marked[0]) if len(marked) else None
+        return self.comparison.best if self.comparison is not None else None
 
 
 def arms_frame(sweep: Sweep) -> pd.DataFrame:
@@ -163,16 +177,15 @@ def arms_frame(sweep: Sweep) -> pd.DataFrame:
     arms = {str(arm.get("label")): arm for arm in sweep.data.definition.get("arms") or []
             if isinstance(arm, dict)}
     rows = []
-    for vi, label in enumerate(sweep.labels):
+    for value_index, label in enumerate(sweep.labels):
         arm = arms.get(label, {})
         source = arm.get("source_score")
-        row = sweep.summary.iloc[vi]
+        row = sweep.rows[value_index]
         rows.append({"label": label, "origin": str(arm.get("origin") or "-"),
                      "source_score": float(source) if source is not None else math.nan,
-                     "mean": row["final_mean"], "low": row["final_low"],
-                     "high": row["final_high"], "iqm": row["iqm"], "iqm_low": row["iqm_low"],
-                     "iqm_high": row["iqm_high"], "n": int(row["complete"]),
-                     "mark": row["mark"]})
+                     "mean": row.final_mean, "low": row.final_low, "high": row.final_high,
+                     "iqm": row.iqm, "iqm_low": row.iqm_low, "iqm_high": row.iqm_high,
+                     "n": row.complete, "answer": row.answer})
     return pd.DataFrame(rows)
 
 
@@ -201,6 +214,10 @@ class SweepEvidence:
     race: RaceRuns | None
 
 
+def _or_nan(value: float | None) -> float:
+    return np.nan if value is None else value
+
+
 def sweep_evidence(data: StudyData) -> SweepEvidence:
     """A sweep's evidence from its stored trials and curves (a single-run study: one value):
     one pass over the trials, through the record schema alone."""
@@ -217,22 +234,20 @@ def sweep_evidence(data: StudyData) -> SweepEvidence:
     for trial in data.trials:
         attrs = trial.user_attrs
         value = swept_value(trial, name, values) if name else None
-        vi = index.get(value_key(value), -1) if name else 0
+        value_index = index.get(value_key(value), -1) if name else 0
         state = outcome(trial)
         ended = state != Outcome.PENDING
         rows.append({
-            "number": trial.number, "key": attrs.get("key"), "seed": attrs.get("seed"), "vi": vi,
-            "value": value_label(values[vi]) if vi >= 0 and name else
+            "number": trial.number, "key": attrs.get("key"), "seed": attrs.get("seed"),
+            "value_index": value_index,
+            "value": value_label(values[value_index]) if value_index >= 0 and name else
             (SINGLE_LABEL if not name else "?"),
             "outcome": state.value,
             "final_score": float(trial.value)
             if state == Outcome.COMPLETE and trial.value is not None else np.nan,
-            # Stored beside the score since the evaluation objective; NaN on older runs.
-            "train_reward": attrs.get("train_reward", np.nan)
-            if state == Outcome.COMPLETE else np.nan,
-            # A run scored by evaluation: its score's standard error from its episodes.
-            "eval_error": (attrs.get("eval_errors") or [np.nan])[0]
-            if state == Outcome.COMPLETE else np.nan,
+            # Measured by a complete run only; NaN where a run does not store the measure.
+            **{m.name: _or_nan(m.read(attrs)) if state == Outcome.COMPLETE else np.nan
+               for m in RUN_MEASURES},
             "wall_time": attrs.get("wall_time", np.nan) if ended else np.nan,
             "cpu_time": attrs.get("cpu_time", np.nan) if ended else np.nan,
             "env_steps": attrs.get("env_steps", np.nan) if ended else np.nan,
@@ -241,16 +256,17 @@ def sweep_evidence(data: StudyData) -> SweepEvidence:
                         if state in (Outcome.FAILED, Outcome.PRUNED) else ""),
             "model_path": attrs.get("model_path")})
     trials = pd.DataFrame(rows, columns=TRIAL_COLUMNS)
-    for column in ("final_score", "train_reward", "eval_error", "wall_time", "cpu_time",
+    for column in ("final_score", *(m.name for m in RUN_MEASURES), "wall_time", "cpu_time",
                    "env_steps"):
         trials[column] = pd.to_numeric(trials[column], errors="coerce").astype(float)
     known = len(values)
-    if (trials["vi"] < 0).any():  # a run whose value cannot be read: show it, do not drop it
+    # A run whose value cannot be read: show it, do not drop it.
+    if (trials["value_index"] < 0).any():
         values, labels = values + ["?"], labels + ["?"]
-        trials.loc[trials["vi"] < 0, "vi"] = len(values) - 1
+        trials.loc[trials["value_index"] < 0, "value_index"] = len(values) - 1
     # A race's ended runs, each value placed in the report's order (matched by value).
     race = race_runs(definition, data.trials, values[:known]) if data.kind.swept else None
-    complete = trials[trials["outcome"] == Outcome.COMPLETE][["vi", "seed", "number"]]
+    complete = trials[trials["outcome"] == Outcome.COMPLETE][["value_index", "seed", "number"]]
     return SweepEvidence(parameter=parameter, name=name, values=values, labels=labels,
                          known=known, trials=trials,
                          curves=data.curves.merge(complete, on="number", how="inner"),
@@ -276,17 +292,21 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
                             select=option(options, "select", None))
     rule = study_rule(data.ledger.attrs.select, judged)
     evidence = sweep_evidence(data)
+    race = evidence.race.replayed() if evidence.race is not None else None
+    found = seed_scores(evidence.trials, evidence.curves, evidence.known, evidence.time_attr,
+                        swept=evidence.name is not None)
+    comparison = sweep_comparison(found.final, race.dropped if race is not None else (),
+                                  judged, tests=True)
     decided = decide_sweep(
-        evidence.trials, evidence.curves, evidence.labels, judged,
+        evidence.trials, evidence.curves, evidence.labels, comparison, found,
         bootstrap=int(option(options, "bootstrap", BOOTSTRAP_REPETITIONS)),
-        threshold=option(options, "threshold", None), race=evidence.race,
-        swept=evidence.name is not None, known=evidence.known, time_attr=evidence.time_attr,
-        train_reward=scored_by_evaluation(data.definition),
+        threshold=option(options, "threshold", None), race=race,
+        time_attr=evidence.time_attr, train_reward=scored_by_evaluation(data.definition),
         rule=rule if evidence.name is not None and evidence.finished else None)
     return Sweep(data=data, parameter=evidence.parameter, name=evidence.name or SINGLE_LABEL,
                  values=evidence.values, rule=rule, labels=evidence.labels,
                  trials=evidence.trials, curves=evidence.curves, bands=decided.bands,
-                 summary=decided.summary, seeds=decided.seeds, threshold=decided.threshold,
+                 rows=decided.rows, seeds=decided.seeds, threshold=decided.threshold,
                  threshold_default=decided.threshold_default, untrained=decided.untrained,
                  bootstrap=decided.bootstrap, verdict=decided.verdict,
                  min_seeds=decided.comparison.min_seeds, race=decided.race,

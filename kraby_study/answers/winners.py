@@ -4,10 +4,16 @@ one taken.
 
 A standalone study names stored studies directly; a campaign stage names earlier stages by their
 study, stored as ``<campaign>-<study>``.
+
+A selection that later work was built on is a stored fact, not recomputed: when a stored stage
+of the campaign recorded the value it took from an earlier stage (its ``inputs``), that value
+and the rule that chose it are taken again, whatever today's rules would select
+(:func:`recorded_inputs`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -67,11 +73,15 @@ class StoreWinners:
     Attributes:
         names: For a campaign stage: study -> stored name of the earlier stages it may name;
             None for a standalone study (stored studies are named directly).
+        recorders: Stored studies whose recorded inputs are facts to take again (a
+            campaign's stages); empty: every value is selected afresh.
         inputs: Every value taken, in the order they were resolved.
     """
 
     names: dict[str, str] | None = None
+    recorders: list[str] = field(default_factory=list)
     inputs: list[Input] = field(default_factory=list)
+    _recorded: dict[str, Input] | None = None
     _cache: dict[str, tuple[SweepSelection, str, dict[str, Any]]] = field(default_factory=dict)
 
     def stored_name(self, study: str, setting: str, root: DictConfig) -> str:
@@ -88,6 +98,13 @@ class StoreWinners:
 
     def __call__(self, study: str, setting: str, root: DictConfig) -> Any:
         name = self.stored_name(study, setting, root)
+        if self._recorded is None:
+            self._recorded = recorded_inputs(str(root.storage), self.recorders)
+        if name in self._recorded:
+            taken = self._recorded[name]
+            self.inputs.append(Input(setting=setting, value=taken.value, study=name,
+                                     rule=taken.rule))
+            return taken.value
         if name not in self._cache:
             self._cache[name] = _read(str(root.storage), name, f"{setting}: ${{winner:{study}}}",
                                       CompareOptions.of(root))
@@ -96,6 +113,24 @@ class StoreWinners:
         self.inputs.append(Input(setting=setting, value=value, study=name, rule=selected.rule))
         return value
 
+
+
+def recorded_inputs(url: str, names: Sequence[str]) -> dict[str, Input]:
+    """The values stored studies ``names`` ran on, by the study each was taken from: the
+    first recording in ``names`` order wins (every stage of one campaign records the same).
+    Nothing is created; a study not stored records nothing."""
+    if not names:
+        return {}
+    from kraby_study.answers.resumed import stored_attrs
+
+    found: dict[str, Input] = {}
+    for name in names:
+        attrs = stored_attrs(url, name)
+        for taken in (attrs.inputs or []) if attrs is not None else []:
+            found.setdefault(str(taken["study"]), Input(
+                setting=str(taken["setting"]), value=taken["value"],
+                study=str(taken["study"]), rule=str(taken["rule"])))
+    return found
 
 def _read(url: str, name: str, where: str, options: CompareOptions
           ) -> tuple[SweepSelection, str, dict[str, Any]]:

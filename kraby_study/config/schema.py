@@ -116,9 +116,8 @@ class StudyConfig:
     select: str = "final_score"
     """How the study's value is selected once it is finished (the report's ``selected`` column,
     ``${winner:NAME}``, ``best``): final_score (highest mean final score), auc (highest mean
-    AUC), fastest_equivalent (lowest mean training time among the best and the values shown
-    equivalent to it, within compare.margin) or fastest_tied (the same among the values not
-    shown worse, the rule of earlier releases). See docs/guide/campaigns.md."""
+    AUC) or fastest_equivalent (lowest mean training time among the best and the values
+    shown equivalent to it, within compare.margin). See docs/guide/campaigns.md."""
 
 
 @dataclass
@@ -229,8 +228,7 @@ class SearchConfig:
     eval_set: str | None = None
     """Where a run's evaluation episodes come from: run (its own, drawn from its seed's
     evaluation stream, so a confirm's fresh seeds never meet its search's episodes) or fixed
-    (one set every run shares, as studies stored before); null: a stored study's own, run for
-    a new one."""
+    (one set every run shares); null: a stored study's own, run for a new one."""
     params: dict[str, ParamSpace] = field(default_factory=dict)
     """The space: Optuna parameter name -> range."""
     enqueue: list[str] | None = field(default_factory=lambda: ["tuned", "start"])
@@ -313,10 +311,9 @@ class ConfirmConfig:
     """The confirm study's name in the store; null: NAME-confirm, or confirm-<baselines> when
     only baselines are retrained (two such confirms on two envs need a name each)."""
     select: str | None = None
-    """The confirm study's selection rule (final_score, auc, fastest_equivalent or
-    fastest_tied, as a sweep's study.select); null: fastest_equivalent for a two-objective
-    search's front, final_score otherwise. The fastest rules read CPU seconds on a confirm
-    study."""
+    """The confirm study's selection rule (final_score, auc or fastest_equivalent, as a
+    sweep's study.select); null: fastest_equivalent for a two-objective search's front,
+    final_score otherwise. fastest_equivalent reads CPU seconds on a confirm study."""
 
 
 @dataclass

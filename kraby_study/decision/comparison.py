@@ -13,8 +13,7 @@ scores), for a margin delta >= 0 in score units, the smallest difference that ma
   :data:`~kraby_study.decision.robust.ANSWER_FROM` seeds, where no answer holds its error rate.
 
 The IQM and not the mean: when a setting's seeds sometimes fail, no test of a mean holds its
-level at a few seeds (a sample that drew no failure shows none), and the measured rates of
-the earlier releases' Welch tests of means reached 0.23 there. The IQM moves little with
+level at a few seeds (a sample that drew no failure shows none). The IQM moves little with
 failures a value has at most a quarter of the time, and the failures are counted apart
 (:mod:`kraby_study.decision.failed_seeds`). The tests of each IQM contrast are in
 :mod:`kraby_study.decision.robust`.
@@ -48,13 +47,6 @@ The margin is a fraction f of the reference's |IQM| (reported in score units as 
 best|), so "j above g by more than the margin" is the contrast (1 - f sign(T_j)) T_j - T_g > 0,
 and every test against the margin is a test of that contrast (:func:`margin_weights`).
 
-**Tied** (:attr:`Comparison.tied`, :attr:`Comparison.p_adjusted`) is not one of the four
-answers: the earlier releases' closed step-down at margin 0 over one-sided Welch t-tests of
-means (or paired t-tests on the seeds two values share, ``paired``), kept for the
-``fastest_tied`` rule so that stored studies select as before. Welch's degrees of freedom are
-Welch-Satterthwaite's between values of equal n from :data:`SATTERTHWAITE_FROM` seeds on, and
-the conservative min(n_i, n_j) - 1 otherwise (:func:`welch_df`).
-
 Values with fewer than ``min_seeds`` complete seeds are left out of the family: they are
 never best, equivalent, undecided or worse.
 """
@@ -71,7 +63,7 @@ from typing import Generic, TypeVar
 import numpy as np
 import scipy  # submodules load on first use: `list` loads none for a rule that needs no test
 
-from kraby_study.decision.robust import ANSWER_FROM, CONSTANT_RTOL, iqm, iqm_pairs
+from kraby_study.decision.robust import ANSWER_FROM, iqm, iqm_pairs
 from kraby_study.decision.robust import NAME as TESTS_NAME
 from kraby_study.records.values import best_group
 
@@ -79,18 +71,10 @@ ALPHA = 0.05
 MIN_SEEDS = 2
 """Fewest complete seeds a value needs to be in the family (at least 2)."""
 MARGIN = 0.2
-"""Default ``compare.margin``: the margin as a fraction of the best value's |mean final score|
+"""Default ``compare.margin``: the margin as a fraction of the best value's |IQM|
 (docs/reference/statistics.md justifies it against this project's data)."""
 POWER = 0.8
 """The power at which :attr:`Comparison.resolvable` is the smallest margin the seeds resolve."""
-SATTERTHWAITE_FROM = 4
-"""From this many seeds a side (equal n), Welch's test takes Welch-Satterthwaite's degrees of
-freedom; below, and at unequal n, min(n_i, n_j) - 1."""
-PROCEDURE = ("closed Holm step-down over one-sided Welch t-tests with Welch-Satterthwaite "
-             f"degrees of freedom between values of equal n from {SATTERTHWAITE_FROM} seeds, "
-             "min(n) - 1 otherwise (each value as a best)")
-"""The test of :attr:`Comparison.tied` (margin 0, means), the ``fastest_tied`` rule's."""
-PROCEDURE_SHORT = "closed Holm-Welch step-down"
 EQUIVALENCE = ("multiple comparisons with the best with a margin (Edwards and Hsu 1983), "
                "Bonferroni form (Nelson and Matejcik 1995)")
 
@@ -106,11 +90,6 @@ class Answer(StrEnum):
     UNDECIDED = "undecided"
 
 
-def procedure_name(alpha: float = ALPHA) -> str:
-    """How reports name the test of "tied", e.g. 'closed Holm-Welch step-down, alpha 0.05'."""
-    return f"{PROCEDURE_SHORT}, alpha {alpha:g}"
-
-
 def answers_name(alpha: float = ALPHA) -> str:
     """How reports name the four answers' procedure."""
     return (f"answers on the interquartile mean (IQM) of the seeds; worse: closed Holm "
@@ -122,185 +101,6 @@ def answers_name(alpha: float = ALPHA) -> str:
 def _clean(values: Sequence[float]) -> np.ndarray:
     x = np.asarray(values, dtype=float).ravel()
     return x[~np.isnan(x)]
-
-
-def no_spread(x: np.ndarray, scale: float) -> bool:
-    """True when a sample's range is negligible against ``scale`` (:data:`CONSTANT_RTOL`)."""
-    return bool(np.ptp(x) <= CONSTANT_RTOL * scale) if len(x) else True
-
-
-def _scale(x: np.ndarray, y: np.ndarray) -> float:
-    return float(max(np.max(np.abs(x)), np.max(np.abs(y))))
-
-
-def welch_greater_p(a: Sequence[float], b: Sequence[float]) -> float:
-    """One-sided Welch t-test p-value of "mean of a > mean of b", with the degrees of freedom of
-    :func:`welch_df`; NaN with fewer than 2 values on either side.
-
-    Two samples without spread (:func:`no_spread`) are compared by their means within the same
-    tolerance: p = 0 when a's mean is higher by more than it, else p = 1.
-    """
-    x, y = _clean(a), _clean(b)
-    if len(x) < 2 or len(y) < 2:
-        return math.nan
-    return float(welch_greater_matrix([x, y])[0, 1])
-
-
-def welch_two_sided_p(a: Sequence[float], b: Sequence[float]) -> float:
-    """Two-sided Welch's t-test p-value; NaN with fewer than 2 values on either side.
-
-    Two samples without spread (:func:`no_spread`) are identical (p = 1) when their means differ
-    by at most the tolerance, else certainly different (p = 0).
-    """
-    x, y = _clean(a), _clean(b)
-    if len(x) < 2 or len(y) < 2:
-        return math.nan
-    scale = _scale(x, y)
-    if no_spread(x, scale) and no_spread(y, scale):
-        return 1.0 if abs(float(np.mean(x) - np.mean(y))) <= CONSTANT_RTOL * scale else 0.0
-    return float(scipy.stats.ttest_ind(x, y, equal_var=False).pvalue)
-
-
-def welch_df(n: np.ndarray, spread: np.ndarray, first: np.ndarray | None = None
-             ) -> np.ndarray:
-    """Degrees of freedom of the one-sided Welch t-test of every pair of samples.
-
-    Welch-Satterthwaite's df when the two samples have equal n of at least
-    :data:`SATTERTHWAITE_FROM`, min(n_i, n_j) - 1 otherwise.
-
-    Args:
-        n: Sample sizes, one per sample (each at least 2).
-        spread: Each sample's variance over its n (the squared standard error of its mean).
-        first: The same for a sample in the first place of a pair, when it is weighted there
-            (:func:`welch_pairs`); None: ``spread``.
-
-    Returns:
-        A k x k array; entry [i, j] is the df of the test between samples i and j.
-    """
-    first = spread if first is None else first
-    # At unequal n the estimated df grows exactly when the small sample's variance is small
-    # by chance: with n = 2 against n = 20 and Welch-Satterthwaite's df everywhere, the
-    # step-down's family-wise error reached 0.106 (bench_error_rates.py). At equal n of 2 or 3
-    # the same happens when one value spreads far more than the other: 2 values x 2 seeds with
-    # sd 1 and 10 gave 0.063, 2 x 3 gave 0.056. min(n_i, n_j) - 1 is conservative for the
-    # Behrens-Fisher problem whatever the variances (Hsu 1938; Mickey and Brown 1966). From 4
-    # seeds on at equal n Welch's test holds its level, and that bound would cost most of the
-    # power (family-wise error 0.003 at 5 x 5, alpha 0.05); after each round of racing every
-    # survivor has equal n.
-    se2 = np.add.outer(first, spread)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        satterthwaite = se2 ** 2 / np.add.outer(first ** 2 / (n - 1), spread ** 2 / (n - 1))
-    # Both variances zero: the statistic is decided by the constant-sample rule, any df will do.
-    satterthwaite = np.where(np.isfinite(satterthwaite), satterthwaite,
-                             np.add.outer(n, n) - 2)
-    own = np.equal.outer(n, n) & (np.minimum.outer(n, n) >= SATTERTHWAITE_FROM)
-    return np.where(own, satterthwaite, np.minimum.outer(n, n) - 1)
-
-
-@dataclass(frozen=True)
-class PairTests:
-    """The t statistics' parts of every ordered pair of samples: entry [j, g] compares j with g.
-
-    ``diff`` is w_j mean_j - mean_g (the mean of w_j x_j - x_g over common seeds when paired;
-    w_j = 1 unless weighted, see :func:`welch_pairs`), ``se`` its standard error, ``df`` its
-    degrees of freedom, ``flat`` where neither side spreads within :data:`CONSTANT_RTOL` of
-    ``scale`` (the difference is then certain), ``tested`` where a test is possible at all. The
-    diagonal is meaningless.
-    """
-
-    diff: np.ndarray
-    se: np.ndarray
-    df: np.ndarray
-    flat: np.ndarray
-    scale: np.ndarray
-    tested: np.ndarray
-
-    def greater(self, shift: float = 0.0) -> np.ndarray:
-        """One-sided p of "mu_j - mu_g > shift" for every pair; NaN where untested."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            # Student's t survival function as scipy.stats.t.sf computes it, called as the raw
-            # ufunc: a tenth of the cost inside the benchmarks' simulations.
-            p = scipy.special.stdtr(self.df, -(self.diff - shift) / self.se)
-        certain = np.where(self.diff - shift > CONSTANT_RTOL * self.scale, 0.0, 1.0)
-        return np.where(self.tested, np.where(self.flat, certain, p), math.nan)
-
-    def less(self, shift: float) -> np.ndarray:
-        """One-sided p of "mu_j - mu_g < shift" for every pair; NaN where untested."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            p = scipy.special.stdtr(self.df, (self.diff - shift) / self.se)
-        certain = np.where(shift - self.diff > CONSTANT_RTOL * self.scale, 0.0, 1.0)
-        return np.where(self.tested, np.where(self.flat, certain, p), math.nan)
-
-
-def welch_pairs(samples: Sequence[np.ndarray], weights: np.ndarray | None = None) -> PairTests:
-    """:class:`PairTests` of Welch's unpaired tests (each sample at least 2 values), vectorised
-    so the procedure stays cheap inside the simulations of the benchmarks.
-
-    ``weights`` (w_j, one per sample) test the contrast w_j mu_j - mu_g instead of the
-    difference: a margin that is a fraction f of the reference's |mean| makes
-    "mu_j - mu_g > f |mu_j|" the contrast (1 - f sign(mu_j)) mu_j - mu_g > 0, whose standard
-    error counts the noise of the reference's mean in the margin (:func:`margin_weights`).
-    """
-    n = np.array([len(x) for x in samples], dtype=float)
-    w = np.ones(len(n)) if weights is None else np.asarray(weights, dtype=float)
-    mean = np.array([np.mean(x) for x in samples])
-    var = np.array([np.var(x, ddof=1) for x in samples])
-    top = np.array([np.max(np.abs(x)) for x in samples])
-    flat = np.array([np.ptp(x) for x in samples]) <= CONSTANT_RTOL * top
-    spread = var / n
-    first = w ** 2 * spread
-    se2 = np.add.outer(first, spread)
-    # Neither sample spreads (within the tolerance), or one does not and the other's variance
-    # vanishes: a difference of means is certain or none.
-    both_flat = np.logical_and.outer(flat, flat) | (np.logical_or.outer(flat, flat) & ~(se2 > 0))
-    return PairTests(diff=np.subtract.outer(w * mean, mean), se=np.sqrt(se2),
-                     df=welch_df(n, spread, first), flat=both_flat,
-                     scale=np.maximum.outer(top, top),
-                     tested=np.ones((len(n), len(n)), dtype=bool))
-
-
-def paired_pairs(samples: Sequence[np.ndarray], weights: np.ndarray | None = None
-                 ) -> PairTests:
-    """:class:`PairTests` of paired t-tests: the samples are aligned (position i of each is the
-    same seed, NaN where that run has no score), and j - g is tested on the differences over
-    the seeds both have, with n - 1 degrees of freedom for n such pairs; untested with fewer
-    than 2 pairs.
-
-    A seed shared by two values (the same initial weights, the same action-noise stream) moves
-    both their scores the same way, and the difference removes that part of the noise (a
-    randomised complete block design, seeds as blocks; F-Race blocks on instances the same way,
-    Nelson and Matejcik's common random numbers likewise). ``weights`` as in
-    :func:`welch_pairs`: the differences are w_j x_j - x_g.
-    """
-    x = np.vstack([np.asarray(s, dtype=float) for s in samples])
-    w = np.ones(len(x)) if weights is None else np.asarray(weights, dtype=float)
-    d = (w[:, None] * x)[:, None, :] - x[None, :, :]
-    both = np.isfinite(d)
-    n = both.sum(axis=2).astype(float)
-    d0 = np.where(both, d, 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        mean = d0.sum(axis=2) / n
-        var = np.where(both, (d0 - mean[:, :, None]) ** 2, 0.0).sum(axis=2) / (n - 1)
-        top = np.nanmax(np.abs(x), axis=1)
-        scale = np.maximum.outer(top, top)
-        spread = np.where(both, d, -np.inf).max(axis=2) - np.where(both, d, np.inf).min(axis=2)
-        se = np.sqrt(var / n)
-    return PairTests(diff=mean, se=se, df=np.maximum(n - 1, 1),
-                     flat=spread <= CONSTANT_RTOL * scale, scale=scale, tested=n >= 2)
-
-
-def welch_greater_matrix(samples: Sequence[np.ndarray], shift: float = 0.0) -> np.ndarray:
-    """One-sided Welch p-values of every ordered pair at once: entry [j, g] is the p of
-    "mu_j - mu_g > shift" (:func:`welch_greater_p` at shift 0); the diagonal is meaningless."""
-    return welch_pairs(samples).greater(shift)
-
-
-def paired_greater_matrix(samples: Sequence[np.ndarray], shift: float = 0.0) -> np.ndarray:
-    """One-sided paired t-test p-values of every ordered pair at once: entry [j, g] is the p of
-    "mu_j - mu_g > shift" on the seeds both have (:func:`paired_pairs`); NaN with fewer than 2
-    common seeds. Differences without spread are compared by their mean within
-    :data:`CONSTANT_RTOL`: p = 0 when it exceeds the shift beyond it, else p = 1."""
-    return paired_pairs(samples).greater(shift)
 
 
 def holm(pvalues: Sequence[float]) -> list[float]:
@@ -324,7 +124,7 @@ def holm(pvalues: Sequence[float]) -> list[float]:
 
 
 def margin_weights(means: np.ndarray, fraction: float) -> np.ndarray:
-    """The weights w_j = 1 - fraction x sign(mean_j) of :func:`welch_pairs` and
+    """The weights w_j = 1 - fraction x sign(mean_j) of
     :func:`~kraby_study.decision.robust.iqm_pairs` for a margin that is ``fraction`` of the
     reference's |location| (its IQM in the answers): "mu_g within f |mu_j| of mu_j" is
     mu_g - w_j mu_j >= 0 (the sign read from the sample; the leg's scores are all negative, so
@@ -343,16 +143,8 @@ class Comparison(Generic[K]):
 
     best: K | None
     """The value with the highest IQM among those with enough seeds; None if none has."""
-    p_adjusted: dict[K, float]
-    """Holm-adjusted p of "this value's mean is a best" (the Welch step-down at margin 0 of the
-    earlier releases, :data:`PROCEDURE`) for every value in the family, NaN for the best
-    itself; < alpha: not a best. What :attr:`tied` reads, not an answer."""
     worse: list[K]
     """Values shown worse than the best by more than the margin, in the given order."""
-    tied: list[K]
-    """Values other than the best not shown worse at margin 0 by :attr:`p_adjusted` (adjusted p
-    >= alpha): what earlier releases called tied, and what ``fastest_tied`` reads; in the
-    given order."""
     left_out: dict[K, int] = field(default_factory=dict)
     """Values with some but fewer than ``min_seeds`` complete seeds: their count of seeds."""
     alpha: float = ALPHA
@@ -502,7 +294,7 @@ def _step_down(matrix: np.ndarray) -> list[float]:
     return holm(list(pi))
 
 
-def compare(scores: Mapping[K, Sequence[float]], margin: float = MARGIN, alpha: float = ALPHA,
+def compare(scores: Mapping[K, Sequence[float]], margin: float, *, alpha: float = ALPHA,
             min_seeds: int = MIN_SEEDS, paired: bool = False, tests: bool = True
             ) -> Comparison[K]:
     """Every value's answer against the best: best, equivalent, worse or undecided.
@@ -517,8 +309,7 @@ def compare(scores: Mapping[K, Sequence[float]], margin: float = MARGIN, alpha: 
         min_seeds: Fewest complete seeds a value needs to be in the family (at least 2).
         paired: The samples are aligned by seed (position i of every sample is the same seed,
             NaN where that run has no score) and each pair of values is compared on their
-            common seeds (paired t-tests for :attr:`Comparison.tied`; the common seeds
-            resampled together, and Yuen's test for dependent trimmed means, for the answers).
+            common seeds (resampled together, and Yuen's test for dependent trimmed means).
         tests: False: only the best, the family and the values left out, no test (``list``
             and the rules that need none stay clear of scipy.stats).
 
@@ -529,8 +320,8 @@ def compare(scores: Mapping[K, Sequence[float]], margin: float = MARGIN, alpha: 
     best = best_by_iqm(family)
     fraction = float(margin)
     if best is None or not tests:
-        return Comparison(best, {}, [], [], left_out, alpha, need, fraction,
-                          family=list(family))
+        return Comparison(best=best, worse=[], left_out=left_out, alpha=alpha,
+                          min_seeds=need, fraction=fraction, family=list(family))
     groups = list(family)
     k = len(groups)
     locations = np.array([float(iqm(family[g])) for g in groups])
@@ -540,16 +331,12 @@ def compare(scores: Mapping[K, Sequence[float]], margin: float = MARGIN, alpha: 
         aligned = [np.asarray(scores[g], dtype=float).ravel() for g in groups]
         if len({len(x) for x in aligned}) > 1:
             raise ValueError("paired samples must be aligned by seed: equal lengths")
-        means = paired_pairs(aligned)
         robust = iqm_pairs(aligned, weights, alpha, paired=True)
     else:
-        means = welch_pairs([family[g] for g in groups])
         robust = iqm_pairs([family[g] for g in groups], weights, alpha)
     # With a margin, "j beats g by more than f |T_j|" is the contrast w_j T_j - T_g > 0 (the
     # weights): its tests count the reference's noise in the margin, which a margin read off
-    # the sample and then held fixed would leave out (an equivalence error of 0.059 at
-    # 2 values x 10 seeds, normal data, alpha 0.05, with the t-tests of earlier releases).
-    at_zero = _step_down(means.greater(0.0))
+    # the sample and then kept fixed would leave out.
     at_margin = _step_down(robust.greater)
     b = groups.index(best)
     others = max(k - 1, 1)
@@ -564,29 +351,23 @@ def compare(scores: Mapping[K, Sequence[float]], margin: float = MARGIN, alpha: 
         quantiles = (scipy.special.stdtrit(robust.df[b], 1 - alpha / others)
                      + scipy.special.stdtrit(robust.df[b], POWER))
     resolvable = np.where(robust.tested[b], quantiles * robust.se[b], math.nan)
-    p_adjusted, p_worse, p_equivalent, answers, resolved = {}, {}, {}, {}, {}
+    p_worse, p_equivalent, answers, resolved = {}, {}, {}, {}
     for i, g in enumerate(groups):
         if g == best:
-            p_adjusted[g] = p_worse[g] = p_equivalent[g] = math.nan
+            p_worse[g] = p_equivalent[g] = math.nan
             answers[g] = Answer.BEST
             continue
-        p_adjusted[g], p_worse[g] = at_zero[i], at_margin[i]
+        p_worse[g] = at_margin[i]
         p_equivalent[g] = float(equivalent[i])
         if robust.tested[b, i]:
             resolved[g] = float(resolvable[i])
         answers[g] = (Answer.WORSE if p_worse[g] < alpha else
                       Answer.EQUIVALENT if p_equivalent[g] < alpha else Answer.UNDECIDED)
     worse = [g for g in groups if answers[g] == Answer.WORSE]
-    tied = [g for g in groups if g != best and not p_adjusted[g] < alpha]
     unanswered = [g for i, g in enumerate(groups)
                   if answers[g] == Answer.UNDECIDED and not robust.tested[b, i]]
-    return Comparison(best, p_adjusted, worse, tied, left_out, alpha, need, fraction, delta,
-                      answers, p_worse, p_equivalent, resolved, groups, unanswered)
+    return Comparison(best=best, worse=worse, left_out=left_out, alpha=alpha, min_seeds=need,
+                      fraction=fraction, margin=delta, answers=answers, p_worse=p_worse,
+                      p_equivalent=p_equivalent, resolvable=resolved, family=groups,
+                      unanswered=unanswered)
 
-
-def compare_with_best(scores: Mapping[K, Sequence[float]], alpha: float = ALPHA,
-                      min_seeds: int = MIN_SEEDS, paired: bool = False) -> Comparison[K]:
-    """:func:`compare` at margin 0: which values are worse than the best IQM (the answers'
-    step-down at margin 0) and which are tied by the Welch step-down of earlier releases; none
-    equivalent."""
-    return compare(scores, 0.0, alpha, min_seeds, paired)

@@ -7,9 +7,8 @@ Two choices are made from it:
 - :func:`front_choice`, the search's selection (``best``, ``list``, the report): the front's
   trials are compared on their seed scores (:func:`kraby_study.decision.comparison.compare`), and
   the search's rule picks the cheapest of the best score and the trials it admits:
-  ``fastest_equivalent`` (a new two-objective search's rule) those shown within the margin of
-  the best, ``fastest_tied`` (the rule of earlier releases, kept for searches stored before)
-  those not shown worse at margin 0. The family is the front, not every trial: the best score
+  ``fastest_equivalent`` those shown within the margin of the best, ``final_score`` none. The
+  family is the front, not every trial: the best score
   is always on it, every trial off it is matched or beaten on both objectives by one on it,
   and a family of 50 trials would leave the tests almost no power at 3 seeds. With fewer than
   ``min_seeds`` (2) seeds a trial there is no test, and the rule falls back to the best score.
@@ -28,7 +27,7 @@ from kraby_study.records.attributes import SelectRule
 
 K = TypeVar("K", bound=Hashable)
 
-FRONT_RULES = (SelectRule.FASTEST_EQUIVALENT, SelectRule.FASTEST_TIED, SelectRule.FINAL_SCORE)
+FRONT_RULES = (SelectRule.FASTEST_EQUIVALENT, SelectRule.FINAL_SCORE)
 """The rules a front can be selected by (the cost is the time they compare)."""
 UNTESTED_TEXT = ("the best score: with fewer than 2 seeds a trial no comparison can be made, so "
                  "the rule falls back to final_score")
@@ -89,12 +88,12 @@ class FrontChoice(Generic[K]):
     chosen: Point[K]
     best: Point[K]
     """The front's best score."""
-    tied: list[K] = field(default_factory=list)
-    """The front's trials the rule admitted beside the best (the best excluded): shown
-    equivalent under fastest_equivalent, not shown worse under fastest_tied."""
+    equivalent: list[K] = field(default_factory=list)
+    """The front's trials the rule admitted beside the best (the best excluded): those shown
+    equivalent to it under fastest_equivalent, none under final_score."""
     tested: bool = True
     """False when the trials had too few seeds for a test: the chosen is then the best."""
-    rule: str = SelectRule.FASTEST_TIED
+    rule: str = SelectRule.FASTEST_EQUIVALENT
     comparison: Comparison[K] | None = None
     """The comparison the rule read (None when untested)."""
 
@@ -103,20 +102,16 @@ class FrontChoice(Generic[K]):
         """The rule that chose, in words."""
         if not self.tested:
             return UNTESTED_TEXT
-        admitted = ("shown equivalent to its best score (within the margin)"
-                    if self.rule == SelectRule.FASTEST_EQUIVALENT else
-                    "not shown worse than its best score (margin 0)"
-                    if self.rule == SelectRule.FASTEST_TIED else None)
-        if admitted is None:
+        if self.rule != SelectRule.FASTEST_EQUIVALENT:
             return f"{self.rule}: the front's best score"
         margin = f"; {self.comparison.margin_text()}" if self.comparison is not None else ""
         return (f"{self.rule}: the lowest cost (CPU s per seed) among the front's trials "
-                f"{admitted}, on each trial's seed scores{margin}")
+                f"shown equivalent to its best score (within the margin), on each trial's "
+                f"seed scores{margin}")
 
 
 def front_choice(front: Sequence[Point[K]], seed_scores: Mapping[K, Sequence[float]],
-                 rule: str = SelectRule.FASTEST_EQUIVALENT,
-                 options: CompareOptions | None = None) -> FrontChoice[K] | None:
+                 rule: str, options: CompareOptions) -> FrontChoice[K] | None:
     """The cheapest of the front's best score and the front's trials ``rule`` admits; None for
     an empty front.
 
@@ -124,31 +119,22 @@ def front_choice(front: Sequence[Point[K]], seed_scores: Mapping[K, Sequence[flo
         front: The front (:func:`pareto_front`).
         seed_scores: Each trial's seed scores, by key; a trial with fewer than ``min_seeds``
             is in no test.
-        rule: fastest_equivalent, fastest_tied or final_score.
-        options: Margin and seeds of the comparison (defaults: ``compare.margin``'s default,
-            2 seeds).
+        rule: fastest_equivalent or final_score.
+        options: The command's margin, alpha and seeds of the comparison.
     """
     if not front:
         return None
-    options = options or CompareOptions()
     best_score = max(front, key=lambda p: p.score)
     # Highest score first, so that the rule's "first in order" breaks a tie in cost by score.
     ordered = sorted(front, key=lambda p: -p.score)
     by_key = {p.key: p for p in ordered}
     comparison = compare({p.key: list(seed_scores.get(p.key, [])) for p in ordered},
-                         options.margin, options.alpha, options.min_seeds)
+                         options.margin, alpha=options.alpha, min_seeds=options.min_seeds)
     if comparison.best is None:
         return FrontChoice(chosen=best_score, best=best_score, tested=False, rule=rule)
-    admitted = (comparison.equivalent if rule == SelectRule.FASTEST_EQUIVALENT else
-                comparison.tied if rule == SelectRule.FASTEST_TIED else [])
+    admitted = comparison.equivalent if rule == SelectRule.FASTEST_EQUIVALENT else []
     # The rules of a sweep's values, with the trials' cost as their time.
     chosen = RULES[SelectRule(rule)].select(comparison, {}, {p.key: p.cost for p in ordered})
     return FrontChoice(chosen=by_key[chosen], best=by_key[comparison.best],
-                       tied=list(admitted), rule=rule, comparison=comparison)
+                       equivalent=list(admitted), rule=rule, comparison=comparison)
 
-
-def cheapest_tied(front: Sequence[Point[K]], seed_scores: Mapping[K, Sequence[float]],
-                  min_seeds: int = 2) -> FrontChoice[K] | None:
-    """:func:`front_choice` under fastest_tied (the rule of earlier releases)."""
-    return front_choice(front, seed_scores, SelectRule.FASTEST_TIED,
-                        CompareOptions(min_seeds=min_seeds))

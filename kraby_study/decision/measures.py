@@ -63,15 +63,15 @@ def seed_samples(runs: Iterable[tuple[int, int, float, float]],
     final: SeedScores = {}
     aucs: SeedScores = {}
     seconds: SeedScores = {}
-    for vi, number, score, spent in runs:
-        final.setdefault(vi, []).append(score)
+    for value_index, number, score, spent in runs:
+        final.setdefault(value_index, []).append(score)
         if number in rewards:
-            aucs.setdefault(vi, []).append(auc(rewards[number]))
+            aucs.setdefault(value_index, []).append(auc(rewards[number]))
         if not math.isnan(spent):
-            seconds.setdefault(vi, []).append(spent)
+            seconds.setdefault(value_index, []).append(spent)
     order = sorted(final)
-    return ({vi: final[vi] for vi in order}, {vi: aucs.get(vi, []) for vi in order},
-            {vi: seconds.get(vi, []) for vi in order})
+    return ({i: final[i] for i in order}, {i: aucs.get(i, []) for i in order},
+            {value_index: seconds.get(value_index, []) for value_index in order})
 
 
 def first_reach(steps: Sequence[float], rewards: Sequence[float], wall_times: Sequence[float],

@@ -7,8 +7,8 @@ look's best by more than the margin is dropped, and a value other than the look'
 equivalent to it (within the margin) is settled. Either way it gets no more seeds. The race
 ends when one value is left racing, or every value left has ``seeds`` seeds. A settled value
 stays a candidate: the selection compares every value the race did not drop, on all its
-seeds, by the study's rule. At margin 0 no value is settled, and the race is the race of
-earlier releases, which stops only values shown worse.
+seeds, by the study's rule. At margin 0 no value is settled: the race stops only values shown
+worse.
 
 The guarantee aimed at is Kim and Nelson's (2001) indifference zone: with probability at least
 1 - alpha the race's selection is within the margin of the highest true mean. A look's false
@@ -19,10 +19,11 @@ probability of a selection outside the margin, truncation included.
 
 Every value runs the same seeds, and a seed can move the scores of all values together (the
 same initial weights and action-noise stream). With ``RaceRules.paired`` (``racing.paired``)
-each pair of values is compared by a paired t-test on the seeds both have ended: seeds are
-blocks, as instances are in F-Race (Birattari et al. 2002), whose Friedman test blocks on them.
-It pays only where that shared part is large: on the four quick studies of docs/benchmarks/index.md
-it saved no run, so the default stays Welch's unpaired tests, the report's own.
+each pair of values is compared on the seeds both have ended (the common seeds resampled
+together, and Yuen's test for dependent trimmed means): seeds are blocks, as instances are in
+F-Race (Birattari et al. 2002), whose Friedman test blocks on them. It pays only where that
+shared part is large: on the four quick studies of docs/benchmarks/index.md it saved no run,
+so the default stays the unpaired tests, the report's own.
 
 Each look is one more chance of a false answer, so the looks share the error: alpha is spent
 in equal parts over the ``seeds - min_seeds + 1`` looks the race can take (Bonferroni's

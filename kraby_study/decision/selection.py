@@ -11,42 +11,29 @@ table column shows) and the values' mean AUC and training time:
   margin, :func:`kraby_study.decision.comparison.compare`), the lowest mean training time: a slower
   value is not worth its time when a faster one is shown as good within the margin, and a
   value needs evidence to be selected, so spread cannot buy a place.
-- ``fastest_tied``: among the best and the values not shown worse at margin 0 (the closed
-  Holm-Welch step-down of means, alpha 0.05), the lowest mean training time. The rule of earlier
-  releases, kept so stored studies select as before: a noisy, cheap, truly worse value enters
-  by its spread.
+
+A study stored with the retired rule name ``fastest_tied`` selects by ``fastest_equivalent``
+(:meth:`kraby_study.records.attributes.SelectRule.of`).
 
 Every rule considers only the comparison's family: values with at least ``min_seeds``
 complete seeds (``report.min_seeds``, default 2), so one lucky seed is never selected. Ties
 inside a rule go to the first value in order; NaN never wins.
 
 In a raced study (:mod:`kraby_study.decision.race`) every rule considers only the values the race
-did not drop as worse: the caller passes them (``dropped``), and the others are compared by the
+did not drop as worse: they are left out of the comparison, and the others are compared by the
 same procedure on all their seeds.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Collection, Hashable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
-from kraby_study.decision.comparison import (
-    ALPHA,
-    MARGIN,
-    MIN_SEEDS,
-    Comparison,
-    compare,
-    procedure_name,
-)
+from kraby_study.decision.comparison import Comparison
 from kraby_study.records.attributes import SelectRule
-from kraby_study.records.values import (
-    best_group,
-)
-
-if TYPE_CHECKING:
-    pass
+from kraby_study.records.values import best_group
 
 K = TypeVar("K", bound=Hashable)
 
@@ -76,13 +63,6 @@ def _fastest_equivalent(comparison: Comparison[K], aucs: Mapping[K, float],
     return _lowest([comparison.best, *comparison.equivalent], times, comparison.best)
 
 
-def _fastest_tied(comparison: Comparison[K], aucs: Mapping[K, float],
-                  times: Mapping[K, float]) -> K | None:
-    if comparison.best is None:
-        return None
-    return _lowest([comparison.best, *comparison.tied], times, comparison.best)
-
-
 @dataclass(frozen=True)
 class Rule:
     """A selection rule: its name, what it selects in words, and the function that selects."""
@@ -107,10 +87,6 @@ RULES: dict[SelectRule, Rule] = {r.name: r for r in (
     Rule(SelectRule.FASTEST_EQUIVALENT,
          f"lowest {_TIME} among the best and the values shown equivalent to it (within the "
          "margin; multiple comparisons with the best, alpha 0.05)", _fastest_equivalent),
-    Rule(SelectRule.FASTEST_TIED,
-         f"lowest {_TIME} among the best and the values not shown worse at margin 0 (the "
-         f"{procedure_name(ALPHA)}; the rule of earlier releases: a noisy value ties by its "
-         "spread)", _fastest_tied),
 )}
 RULE_TEXT = {name: rule.description for name, rule in RULES.items()}
 
@@ -130,21 +106,16 @@ def mean_by_value(groups: Mapping[K, Sequence[float]]) -> dict[K, float]:
     return out
 
 
-def select(rule: str, final: Mapping[K, Sequence[float]], aucs: Mapping[K, Sequence[float]],
-           seconds: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS,
-           dropped: Collection[K] = (), margin: float = MARGIN) -> K | None:
-    """The selected group under ``rule``; None when no group can be selected.
+def select(rule: str, comparison: Comparison[K], aucs: Mapping[K, Sequence[float]],
+           seconds: Mapping[K, Sequence[float]]) -> K | None:
+    """The value ``rule`` selects from the study's one ``comparison`` (whose family excludes
+    the values a race dropped) and each value's AUCs and training times (their means are
+    compared); None when the comparison has no best.
 
     Args:
-        rule: final_score, auc, fastest_equivalent or fastest_tied.
-        final: Final scores of the complete seeds, by group, in the study's order.
-        aucs: AUC of each complete seed with a curve, by group.
-        seconds: Training time of each complete seed, by group.
-        min_seeds: Fewest complete seeds a group needs to be selected.
-        dropped: Groups a race dropped as worse: left out of every rule, as if never run.
-        margin: ``compare.margin``, the margin as a fraction of the best's |IQM|.
+        rule: final_score, auc or fastest_equivalent.
+        comparison: The study's comparison of its complete seeds' final scores.
+        aucs: AUC of each complete seed with a curve, by value.
+        seconds: Training time of each complete seed, by value.
     """
-    chosen = rule_of(rule)
-    comparison = compare({g: vs for g, vs in final.items() if g not in dropped}, margin,
-                         min_seeds=min_seeds, tests=chosen.tests)
-    return chosen.select(comparison, mean_by_value(aucs), mean_by_value(seconds))
+    return rule_of(rule).select(comparison, mean_by_value(aucs), mean_by_value(seconds))

@@ -1,6 +1,10 @@
-"""A sweep's per-value summary from its runs' table and seed scores: counts, the final score's
-mean and interval, IQM, spread, the answers at the margin, the learning curves' metrics
-(sample efficiency, time to a threshold), failed seeds, and the verdict.
+"""A sweep's per-value summary from its runs' table, its seed scores and its one comparison,
+as typed rows (:class:`ValueSummary`, one per value) the report renders and writes as
+summary.csv: counts, the final score's mean and interval (bootstrap-t from 5 seeds, Hall's
+skewness-corrected t below), the IQM and its trimmed-t interval (Tukey and McLaughlin 1963),
+spread, the answers at the margin, the learning curves' metrics (sample efficiency, time to a
+threshold), failed seeds (Clopper-Pearson rate interval), the per-run measures
+(:data:`kraby_study.records.attributes.RUN_MEASURES`), the selected value, and the verdict.
 
 In a raced study (:mod:`kraby_study.decision.race`) the values the race dropped are never best,
 equivalent, selected or any answer of the verdict: they are shown as worse, with the round and
@@ -9,14 +13,15 @@ settled as equivalent) are compared on all their seeds."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Collection, Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-from kraby_study.decision.comparison import MIN_SEEDS, CompareOptions, Comparison, compare
+from kraby_study.decision.comparison import Comparison
 from kraby_study.decision.failed_seeds import failed_seeds, failure_line
 from kraby_study.decision.intervals import (
     BOOTSTRAP_REPETITIONS,
@@ -36,10 +41,10 @@ from kraby_study.decision.measures import (
     p_improvement_interval,
     seed_samples,
 )
-from kraby_study.decision.race import Drop, RaceRuns, StudyRace
-from kraby_study.decision.selection import RULES, mean_by_value
-from kraby_study.decision.verdict import Verdict, compare_to_best, verdict, welch_p
-from kraby_study.records.attributes import SelectRule
+from kraby_study.decision.race import Drop, StudyRace
+from kraby_study.decision.selection import select
+from kraby_study.decision.verdict import Verdict, verdict
+from kraby_study.records.attributes import RUN_MEASURES
 from kraby_study.records.stored import Outcome
 from kraby_study.records.values import ANSWER_FROM
 
@@ -47,7 +52,7 @@ DROPPED_PREFIX = "dropped by the race"
 """How the summary's note of a value the race dropped begins."""
 SETTLED_PREFIX = "settled equivalent by the race"
 """How the summary's note of a value the race settled as equivalent begins."""
-SEED_COLUMNS = ["vi", "seed", "number", "final_score", "first_reward", "auc",
+SEED_COLUMNS = ["value_index", "seed", "number", "final_score", "first_reward", "auc",
                 "steps_to_threshold", "seconds_to_threshold", "end_step", "end_seconds"]
 
 
@@ -56,14 +61,15 @@ def curve_bands(curves: pd.DataFrame) -> pd.DataFrame:
     (:func:`kraby_study.decision.intervals.describe` without a bootstrap), per value and step
     (vectorised): hundreds of intervals a value, where a bootstrap each would cost seconds."""
     if curves.empty:
-        return pd.DataFrame(columns=["vi", "step", "n", "mean", "sd", "low", "high", "wall_time"])
-    grouped = describe(curves, ["vi", "step"], "mean_reward")
-    grouped["wall_time"] = curves.groupby(["vi", "step"], sort=True)["wall_time"].mean()
+        return pd.DataFrame(columns=["value_index", "step", "n", "mean", "sd", "low", "high",
+                                     "wall_time"])
+    grouped = describe(curves, ["value_index", "step"], "mean_reward")
+    grouped["wall_time"] = curves.groupby(["value_index", "step"], sort=True)["wall_time"].mean()
     return grouped[["n", "mean", "sd", "low", "high", "wall_time"]].reset_index()
 
 
 def _finals(done: pd.DataFrame) -> dict[int, list[float]]:
-    return {int(vi): group["final_score"].tolist() for vi, group in done.groupby("vi")}
+    return {int(i): group["final_score"].tolist() for i, group in done.groupby("value_index")}
 
 
 def left_out_note(n: int, min_seeds: int) -> str:
@@ -100,11 +106,10 @@ def note_part(note: str, prefix: str) -> str | None:
                 None)
 
 
-def summarise(trials: pd.DataFrame, labels: list[str],
-              bootstrap: int = BOOTSTRAP_REPETITIONS, min_seeds: int = MIN_SEEDS,
+def summarise(trials: pd.DataFrame, labels: list[str], comparison: Comparison[int],
+              bootstrap: int = BOOTSTRAP_REPETITIONS,
               dropped: Mapping[int, Drop] | None = None,
               look_alpha: float = math.nan, time_attr: str = "wall_time",
-              comparison: Comparison[int] | None = None,
               settled: Mapping[int, Drop] | None = None,
               final: Mapping[int, list[float]] | None = None) -> pd.DataFrame:
     """One row per value: run counts; the round after which a race dropped it
@@ -112,11 +117,9 @@ def summarise(trials: pd.DataFrame, labels: list[str],
     seeds' final score (mean, sd, interval of the mean,
     :func:`kraby_study.decision.intervals.mean_interval` with ``bootstrap`` resamples; IQM with its
     trimmed-t interval; IQR raw and rescaled to be comparable across n) and training time (the trial
-    column ``time_attr``, :func:`kraby_study.decision.selection.time_measure`); the raw two-sided
-    Welch p-value against the best value (``p_vs_best``) and the adjusted p of the closed Holm-Welch
-    step-down (``p_holm``, :func:`kraby_study.decision.comparison.compare_with_best`); the
-    probability that the best value beats this one, with its Newcombe score-type interval; a mark:
-    ``best``, ``tie`` (adjusted p >= 0.05: not shown worse at margin 0) or empty; the ``answer`` of
+    column ``time_attr``, :func:`kraby_study.answers.seed_scores.time_measure`); the
+    probability that the best value beats this one, with its Newcombe score-type interval; the
+    ``answer`` of
     the comparison, written out (best, equivalent, worse, undecided; ``left out`` for a value with
     too few seeds, empty for one without any), with ``p_worse`` and ``p_equivalent`` (empty
     where no test of the value against the best is run), the margin in
@@ -125,59 +128,48 @@ def summarise(trials: pd.DataFrame, labels: list[str],
     complete seeds is left out, or which look of the race dropped or settled it. The curve
     metrics are added by :func:`add_curve_metrics`.
 
-    ``comparison`` is the study's one comparison (:func:`kraby_study.decision.comparison.compare`);
-    None: compared here at margin 0. ``dropped`` (by value index) are the values a race
-    dropped as worse, at per-look level ``look_alpha``: they are left out of the comparison
-    (never best or equivalent, ``p_holm`` empty, answer worse); ``settled``, those it settled
-    as equivalent, which stay in it. ``final``: each value's complete seeds' final scores from
-    the pass every decision reads (:func:`kraby_study.decision.selection.samples`); None: read from
-    ``trials``.
+    ``comparison`` is the study's one comparison, made in the answers layer
+    (:func:`kraby_study.answers.seed_scores.sweep_comparison`). ``dropped`` (by value index) are
+    the values a race dropped as worse, at per-look level ``look_alpha``: they are left out of
+    the comparison (never best or equivalent, answer worse); ``settled``, those it settled as
+    equivalent, which stay in it. ``final``: each value's complete seeds' final scores from
+    the pass every decision reads (:func:`seed_scores`); None: read from ``trials``.
     """
     dropped = dict(dropped or {})
     settled = dict(settled or {})
     done = trials[trials["outcome"] == Outcome.COMPLETE]
-    score = describe(done, "vi", "final_score", bootstrap=bootstrap)
-    time = describe(done, "vi", time_attr, bootstrap=bootstrap)
-    counts = pd.crosstab(trials["vi"], trials["outcome"])
+    score = describe(done, "value_index", "final_score", bootstrap=bootstrap)
+    time = describe(done, "value_index", time_attr, bootstrap=bootstrap)
+    counts = pd.crosstab(trials["value_index"], trials["outcome"])
     # A run whose value cannot be read ("?") is described but never in the decisions' pass.
     scores = {**_finals(done), **(final or {})}
-    survivors = {vi: finals for vi, finals in scores.items() if vi not in dropped}
-    if comparison is None:
-        comparison = compare(survivors, 0.0, min_seeds=min_seeds)
     best = comparison.best
-    _, pvalues = compare_to_best(survivors, min_seeds=comparison.min_seeds)
-    if best is not None:  # for information, as for any value: no mark uses it
-        pvalues.update({vi: welch_p(scores[best], scores[vi]) for vi in dropped if vi in scores})
     left_out = comparison.left_out
-    raw = [pvalues.get(vi, np.nan) for vi in range(len(labels))]
-    adjusted = [comparison.p_adjusted.get(vi, np.nan) for vi in range(len(labels))]
     rows = []
-    for vi, label in enumerate(labels):
-        count = counts.loc[vi] if vi in counts.index else pd.Series(dtype=int)
-        finals = scores.get(vi, [])
-        p_holm = adjusted[vi]
-        mark = "best" if vi == best else ("tie" if vi in comparison.tied else "")
-        s = score.loc[vi] if vi in score.index else None
-        t = time.loc[vi] if vi in time.index else None
-        steps = done.loc[done["vi"] == vi, "env_steps"]
+    for value_index, label in enumerate(labels):
+        count = counts.loc[value_index] if value_index in counts.index else pd.Series(dtype=int)
+        finals = scores.get(value_index, [])
+        s = score.loc[value_index] if value_index in score.index else None
+        t = time.loc[value_index] if value_index in time.index else None
+        steps = done.loc[done["value_index"] == value_index, "env_steps"]
         iqm_low, iqm_high = iqm_interval(finals)
-        if best is None or vi == best or not finals:
+        if best is None or value_index == best or not finals:
             improvement, improvement_low, improvement_high = np.nan, np.nan, np.nan
         else:
             improvement = p_improvement(scores[best], finals)
             improvement_low, improvement_high = p_improvement_interval(scores[best], finals)
-        drop = dropped.get(vi)
+        drop = dropped.get(value_index)
         notes = [dropped_note(drop, look_alpha)] if drop is not None else []
-        if vi in settled:
-            notes.append(settled_note(settled[vi], look_alpha))
-        if vi in left_out:
+        if value_index in settled:
+            notes.append(settled_note(settled[value_index], look_alpha))
+        if value_index in left_out:
             notes.append(left_out_note(len(finals), comparison.min_seeds))
-        untested = vi in comparison.unanswered
+        untested = value_index in comparison.unanswered
         if untested:
             notes.append(untested_note())
         answer = ("worse" if drop is not None else
-                  str(comparison.answers[vi]) if vi in comparison.answers else
-                  "left out" if vi in left_out else "")
+                  str(comparison.answers[value_index]) if value_index in comparison.answers else
+                  "left out" if value_index in left_out else "")
         rows.append({
             "value": label,
             "complete": int(count.get(Outcome.COMPLETE, 0)),
@@ -199,18 +191,16 @@ def summarise(trials: pd.DataFrame, labels: list[str],
             "time_low": t["low"] if t is not None else np.nan,
             "time_high": t["high"] if t is not None else np.nan,
             "env_steps": float(steps.mean()) if len(steps) else np.nan,
-            "p_vs_best": raw[vi],
-            "p_holm": p_holm,
             # An untested value has no p: the comparison's 1 only keeps it out of every answer.
-            "p_worse": np.nan if untested else comparison.p_worse.get(vi, np.nan),
-            "p_equivalent": np.nan if untested else comparison.p_equivalent.get(vi, np.nan),
+            "p_worse": np.nan if untested else comparison.p_worse.get(value_index, np.nan),
+            "p_equivalent": (np.nan if untested
+                             else comparison.p_equivalent.get(value_index, np.nan)),
             "p_improvement": improvement,
             "p_improvement_low": improvement_low,
             "p_improvement_high": improvement_high,
-            "mark": mark,
             "answer": answer,
             "margin": comparison.margin,
-            "margin_resolvable": comparison.resolvable.get(vi, np.nan),
+            "margin_resolvable": comparison.resolvable.get(value_index, np.nan),
             "note": "; ".join(notes),
         })
     frame = pd.DataFrame(rows)
@@ -227,7 +217,7 @@ def first_points(curves: pd.DataFrame) -> pd.DataFrame:
 
 def best_mean(summary: pd.DataFrame) -> float:
     """The mean final score of the summary's best value; NaN when none is best."""
-    best = summary.index[summary["mark"] == "best"]
+    best = summary.index[summary["answer"] == "best"]
     return float(summary.loc[best[0], "final_mean"]) if len(best) else math.nan
 
 
@@ -276,7 +266,8 @@ def seed_metrics(trials: pd.DataFrame, curves: pd.DataFrame, threshold: float) -
     rows = []
     for row in done.itertuples(index=False):
         metrics = per_trial.get(int(row.number), missing)
-        rows.append((int(row.vi), row.seed, int(row.number), float(row.final_score), *metrics))
+        rows.append((int(row.value_index), row.seed, int(row.number), float(row.final_score),
+                     *metrics))
     frame = pd.DataFrame(rows, columns=SEED_COLUMNS)
     for column in SEED_COLUMNS[3:]:
         frame[column] = frame[column].astype(float)
@@ -298,9 +289,9 @@ def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame,
     columns: dict[str, list[float]] = {name: [] for name in (
         "auc_mean", "auc_low", "auc_high", "steps_to_threshold", "seconds_to_threshold",
         "reached")}
-    groups = dict(iter(seeds.groupby("vi", sort=True)))
-    for vi in summary.index:
-        group = groups.get(vi, seeds.iloc[:0])
+    groups = dict(iter(seeds.groupby("value_index", sort=True)))
+    for value_index in summary.index:
+        group = groups.get(value_index, seeds.iloc[:0])
         aucs = group["auc"].dropna().to_numpy()
         mean, low, high = mean_interval(aucs, resamples=bootstrap)
         reached = group[group["steps_to_threshold"].notna()]
@@ -321,28 +312,33 @@ def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame,
     return out
 
 
-def add_train_reward(summary: pd.DataFrame, trials: pd.DataFrame,
-                     bootstrap: int = BOOTSTRAP_REPETITIONS) -> pd.DataFrame:
-    """``summary`` with each value's training reward (mean episode reward over the last 10 %
-    of training) over its complete seeds: ``train_mean``, ``train_sd`` and the interval of
-    the mean ``train_low``, ``train_high`` (:func:`kraby_study.decision.intervals.describe`, as the
-    final score's). For a study scored by evaluation, whose final score is not the training
-    reward; no decision reads it."""
-    done = trials[(trials["outcome"] == Outcome.COMPLETE) & trials["train_reward"].notna()]
-    columns = {"mean": "train_mean", "sd": "train_sd", "low": "train_low", "high": "train_high"}
-    if done.empty:
-        return summary.assign(**{column: np.nan for column in columns.values()})
-    train = describe(done, "vi", "train_reward", bootstrap=bootstrap)
-    return summary.join(train[list(columns)].rename(columns=columns))  # NaN: no such seeds
-
-
-def add_eval_error(summary: pd.DataFrame, trials: pd.DataFrame) -> pd.DataFrame:
-    """``summary`` with each value's evaluation standard error (``eval_se``): the root mean
-    square over its complete seeds of each run's standard error from its own episodes, the
-    test set's share of a run's score (NaN for runs stored without one)."""
-    done = trials[(trials["outcome"] == Outcome.COMPLETE) & trials["eval_error"].notna()]
-    rms = done.groupby("vi")["eval_error"].apply(lambda e: float(np.sqrt(np.mean(e ** 2))))
-    return summary.assign(eval_se=[rms.get(vi, np.nan) for vi in summary.index])
+def add_run_measures(summary: pd.DataFrame, trials: pd.DataFrame,
+                     bootstrap: int = BOOTSTRAP_REPETITIONS, evaluated: bool = False
+                     ) -> pd.DataFrame:
+    """``summary`` with each per-run measure's per-value columns
+    (:data:`kraby_study.records.attributes.RUN_MEASURES`) over the value's complete seeds that
+    measured it: ``describe``, the mean, sd and interval of the mean
+    (:func:`kraby_study.decision.intervals.describe`, as the final score's); ``rms``, the root
+    mean square. The measures of runs scored by evaluation only when ``evaluated``; NaN where
+    no seed measured it. No decision reads them."""
+    complete = trials[trials["outcome"] == Outcome.COMPLETE]
+    out = summary
+    for measure in RUN_MEASURES:
+        if measure.evaluated and not evaluated:
+            continue
+        done = complete[complete[measure.name].notna()]
+        if measure.summary == "describe":
+            parts = dict(zip(("mean", "sd", "low", "high"), measure.columns, strict=True))
+            if done.empty:
+                out = out.assign(**{column: np.nan for column in parts.values()})
+                continue
+            found = describe(done, "value_index", measure.name, bootstrap=bootstrap)
+            out = out.join(found[list(parts)].rename(columns=parts))  # NaN: no such seeds
+        else:
+            rms = done.groupby("value_index")[measure.name].apply(
+                lambda e: float(np.sqrt(np.mean(e ** 2))))
+            out = out.assign(**{measure.column: [rms.get(i, np.nan) for i in out.index]})
+    return out
 
 
 def add_failed_seeds(summary: pd.DataFrame, seeds: pd.DataFrame, untrained: float
@@ -352,32 +348,23 @@ def add_failed_seeds(summary: pd.DataFrame, seeds: pd.DataFrame, untrained: floa
     interval of the rate); and the failure line (NaN when it is not defined: no best, no
     curve, or a best that learned nothing)."""
     line = failure_line(untrained, best_mean(summary))
-    groups = dict(iter(seeds.groupby("vi", sort=True)))
-    found = [failed_seeds(groups[vi]["final_score"].tolist() if vi in groups else [], line)
-             for vi in summary.index]
+    groups = dict(iter(seeds.groupby("value_index", sort=True)))
+    found = [failed_seeds(groups[i]["final_score"].tolist() if i in groups else [], line)
+             for i in summary.index]
     out = summary.assign(failed_seeds=[f.count if f.seeds else np.nan for f in found],
                          failed_seeds_low=[f.low for f in found],
                          failed_seeds_high=[f.high for f in found])
     return out, line
 
 
-def study_verdict(summary: pd.DataFrame, seeds: pd.DataFrame,
-                  min_seeds: int = MIN_SEEDS, dropped: Collection[int] = (),
-                  comparison: Comparison[int] | None = None) -> Verdict:
-    """The verdict of :func:`kraby_study.decision.verdict.verdict` from the summary rows and the
-    seeds' final scores, reading the study's one ``comparison`` when given. The fastest is by the
-    restricted mean seconds (a seed that never reached the threshold counts at its run's end);
-    the rescaled IQR (``final_iqr_unbiased``) decides the most repeatable. Values a race dropped
-    (``dropped``, by index) are no answer."""
-    final = {int(vi): group["final_score"].tolist() for vi, group in seeds.groupby("vi")
-             if int(vi) not in dropped}
-
-    def kept(column: str) -> dict[int, float]:
-        return {vi: v for vi, v in summary[column].to_dict().items() if vi not in dropped}
-
-    return verdict(final, auc_means=kept("auc_mean"), seconds=kept("seconds_to_threshold"),
-                   iqrs=kept("final_iqr_unbiased"), p_holm=kept("p_holm"), min_seeds=min_seeds,
-                   comparison=comparison)
+def study_verdict(summary: pd.DataFrame, comparison: Comparison[int]) -> Verdict:
+    """The verdict of :func:`kraby_study.decision.verdict.verdict` from the study's one
+    ``comparison`` (whose family leaves out the values a race dropped) and the summary rows. The
+    fastest is by the restricted mean seconds (a seed that never reached the threshold counts at
+    its run's end); the rescaled IQR (``final_iqr_unbiased``) decides the most repeatable."""
+    return verdict(comparison, auc_means=summary["auc_mean"].to_dict(),
+                   seconds=summary["seconds_to_threshold"].to_dict(),
+                   iqrs=summary["final_iqr_unbiased"].to_dict())
 
 
 REACH_COLUMNS = ("steps_to_threshold", "seconds_to_threshold")
@@ -390,24 +377,123 @@ def reach_means(seeds: pd.DataFrame, values: int, bootstrap: int) -> pd.DataFram
     ``_low`` and ``_high``: the marks of the time-to-threshold figure (the summary's columns are
     restricted means over every seed instead)."""
     rows = []
-    for vi in range(values):
+    for value_index in range(values):
         row: dict[str, float] = {}
         for column in REACH_COLUMNS:
-            found = seeds.loc[(seeds["vi"] == vi) & seeds[column].notna(), column].to_numpy()
+            kept = (seeds["value_index"] == value_index) & seeds[column].notna()
+            found = seeds.loc[kept, column].to_numpy()
             mean, low, high = mean_interval(found, resamples=bootstrap)
             row |= {f"{column}_mean": mean, f"{column}_low": low, f"{column}_high": high}
         rows.append(row)
-    return pd.DataFrame(rows, index=pd.RangeIndex(values, name="vi"))
+    return pd.DataFrame(rows, index=pd.RangeIndex(values, name="value_index"))
+
+
+@dataclass(frozen=True)
+class ValueSummary:
+    """What a sweep's evidence says of one value: the report's tables, figures and summary.csv
+    read these fields (summary.csv's columns are their names, in this order, with the per-run
+    measures' columns in place of ``measures``)."""
+
+    value: str
+    """How the value is written."""
+    complete: int
+    failed: int
+    pruned: int
+    pending: int
+    """Its runs by outcome (pending: planned and not ended)."""
+    dropped_at: int | None
+    """The round after which a race dropped it; None for a survivor or without a race."""
+    final_mean: float
+    final_sd: float
+    final_low: float
+    final_high: float
+    """The complete seeds' final score: mean, sd and the interval of the mean."""
+    iqm: float
+    iqm_low: float
+    iqm_high: float
+    """The interquartile mean (IQM) of the final scores and its trimmed-t interval."""
+    final_iqr: float
+    """The final scores' interquartile range (NaN below 2 seeds)."""
+    final_iqr_unbiased: float
+    """The IQR rescaled to be comparable across n."""
+    auc_mean: float
+    auc_low: float
+    auc_high: float
+    """Sample efficiency (AUC): mean and interval over the seeds with a curve."""
+    steps_to_threshold: float
+    seconds_to_threshold: float
+    """Restricted mean env steps and seconds to the threshold (NaN when no seed reached it)."""
+    reached: int
+    """Seeds whose curve reached the threshold."""
+    time_mean: float
+    time_low: float
+    time_high: float
+    """Training time per run: mean and interval of the mean."""
+    env_steps: float
+    """Mean env steps per complete run."""
+    p_worse: float
+    p_equivalent: float
+    """The comparison's p of each answer (NaN where untested or for the best)."""
+    p_improvement: float
+    p_improvement_low: float
+    p_improvement_high: float
+    """P(best > value) with its Newcombe interval (NaN for the best)."""
+    answer: str
+    """best, equivalent, worse, undecided, ``left out`` (too few seeds) or empty (no seed)."""
+    margin: float
+    """The comparison's margin in score units (the same on every row)."""
+    margin_resolvable: float
+    """The smallest margin its seeds resolve against the best (NaN where untested)."""
+    note: str
+    """Why it is left out, untested, or what a race did with it; parts joined by '; '."""
+    failed_seeds: float
+    failed_seeds_low: float
+    failed_seeds_high: float
+    """Its failed seeds (NaN when not counted) and the exact interval of the rate."""
+    measures: dict[str, float]
+    """The per-run measures' per-value columns (:data:`RUN_MEASURES`), by column name."""
+    selected: bool
+    """The study's rule selects it."""
+
+
+_SCALARS = [f.name for f in dataclasses.fields(ValueSummary)
+            if f.name not in ("measures", "selected")]
+
+
+def value_rows(frame: pd.DataFrame) -> list[ValueSummary]:
+    """The typed rows of the per-value table the summary's steps build, in value order."""
+    scalars = set(_SCALARS) | {"selected"}
+    rows = []
+    for record in frame.to_dict("records"):
+        dropped = record["dropped_at"]
+        rows.append(ValueSummary(
+            **{name: record[name] for name in _SCALARS if name != "dropped_at"},
+            dropped_at=None if pd.isna(dropped) else int(dropped),
+            measures={k: float(v) for k, v in record.items() if k not in scalars},
+            selected=bool(record["selected"])))
+    return rows
+
+
+def summary_frame(rows: Sequence[ValueSummary]) -> pd.DataFrame:
+    """The rows as one table, a column per field in order (summary.csv, and a notebook's
+    view): the per-run measures' columns where ``measures`` stands."""
+    records = [{**{name: getattr(r, name) for name in _SCALARS}, **r.measures,
+                "selected": r.selected} for r in rows]
+    frame = pd.DataFrame(records, columns=list(records[0]) if records else
+                         [*_SCALARS, "selected"])
+    frame["dropped_at"] = frame["dropped_at"].astype("Int64")
+    return frame
 
 
 @dataclass(frozen=True)
 class SweepAnswers:
     """What a sweep's evidence decides: the one comparison, the per-value summary (answers,
-    marks, the selected value), the per-seed metrics, the curves' bands, the race (None
+    the selected value), the per-seed metrics, the curves' bands, the race (None
     without one) and the verdict."""
 
     comparison: Comparison[int]
-    summary: pd.DataFrame
+    rows: list[ValueSummary]
+    """One per value, in value order."""
     seeds: pd.DataFrame
     bands: pd.DataFrame
     threshold: float
@@ -422,67 +508,72 @@ class SweepAnswers:
     (:func:`reach_means`)."""
 
 
-def seed_scores(trials: pd.DataFrame, curves: pd.DataFrame, known: int, time_attr: str
-                ) -> tuple[dict[int, list[float]], dict[int, list[float]], dict[int, list[float]]]:
-    """Per value with a complete run (among the first ``known``), in value order: the complete
-    runs' final scores, their curves' AUCs and their training times (column ``time_attr``),
-    each in run order: the numbers every decision reads."""
+@dataclass(frozen=True)
+class SeedScores:
+    """Per value with a complete run, in value order: the complete runs' final scores, their
+    curves' AUCs and their training times, each in run order: the numbers every decision
+    reads."""
+
+    final: dict[int, list[float]]
+    aucs: dict[int, list[float]]
+    seconds: dict[int, list[float]]
+
+
+def seed_scores(trials: pd.DataFrame, curves: pd.DataFrame, known: int, time_attr: str,
+                swept: bool = True) -> SeedScores:
+    """The :class:`SeedScores` of the values among the first ``known`` (training time: the
+    column ``time_attr``); a single-run study (``swept`` False) has one value, every complete
+    run's score."""
     done = trials[(trials["outcome"] == Outcome.COMPLETE) & trials["final_score"].notna()
-                  & (trials["vi"] < known)]
-    runs = done[["vi", "number", "final_score", time_attr]].itertuples(index=False)
-    return seed_samples(((int(vi), int(number), float(score), float(spent))
-                         for vi, number, score, spent in runs), curve_rewards(curves))
+                  & (trials["value_index"] < known)]
+    runs = done[["value_index", "number", "final_score", time_attr]].itertuples(index=False)
+    final, aucs, seconds = seed_samples(((int(value_index), int(number), float(score), float(spent))
+                                         for value_index, number, score, spent in runs),
+                                        curve_rewards(curves))
+    if not swept:
+        final = _finals(trials[trials["outcome"] == Outcome.COMPLETE])
+    return SeedScores(final=final, aucs=aucs, seconds=seconds)
 
 
 def decide_sweep(trials: pd.DataFrame, curves: pd.DataFrame, labels: list[str],
-                 judged: CompareOptions, *, bootstrap: int, threshold: float | None,
-                 race: RaceRuns | None, swept: bool, known: int, time_attr: str,
+                 comparison: Comparison[int], samples: SeedScores, *, bootstrap: int,
+                 threshold: float | None, race: StudyRace | None, time_attr: str,
                  train_reward: bool, rule: str | None) -> SweepAnswers:
-    """The answers of a sweep from its evidence, in one pass.
+    """The answers of a sweep from its evidence and its one comparison, in one pass.
 
     Args:
-        trials: One row per counted run (``vi`` indexes ``labels``).
-        curves: Curve points of the complete runs, with their ``vi`` and ``seed``.
+        trials: One row per counted run (``value_index`` indexes ``labels``).
+        curves: Curve points of the complete runs, with their ``value_index`` and ``seed``.
         labels: How each value is written.
-        judged: The comparison's margin, alpha, fewest seeds and rule.
+        comparison: The study's one comparison of ``samples.final`` (the values a race
+            dropped left out), made in the answers layer.
+        samples: The seed scores every decision reads (:func:`seed_scores`).
         bootstrap: Resamples of the bootstrap-t interval of a mean.
         threshold: The reward a curve must reach, None for the default.
-        race: A raced study's ended runs (None: it did not race): its dropped values are
+        race: A raced study's race replayed (None: it did not race): its dropped values are
             never best, equivalent or selected.
-        swept: The study sweeps a setting; False for a single-run study (one value).
-        known: How many of the values the study lists (a last "?" is not compared).
         time_attr: The trial column read as training time.
         train_reward: The runs are scored by evaluation: add the training reward and the
             evaluation's standard error beside the final score.
         rule: The rule that selects a value (None while runs are pending, or in a single-run
             study).
     """
-    state = race.replayed() if race is not None else None
-    dropped = state.dropped if state is not None else {}
-    settled = state.settled if state is not None else {}
-    look_alpha = state.rules.look_alpha if state is not None else math.nan
-    final, aucs, seconds = seed_scores(trials, curves, known, time_attr)
-    if not swept:  # one value: every complete run's score
-        final = _finals(trials[trials["outcome"] == Outcome.COMPLETE])
-    comparison = compare({vi: v for vi, v in final.items() if vi not in dropped},
-                         judged.margin, judged.alpha, judged.min_seeds)
-    summary = summarise(trials, labels, bootstrap, comparison.min_seeds, dropped, look_alpha,
-                        time_attr, comparison, settled, final)
+    dropped = race.dropped if race is not None else {}
+    settled = race.settled if race is not None else {}
+    look_alpha = race.rules.look_alpha if race is not None else math.nan
+    summary = summarise(trials, labels, comparison, bootstrap, dropped, look_alpha,
+                        time_attr, settled, samples.final)
     level, is_default, untrained = study_threshold(curves, summary, threshold)
     seeds = seed_metrics(trials, curves, level)
     summary = add_curve_metrics(summary, seeds, bootstrap)
     summary, failure = add_failed_seeds(summary, seeds, untrained)
-    if train_reward:
-        summary = add_train_reward(summary, trials, bootstrap)
-        summary = add_eval_error(summary, trials)
-    chosen = (RULES[SelectRule(rule)].select(comparison, mean_by_value(aucs),
-                                             mean_by_value(seconds))
+    summary = add_run_measures(summary, trials, bootstrap, evaluated=train_reward)
+    chosen = (select(rule, comparison, samples.aucs, samples.seconds)
               if rule is not None else None)
-    summary["selected"] = [vi == chosen for vi in summary.index]
-    return SweepAnswers(comparison=comparison, summary=summary, seeds=seeds,
+    summary["selected"] = [value_index == chosen for value_index in summary.index]
+    return SweepAnswers(comparison=comparison, rows=value_rows(summary), seeds=seeds,
                         bands=curve_bands(curves), threshold=level,
                         threshold_default=is_default, untrained=untrained,
                         failure_line=failure, bootstrap=bootstrap,
-                        verdict=study_verdict(summary, seeds, comparison.min_seeds,
-                                              list(dropped), comparison), race=state,
+                        verdict=study_verdict(summary, comparison), race=race,
                         reach=reach_means(seeds, len(summary), bootstrap))

@@ -58,16 +58,17 @@ class SelectRule(StrEnum):
     """The best: the highest IQM of the final scores (the mean below 4 seeds)."""
     AUC = "auc"
     """The highest mean AUC (sample efficiency)."""
-    FASTEST_TIED = "fastest_tied"
-    """The lowest mean training time among the best and the values not shown worse than it
-    (at margin 0): the rule of earlier releases, which a noisy value enters by its spread."""
     FASTEST_EQUIVALENT = "fastest_equivalent"
     """The lowest mean training time among the best and the values shown equivalent to it
     (within the margin): a value needs evidence to be selected."""
 
     @classmethod
     def of(cls, stored: str | None) -> SelectRule:
-        """The rule a study stored; the default (final_score) for none or an unknown one."""
+        """The rule a study stored answered by today's rules: a retired name by the rule that
+        replaces it (:data:`RETIRED_RULES`); the default (final_score) for none or an unknown
+        one."""
+        if stored in RETIRED_RULES:
+            return RETIRED_RULES[stored]
         try:
             return cls(stored) if stored is not None else cls.FINAL_SCORE
         except ValueError:
@@ -77,10 +78,19 @@ class SelectRule(StrEnum):
     def check(cls, rule: str, where: str = "study.select") -> SelectRule:
         """The rule named ``rule``; ConfigError naming the known ones."""
         from_text = {r.value: r for r in cls}
+        if rule in RETIRED_RULES:
+            raise ConfigError(f"{where}: {rule} is retired; use "
+                              f"{RETIRED_RULES[rule].value} (a study stored with {rule} "
+                              "selects by it)")
         if rule not in from_text:
             raise ConfigError(f"{where} must be one of {', '.join(from_text)}, got {rule!r}")
         return from_text[rule]
 
+
+
+RETIRED_RULES: dict[str, SelectRule] = {"fastest_tied": SelectRule.FASTEST_EQUIVALENT}
+"""Selection rule names a stored study may carry but a config may not name, each with the
+rule that answers such a study today."""
 
 @dataclass(frozen=True)
 class CurvePoint:
@@ -128,6 +138,9 @@ class TrialMeasures:
     eval_errors: list[float] | None = None
     """A trial scored by evaluation: each seed's evaluation standard error, in seed order
     (the sd of its episodes' returns over sqrt(episodes): the test set's own noise)."""
+    eval_sds: list[float] | None = None
+    """A trial scored by evaluation: each seed's sd of its evaluation episodes' returns, in
+    seed order (how far one episode's return strays from the run's score)."""
 
     def measures(self) -> TrialMeasures:
         """Only the measured fields (of a result or of stored attributes)."""
@@ -141,6 +154,63 @@ class TrialMeasures:
             return None
         return float(self.cpu_time) / len(self.scores)
 
+
+
+@dataclass(frozen=True)
+class RunMeasure:
+    """A number each run of a sweep measures beside its final score, and how a value's runs
+    are summarised: the run table, the per-value summary and summary.csv all follow this
+    declaration, so a new per-run measure is a :class:`TrialMeasures` field, an entry of
+    :data:`RUN_MEASURES` and the code in :mod:`kraby_study.run.trial` that measures it."""
+
+    name: str
+    """Its column in the run table (trials.csv)."""
+    attribute: str
+    """The :class:`TrialMeasures` field it is read from: a number, or a list with one entry
+    per seed (a sweep's run has one seed: the first is read)."""
+    summary: str
+    """How a value's complete runs are summarised: ``describe`` (mean, sd and the interval of
+    the mean, as the final score's: columns ``<column>_mean``, ``_sd``, ``_low``, ``_high``)
+    or ``rms`` (the root mean square over the runs: one column)."""
+    column: str
+    """Its per-value column in summary.csv (``describe``: the columns' prefix)."""
+    text: str
+    """What its per-value number is, for the report's methods."""
+    per_seed: bool = False
+    """Stored as a list with one entry per seed of a trial (a recheck appends its own seeds'
+    entries to the trial's)."""
+    evaluated: bool = True
+    """Measured only on runs scored by evaluation: summarised only in such studies."""
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """Its per-value columns in summary.csv."""
+        if self.summary == "describe":
+            return tuple(f"{self.column}_{part}" for part in ("mean", "sd", "low", "high"))
+        return (self.column,)
+
+    def read(self, attrs: Mapping[str, Any]) -> float | None:
+        """Its value for one run from the run's stored attributes; None when not measured."""
+        value = attrs.get(self.attribute)
+        if isinstance(value, list):
+            value = value[0] if value else None
+        return None if value is None else float(value)
+
+
+RUN_MEASURES: tuple[RunMeasure, ...] = (
+    RunMeasure("train_reward", "train_reward", "describe", "train",
+               "the training reward (mean episode reward over the last 10 % of training): "
+               "mean, sd and interval of the mean over the value's complete seeds"),
+    RunMeasure("eval_error", "eval_errors", "rms", "eval_se",
+               "the evaluation standard error, the share of a run's score that its evaluation "
+               "episodes add (the sd of their returns over sqrt(episodes)): root mean square "
+               "over the value's complete seeds", per_seed=True),
+    RunMeasure("eval_sd", "eval_sds", "rms", "eval_sd",
+               "the evaluation return sd, how far one evaluation episode's return strays from "
+               "its run's score (the sd of the returns over the run's evaluation episodes): "
+               "root mean square over the value's complete seeds", per_seed=True),
+)
+"""The per-run measures beside the final score, in the order of their columns."""
 
 @dataclass(kw_only=True)
 class TrialResult(TrialMeasures):
@@ -183,7 +253,7 @@ class TrialAttrs(TrialMeasures):
     kept by its later attempts."""
     suggest_cpu: float | None = None
     """A search trial: CPU seconds the command's process spent asking the sampler for it (a
-    Gaussian process's fit is dearer than TPE's); part of what the search spends under its
+    Gaussian process's fit costs more than TPE's); part of what the search spends under its
     CPU budget, not of the trial's own cpu_time."""
     cost_stop: float | None = None
     """A search trial stopped for its cost (``search.trial_share``): the CPU seconds it was

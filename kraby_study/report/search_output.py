@@ -27,9 +27,9 @@ CAPTIONS = {
               "(CPU seconds per seed). The front (no other trial scores at least as high for "
               "at most its cost) is joined as a staircase and labelled by trial number; "
               "diamonds mark the enqueued configurations, the star the selected trial (the "
-              "cheapest tied with the front's best score). A dashed line, when the search has "
-              "a floor, is the floor configuration's score: trials below it are infeasible and "
-              "off the front.",
+              "cheapest of the front's best score and the trials shown equivalent to it). A "
+              "dashed line, when the search has a floor, is the floor configuration's score: "
+              "trials below it are infeasible and off the front.",
     "history": "Objective of every complete trial on the seeds it was first trained on, by "
                "trial number, and the best value so far; a rechecked trial also as a ring at "
                "its objective over all its seeds, joined by a thin line; pruned and failed "
@@ -151,7 +151,7 @@ def front_cells(search: Search) -> Table:
                      test,
                      *[format_param(row[p], search.distributions.get(p))
                        for p in search.params]])
-        marks.append("best" if row["selected"] else "tie" if row["tied"] or row["best"]
+        marks.append("best" if row["selected"] else "tie" if row["equivalent"] or row["best"]
                      else "")
     return Table(header, rows, marks=marks)
 

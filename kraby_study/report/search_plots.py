@@ -359,4 +359,4 @@ def _draw_front(ax: Axes, search: Search, done: pd.DataFrame, queued: pd.DataFra
         ax.scatter([choice.chosen.cost], [choice.chosen.score], s=260, marker="*",
                    facecolors="none", edgecolors="#2e8b57", linewidths=1.4, zorder=6,
                    label=f"selected: trial {choice.chosen.key}"
-                         + (" (fastest_tied)" if choice.tested else " (best score, untested)"))
+                         + (f" ({choice.rule})" if choice.tested else " (best score, untested)"))

@@ -25,9 +25,8 @@ from kraby_study.decision.intervals import (
 )
 from kraby_study.decision.measures import AUC_NAME, p_improvement_name
 from kraby_study.decision.selection import RULE_TEXT
-from kraby_study.decision.summary import note_part
-from kraby_study.decision.verdict import HOLM_NAME, TEST_NAME
-from kraby_study.records.attributes import StudyKind
+from kraby_study.decision.summary import ValueSummary, note_part
+from kraby_study.records.attributes import RUN_MEASURES, StudyKind
 from kraby_study.records.definition import stored_eval_set
 from kraby_study.records.stored import Outcome
 from kraby_study.records.values import value_label
@@ -53,7 +52,7 @@ CAPTIONS = {
                    "column.",
     "wallclock": "Mean episode reward against wall-clock time since the start of training.",
     "training_time": "Training time of every run (wall-clock seconds; on a confirm study CPU "
-                     "seconds, which fastest_tied compares there), with mean and "
+                     "seconds, which fastest_equivalent compares there), with mean and "
                      f"{SHORT_INTERVAL_NAME}.",
     "sample_efficiency": "Sample efficiency (AUC: the mean of a seed's binned mean episode "
                          "rewards over the whole run, the normalised area under its learning "
@@ -99,8 +98,8 @@ def _bootstrap_interval(low: float, high: float) -> str:
     return _interval(low, high, 3)
 
 
-def _reached(row: pd.Series) -> str:
-    return f"{row['reached']}/{row['complete']}" if row["complete"] else "-"
+def _reached(row: ValueSummary) -> str:
+    return f"{row.reached}/{row.complete}" if row.complete else "-"
 
 
 def _steps(value: float) -> str:
@@ -114,10 +113,10 @@ ANSWER_COLUMNS = ("answer", "p_worse", "p_equivalent")
 """The columns a single-run study's table leaves out: its one value is trivially the best."""
 
 
-def _answer_cell(sweep: Sweep, vi: int, row: pd.Series) -> str:
+def _answer_cell(sweep: Sweep, value_index: int, row: ValueSummary) -> str:
     """A value's answer; a value the race dropped says after which round."""
-    answer = str(row.get("answer") or "-")
-    drop = sweep.dropped.get(vi)
+    answer = row.answer or "-"
+    drop = sweep.dropped.get(value_index)
     return f"{answer} (dropped by the race after round {drop.round})" if drop else answer
 
 
@@ -126,11 +125,11 @@ def row_mark(answer: str) -> str:
     return answer if answer in ("best", "equivalent") else ""
 
 
-def _iqm_cell(row: pd.Series) -> str:
+def _iqm_cell(row: ValueSummary) -> str:
     """'1.001 [0.9902, 1.011]': the IQM final score and its interval, 4 digits each."""
-    text = number(row["iqm"])
-    if np.isfinite(row["iqm"]) and np.isfinite(row["iqm_low"]):
-        text += f" {_interval(row['iqm_low'], row['iqm_high'])}"
+    text = number(row.iqm)
+    if np.isfinite(row.iqm) and np.isfinite(row.iqm_low):
+        text += f" {_interval(row.iqm_low, row.iqm_high)}"
     return text
 
 
@@ -145,24 +144,24 @@ def summary_table(sweep: Sweep) -> Table:
     summary.csv."""
     compared = bool(sweep.parameter)
     rows = []
-    for vi, row in sweep.summary.iterrows():
-        answers = [_answer_cell(sweep, int(vi), row), _p_cell(row["p_worse"]),
-                   _p_cell(row["p_equivalent"])]
-        rows.append([str(row["value"]), str(row["complete"]), _iqm_cell(row),
-                     number(row["final_mean"]), *(answers if compared else []),
+    for value_index, row in enumerate(sweep.rows):
+        answers = [_answer_cell(sweep, int(value_index), row), _p_cell(row.p_worse),
+                   _p_cell(row.p_equivalent)]
+        rows.append([str(row.value), str(row.complete), _iqm_cell(row),
+                     number(row.final_mean), *(answers if compared else []),
                      _failed_seeds(row)])
     header = SUMMARY_COLUMNS if compared else [c for c in SUMMARY_COLUMNS
                                                if c not in ANSWER_COLUMNS]
     return Table([sweep.name, *header], rows,
-                 marks=[row_mark(str(a)) for a in sweep.summary["answer"]] if compared else [])
+                 marks=[row_mark(r.answer) for r in sweep.rows] if compared else [])
 
 
-def _failed_seeds(row: pd.Series) -> str:
+def _failed_seeds(row: ValueSummary) -> str:
     """A value's failed seeds, e.g. '2/10 [0.03, 0.56]'; '-' when not counted."""
-    if not np.isfinite(row["failed_seeds"]):
+    if not np.isfinite(row.failed_seeds):
         return "-"
-    return (f"{int(row['failed_seeds'])}/{row['complete']} "
-            f"{_interval(row['failed_seeds_low'], row['failed_seeds_high'])}")
+    return (f"{int(row.failed_seeds)}/{row.complete} "
+            f"{_interval(row.failed_seeds_low, row.failed_seeds_high)}")
 
 
 def threshold_text(sweep: Sweep) -> str:
@@ -174,7 +173,7 @@ def threshold_text(sweep: Sweep) -> str:
     if not sweep.threshold_default:
         return text + ", set by the report's option report.threshold."
     best = sweep.best
-    final = sweep.summary.iloc[best]["final_mean"] if best is not None else np.nan
+    final = sweep.rows[best].final_mean if best is not None else np.nan
     count = int(sweep.seeds["first_reward"].notna().sum())
     return (text + f", the default: 90 % of the way from the untrained policy's reward "
             f"({number(sweep.untrained)}, the mean first-bin reward of all {count} complete "
@@ -219,10 +218,8 @@ def methods(bootstrap: int, min_seeds: int = 2, raced: bool = False,
         f"Learning-curve bands: {BAND_NAME}, at every n.",
         "summary.csv also holds: the run counts; the mean final score with its interval; the "
         "final IQR, raw and rescaled; AUC; steps and seconds to threshold and the seeds that "
-        f"reached it; training time; p_vs_best, the {TEST_NAME}; p_holm and mark (best, tie), "
-        f"the margin-0 question of earlier releases that the rule fastest_tied reads: "
-        f"{HOLM_NAME}; P(best > value): {p_improvement_name()}; the margin and the margin "
-        "its seeds resolve; notes.",
+        f"reached it; training time; P(best > value): {p_improvement_name()}; the margin "
+        "and the margin its seeds resolve; notes.",
     ]
     if raced:
         items.append("Raced: a value the race dropped is never best, selected or any other "
@@ -237,14 +234,13 @@ def few_seeds_note(sweep: Sweep) -> str | None:
     """The measured coverage of the intervals drawn from fewer than 5 seeds in this sweep, and
     of those from more where skewed data were covered less than 93 % of the time
     (:func:`kraby_study.decision.coverage.coverage_note`); None when neither is drawn here."""
-    return coverage_note(int(n) for n in sweep.summary["complete"] if int(n) >= 2)
+    return coverage_note(r.complete for r in sweep.rows if r.complete >= 2)
 
 
 def left_out_text(sweep: Sweep) -> str | None:
     """The values left out of every comparison and answer for too few seeds, and why; None
     when none is."""
-    notes = [(r["value"], note_part(r["note"], "left out: "))
-             for _, r in sweep.summary.iterrows()]
+    notes = [(r.value, note_part(r.note, "left out: ")) for r in sweep.rows]
     notes = [(value, note) for value, note in notes if note]
     if not notes:
         return None
@@ -259,30 +255,30 @@ def race_text(sweep: Sweep) -> str | None:
     race = sweep.race
     if race is None:
         return None
-    dropped = ", ".join(f"{_label(sweep, vi)} after round {drop.round} (adjusted p "
-                        f"{_p_text(drop.p)})" for vi, drop in sorted(
+    dropped = ", ".join(f"{_label(sweep, value_index)} after round {drop.round} (adjusted p "
+                        f"{_p_text(drop.p)})" for value_index, drop in sorted(
                             sweep.dropped.items(), key=lambda item: (item[1].round, item[0])))
     state = "the race is over" if race.over else f"{race.rounds} round(s) decided so far"
     return (f"Race ({race.rules.describe()}): "
             + (f"dropped {dropped}" if dropped else "nothing dropped")
-            + f"; {state}; {race.saved_text()}. Best, ties and the selection are among the "
+            + f"; {state}; {race.saved_text()}. Best, answers and the selection are among the "
             "survivors.")
 
 
 def _named(sweep: Sweep, values: list[int]) -> str:
-    return ", ".join(_label(sweep, vi) for vi in values) or "none"
+    return ", ".join(_label(sweep, value_index) for value_index in values) or "none"
 
 
 def _answered(sweep: Sweep, answer: str) -> list[int]:
     """The values whose summary answer is ``answer``, in the summary's order."""
-    return [int(vi) for vi in sweep.summary.index[sweep.summary["answer"] == answer]]
+    return [value_index for value_index, r in enumerate(sweep.rows) if r.answer == answer]
 
 
 def answer_lines(sweep: Sweep) -> list[str]:
     """The answer of every value other than the best, one line per answer, the margin in score
     units once; empty when no other value was compared."""
     compared = sweep.comparison
-    others = [vi for a in ("equivalent", "worse", "undecided") for vi in _answered(sweep, a)]
+    others = [i for a in ("equivalent", "worse", "undecided") for i in _answered(sweep, a)]
     if compared is None or not others:
         return []
     if compared.fraction > 0:
@@ -317,40 +313,40 @@ def resolution_text(sweep: Sweep) -> str | None:
     return None
 
 
-def _label(sweep: Sweep, vi: int) -> str:
-    return str(sweep.labels[vi])
+def _label(sweep: Sweep, value_index: int) -> str:
+    return str(sweep.labels[value_index])
 
 
-def _mean_text(row: pd.Series) -> str:
+def _located(name: str, location: float, low: float, high: float, n: int,
+             extra: str = "") -> str:
+    """'NAME 1.001 (95 % CI [0.9902, 1.011], n=8EXTRA)'; without the interval when it is NaN."""
+    interval = f"95 % CI {_interval(low, high)}, " if np.isfinite(low) else ""
+    return f"{name} {number(location)} ({interval}n={n}{extra})"
+
+
+def _mean_text(row: ValueSummary) -> str:
     """'mean final score 1.001 (95 % CI [0.9902, 1.011], n=8)'."""
-    text = f"mean final score {number(row['final_mean'])}"
-    if np.isfinite(row["final_low"]):
-        return text + f" (95 % CI {_interval(row['final_low'], row['final_high'])}, " \
-                      f"n={row['complete']})"
-    return text + f" (n={row['complete']})"
+    return _located("mean final score", row.final_mean, row.final_low, row.final_high,
+                    row.complete)
 
 
-def _iqm_text(row: pd.Series) -> str:
+def _iqm_text(row: ValueSummary) -> str:
     """'IQM final score 1.001 (95 % CI [0.9902, 1.011], n=8; mean 0.998)'."""
-    text = f"IQM final score {number(row['iqm'])}"
-    mean = f"mean {number(row['final_mean'])}"
-    if np.isfinite(row["iqm_low"]):
-        return text + f" (95 % CI {_interval(row['iqm_low'], row['iqm_high'])}, " \
-                      f"n={row['complete']}; {mean})"
-    return text + f" (n={row['complete']}; {mean})"
+    return _located("IQM final score", row.iqm, row.iqm_low, row.iqm_high, row.complete,
+                    f"; mean {number(row.final_mean)}")
 
 
-def _auc_text(row: pd.Series) -> str:
-    text = f"AUC {number(row['auc_mean'])}"
-    if np.isfinite(row["auc_low"]):
-        text += f", 95 % CI {_interval(row['auc_low'], row['auc_high'])}"
-    return text + f", n={int(row['complete'])}"
+def _auc_text(row: ValueSummary) -> str:
+    text = f"AUC {number(row.auc_mean)}"
+    if np.isfinite(row.auc_low):
+        text += f", 95 % CI {_interval(row.auc_low, row.auc_high)}"
+    return text + f", n={int(row.complete)}"
 
 
-def _reach_text(row: pd.Series) -> str:
-    return (f"{number(row['seconds_to_threshold'], 3)} s, "
-            f"{_steps(row['steps_to_threshold'])} env steps, restricted mean over the seeds, "
-            f"{row['reached']}/{row['complete']} reached it")
+def _reach_text(row: ValueSummary) -> str:
+    return (f"{number(row.seconds_to_threshold, 3)} s, "
+            f"{_steps(row.steps_to_threshold)} env steps, restricted mean over the seeds, "
+            f"{row.reached}/{row.complete} reached it")
 
 
 def failed_seeds_line(sweep: Sweep) -> str | None:
@@ -358,18 +354,18 @@ def failed_seeds_line(sweep: Sweep) -> str | None:
     failed (or the line is not defined)."""
     if not np.isfinite(sweep.failure_line):
         return None
-    rows = sweep.summary[sweep.summary["failed_seeds"].fillna(0) > 0]
-    if rows.empty:
+    rows = [r for r in sweep.rows if np.isfinite(r.failed_seeds) and r.failed_seeds > 0]
+    if not rows:
         return None
-    parts = [f"{row['value']}{' (selected)' if bool(row.get('selected', False)) else ''}: "
-             f"{int(row['failed_seeds'])} of {row['complete']}" for _, row in rows.iterrows()]
+    parts = [f"{row.value}{' (selected)' if row.selected else ''}: "
+             f"{int(row.failed_seeds)} of {row.complete}" for row in rows]
     return (f"Failed seeds (final score below {number(sweep.failure_line)}): "
             + "; ".join(parts) + ".")
 
 
-def _single_lines(sweep: Sweep, row: pd.Series) -> list[str]:
+def _single_lines(sweep: Sweep, row: ValueSummary) -> list[str]:
     """A single-run study's verdict: its final score, AUC and time to threshold."""
-    reached = (f"Threshold reached in {_reach_text(row)}." if row["reached"] else
+    reached = (f"Threshold reached in {_reach_text(row)}." if row.reached else
                "No seed reached the threshold.")
     text = _mean_text(row)
     return [f"{text[0].upper()}{text[1:]}.", f"Sample efficiency: {_auc_text(row)}.",
@@ -383,7 +379,7 @@ def verdict_lines(sweep: Sweep) -> list[str]:
     best = sweep.verdict.best
     if best is None:
         return ["No run is complete yet, so no value can be compared."]
-    row = sweep.summary.iloc[best]
+    row = sweep.rows[best]
     if not sweep.parameter:
         return _single_lines(sweep, row)
     lines = [f"Best: {_label(sweep, best)}, {_iqm_text(row)}.", *answer_lines(sweep)]
@@ -396,25 +392,24 @@ def other_measures(sweep: Sweep) -> list[str]:
     """The verdict's other findings: the most sample-efficient, the fastest to the threshold,
     the most repeatable, what a race did and the values left out; empty for a single run."""
     result = sweep.verdict
-    summary = sweep.summary
     if result.best is None or not sweep.parameter:
         return []
     items = []
     if result.most_sample_efficient is not None:
-        row = summary.iloc[result.most_sample_efficient]
+        row = sweep.rows[result.most_sample_efficient]
         items.append(f"Most sample-efficient: {_label(sweep, result.most_sample_efficient)} "
                      f"({_auc_text(row)}).")
     if result.fastest is not None:
-        row = summary.iloc[result.fastest]
+        row = sweep.rows[result.fastest]
         items.append(f"Fastest to threshold: {_label(sweep, result.fastest)} "
                      f"({_reach_text(row)}, lowest restricted mean).")
     elif np.isfinite(sweep.threshold):
         items.append(f"No value reached the threshold {number(sweep.threshold)}.")
     if result.most_repeatable is not None:
-        row = summary.iloc[result.most_repeatable]
+        row = sweep.rows[result.most_repeatable]
         items.append(f"Most repeatable: {_label(sweep, result.most_repeatable)} (rescaled final "
-                     f"IQR {number(row['final_iqr_unbiased'], 3)}, raw "
-                     f"{number(row['final_iqr'], 3)}, n={row['complete']}).")
+                     f"IQR {number(row.final_iqr_unbiased, 3)}, raw "
+                     f"{number(row.final_iqr, 3)}, n={row.complete}).")
     found = [race_text(sweep), left_out_text(sweep)]
     return items + [text for text in found if text]
 
@@ -428,7 +423,7 @@ def arms_table(sweep: Sweep) -> Table:
             for _, r in arms.iterrows()]
     return Table(["configuration", "origin", "source's score", "confirmed mean final score",
                   "95 % CI", "confirmed IQM", "95 % trimmed-t CI", "n"], rows,
-                 marks=[row_mark(str(a)) for a in sweep.summary["answer"]])
+                 marks=[row_mark(r.answer) for r in sweep.rows])
 
 
 WINNER_ANSWER = {
@@ -453,9 +448,9 @@ def winner_text(sweep: Sweep) -> str | None:
     best = sweep.verdict.best
     if best is None:
         return f"{owner} winner {winner} cannot be checked yet: no confirmed run is complete."
-    row = sweep.summary.iloc[best]
+    row = sweep.rows[best]
     label = _label(sweep, best)
-    fresh = f"the best IQM final score on {row['complete']} fresh seeds"
+    fresh = f"the best IQM final score on {row.complete} fresh seeds"
     if winner == label:
         return f"{owner} winner {winner} is the confirmed winner: it has {fresh}."
     text = f"{owner} winner {winner} is not the confirmed winner: {label} has {fresh}."
@@ -465,7 +460,7 @@ def winner_text(sweep: Sweep) -> str | None:
     if index in sweep.dropped:
         return text + (f" The race dropped {winner} after round "
                        f"{sweep.dropped[index].round}.")
-    answer = str(sweep.summary.iloc[index].get("answer") or "")
+    answer = sweep.rows[index].answer
     return text + WINNER_ANSWER.get(answer, "").format(winner=winner)
 
 
@@ -487,19 +482,33 @@ def failed_items(sweep: Sweep) -> list[str]:
             f"{r['failure'] or r['outcome']}" for _, r in failed.iterrows()]
 
 
-def _tables(sweep: Sweep, folder: Path) -> list[Path]:
+def _write_tables(sweep: Sweep, folder: Path) -> list[Path]:
     summary = sweep.summary.copy()
     summary.insert(0, "parameter", sweep.parameter or "-")
-    trials = sweep.trials.drop(columns=["vi"]).rename(columns={"value": sweep.name})
-    curves = sweep.curves.assign(value=[sweep.labels[int(v)] for v in sweep.curves["vi"]])
+    trials = sweep.trials.drop(columns=["value_index"]).rename(columns={"value": sweep.name})
+    curves = sweep.curves.assign(value=[sweep.labels[int(v)] for v in sweep.curves["value_index"]])
     curves = curves[["value", "seed", "number", "step", "mean_reward", "wall_time", "episodes"]]
     curves = curves.rename(columns={"value": sweep.name, "number": "trial"})
-    bands = sweep.bands.assign(value=[sweep.labels[int(v)] for v in sweep.bands["vi"]])
+    bands = sweep.bands.assign(value=[sweep.labels[int(v)] for v in sweep.bands["value_index"]])
     bands = bands[["value", "step", "n", "mean", "sd", "low", "high", "wall_time"]]
     bands = bands.rename(columns={"value": sweep.name, "low": "ci_low", "high": "ci_high"})
     frames: list[tuple[str, pd.DataFrame]] = [("summary.csv", summary), ("trials.csv", trials),
                                               ("curves.csv", curves), ("curves_mean.csv", bands)]
     return write_csvs(folder, frames)
+
+
+def evaluated_text(sweep: Sweep) -> str:
+    """The per-run measures of runs scored by evaluation
+    (:data:`kraby_study.records.attributes.RUN_MEASURES`): what each is, where summary.csv
+    holds it, and each root-mean-square measure by value."""
+    measured = [m for m in RUN_MEASURES if m.evaluated]
+    what = "; ".join(f"{', '.join(m.columns)}: {m.text}" for m in measured)
+    by_value = " ".join(
+        f"{m.column} by value: " + "; ".join(
+            f"{row.value} {number(row.measures.get(m.column, math.nan), 3)}"
+            for row in sweep.rows) + "."
+        for m in measured if m.summary == "rms")
+    return f"Beside it in summary.csv, and read by no answer: {what}. {by_value}"
 
 
 def describe_sweep(sweep: Sweep) -> str:
@@ -519,17 +528,11 @@ def describe_sweep(sweep: Sweep) -> str:
         if sweep.by_evaluation:
             episodes = definition.get("eval_episodes")
             drawn = ("drawn from its own seed's evaluation stream, so none is an episode its "
-                     "source selected on; evaluation se: the standard error a run's score "
-                     "carries from its episodes (root mean square over the seeds)"
-                     if stored_eval_set(definition) == "run" else
-                     "every run shares (one fixed set, as stored before runs drew their own)")
+                     "source selected on" if stored_eval_set(definition) == "run" else
+                     "that every run shares (one fixed set)")
             scored = (f" Scored by evaluation: a run's final score is its deterministic "
-                      f"policy's mean return over {episodes} evaluation episodes {drawn}; the "
-                      f"training reward ({TRAINING_SCORE}; train_mean, train_sd, train_low, "
-                      "train_high) and the evaluation se (eval_se) are in summary.csv beside "
-                      "it, and no answer reads them. Evaluation se by value: "
-                      + "; ".join(f"{row['value']} {number(row['eval_se'], 3)}"
-                                  for _, row in sweep.summary.iterrows()) + ".")
+                      f"policy's mean return over {episodes} evaluation episodes {drawn}. "
+                      f"{evaluated_text(sweep)}")
         return (f"Confirmation of {len(sweep.values)} configurations{origin} on {fresh}"
                 f"{budget}. Status: {sweep.status()}.{scored}")
     if not sweep.parameter:
@@ -547,9 +550,9 @@ def selection_text(sweep: Sweep) -> str | None:
     if not sweep.parameter:
         return None
     rule = f"rule {sweep.rule}: {RULE_TEXT[sweep.rule]}"
-    chosen = sweep.summary.index[sweep.summary["selected"].astype(bool)]
-    if len(chosen):
-        return f"Selected ({rule}): {sweep.labels[int(chosen[0])]}."
+    chosen = [value_index for value_index, r in enumerate(sweep.rows) if r.selected]
+    if chosen:
+        return f"Selected ({rule}): {sweep.labels[chosen[0]]}."
     if not sweep.finished:
         return f"Selected ({rule}): none until the {sweep.counts['pending']} pending run(s) end."
     return f"Selected ({rule}): none, no run is complete."
@@ -598,9 +601,9 @@ def result_text(sweep: Sweep) -> str:
     if best is None:
         return "no complete run"
     if not sweep.parameter:
-        return _mean_text(sweep.summary.iloc[best])
-    chosen = sweep.summary.index[sweep.summary["selected"].astype(bool)]
-    picked = _label(sweep, int(chosen[0])) if len(chosen) else "none yet"
+        return _mean_text(sweep.rows[best])
+    chosen = [value_index for value_index, r in enumerate(sweep.rows) if r.selected]
+    picked = _label(sweep, chosen[0]) if chosen else "none yet"
     return f"best {_label(sweep, best)}; selected {picked}"
 
 
@@ -619,12 +622,12 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
     folder.mkdir(parents=True, exist_ok=True)
     report = StudyReport(name=sweep.data.name, kind=sweep.data.kind, folder=folder,
                          status=sweep.status(), finished=sweep.finished)
-    figures: list[tuple[str, Any]] = [("learning_curves", sweep_plots.learning_curves),
-                                      ("final_score", sweep_plots.final_score),
-                                      ("wallclock", sweep_plots.wallclock)]
+    figures: list[tuple[str, Any]] = [("learning_curves", sweep_plots.draw_learning_curves),
+                                      ("final_score", sweep_plots.draw_final_score),
+                                      ("wallclock", sweep_plots.draw_wallclock)]
     if len(sweep.values) > 1:
-        figures.append(("training_time", sweep_plots.training_time))
-        figures += [(stem, getattr(sweep_plots, stem)) for stem in NEW_FIGURES]
+        figures.append(("training_time", sweep_plots.draw_training_time))
+        figures += [(stem, getattr(sweep_plots, f"draw_{stem}")) for stem in NEW_FIGURES]
     images: list[Block] = []
     if (sweep.trials["outcome"] == Outcome.COMPLETE).any():
         with styled():
@@ -641,7 +644,7 @@ def write_sweep(sweep: Sweep, folder: Path, rel: str, fmt: str) -> StudyReport:
                 images.append(Image(f"{rel}/{path.name}", stem.replace("_", " "), caption))
     else:
         report.notes.append("no complete run yet: no figures")
-    tables = _tables(sweep, folder)
+    tables = _write_tables(sweep, folder)
     said = Items(verdict_lines(sweep))
     _, winner = confirm_blocks(sweep)
     warning = resolution_text(sweep)
@@ -670,7 +673,7 @@ def policy_candidates(sweep: Sweep) -> list[tuple[str, dict[str, Any], str]]:
     if best is None:
         return []
     rows = sweep.trials
-    done = rows[(rows["outcome"] == Outcome.COMPLETE) & (rows["vi"] == best)]
+    done = rows[(rows["outcome"] == Outcome.COMPLETE) & (rows["value_index"] == best)]
     done = done.sort_values("final_score", ascending=False)
     trials = {t.number: t for t in sweep.data.trials}
     out = []

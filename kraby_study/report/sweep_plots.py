@@ -12,6 +12,7 @@ raced study, the curves of the values the race dropped are dashed.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,7 @@ from matplotlib.patches import Patch
 
 from kraby_study.answers.sweep_evidence import Sweep
 from kraby_study.decision.intervals import SHORT_INTERVAL_NAME, SHORT_IQM_INTERVAL_NAME
+from kraby_study.decision.summary import ValueSummary
 from kraby_study.records.stored import Outcome
 from kraby_study.report.style import (
     BEST_COLOUR,
@@ -53,11 +55,11 @@ def _title(sweep: Sweep, what: str) -> str:
 
 
 def _draw_bands(ax: Axes, sweep: Sweep, x: str) -> None:
-    for vi, group in sweep.bands.groupby("vi", sort=True):
-        colour = sweep_colours(sweep)[int(vi)]
-        style = DROPPED_STYLE if int(vi) in sweep.dropped else "-"
+    for value_index, group in sweep.bands.groupby("value_index", sort=True):
+        colour = sweep_colours(sweep)[int(value_index)]
+        style = DROPPED_STYLE if int(value_index) in sweep.dropped else "-"
         ax.plot(group[x], group["mean"], color=colour, linestyle=style,
-                label=legend_label(sweep, int(vi)))
+                label=legend_label(sweep, int(value_index)))
         ax.fill_between(group[x], group["low"], group["high"], color=colour, alpha=0.18,
                         linewidth=0)
 
@@ -68,7 +70,7 @@ def _legend(fig: Figure, ax: Axes, sweep: Sweep, below: list[int] | None = None)
     note = BAND_NOTE + (f"\n{DROPPED_NOTE}" if sweep.dropped else "")
     if below:
         handles.append(Line2D([], [], linestyle=""))
-        labels.append("below the zoom (b):\n" + ", ".join(sweep.labels[vi] for vi in below))
+        labels.append("below the zoom (b):\n" + ", ".join(sweep.labels[i] for i in below))
     ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
               frameon=False, title=f"{title}\n{note}", alignment="left")
 
@@ -84,17 +86,17 @@ def late_limits(bands: pd.DataFrame, start: float) -> tuple[float, float, list[i
     late = bands[bands["step"] >= start]
     if late.empty:
         return np.nan, np.nan, []
-    level = late.groupby("vi")["mean"].mean().sort_values(ascending=False)
+    level = late.groupby("value_index")["mean"].mean().sort_values(ascending=False)
     keep = level.index[: max(3, int(np.ceil(len(level) / 2)))] if len(level) > 3 else level.index
-    shown = late[late["vi"].isin(keep)]
+    shown = late[late["value_index"].isin(keep)]
     low = np.nanmin(np.fmin(shown["low"].to_numpy(), shown["mean"].to_numpy()))
     high = np.nanmax(np.fmax(late["high"].to_numpy(), late["mean"].to_numpy()))
-    below = sorted(int(vi) for vi in level.index if vi not in keep and level[vi] < low)
+    below = sorted(int(i) for i in level.index if i not in keep and level[i] < low)
     pad = 0.08 * (high - low) if high > low else max(abs(high) * 0.05, 1e-6)
     return low - pad, high + pad, below
 
 
-def learning_curves(sweep: Sweep, path: Path) -> Path:
+def draw_learning_curves(sweep: Sweep, path: Path) -> Path:
     """Mean reward against environment steps, whole training and zoomed on its last quarter."""
     fig, (whole, zoom) = new_figure(WIDE, ncols=2)
     last = float(sweep.bands["step"].max()) if not sweep.bands.empty else 1.0
@@ -116,7 +118,7 @@ def learning_curves(sweep: Sweep, path: Path) -> Path:
     return save(fig, path)
 
 
-def wallclock(sweep: Sweep, path: Path) -> Path:
+def draw_wallclock(sweep: Sweep, path: Path) -> Path:
     """Mean reward against the wall-clock time at which the seeds reached each step."""
     fig, (ax,) = new_figure((WIDE[0] * 0.75, WIDE[1]))
     _draw_bands(ax, sweep, "wall_time")
@@ -143,42 +145,46 @@ def _value_axis(ax: Axes, sweep: Sweep) -> None:
 
 def _seed_points(ax: Axes, sweep: Sweep, points: pd.DataFrame, column: str) -> None:
     rng = np.random.default_rng(0)  # fixed jitter: a rerun draws the same figure
-    for vi, group in points.groupby("vi", sort=True):
+    for value_index, group in points.groupby("value_index", sort=True):
         values = group[column].dropna()
         jitter = rng.uniform(-0.12, 0.12, len(values))
-        ax.scatter(int(vi) - 0.1 + jitter, values, s=16, color=sweep_colours(sweep)[int(vi)],
+        ax.scatter(int(value_index) - 0.1 + jitter, values, s=16,
+                   color=sweep_colours(sweep)[int(value_index)],
                    alpha=0.55, linewidths=0, zorder=2)
 
 
-def _mean_mark(ax: Axes, sweep: Sweep, vi: int, mean: float, low: float, high: float) -> None:
+def _mean_mark(ax: Axes, sweep: Sweep, value_index: int, mean: float, low: float,
+               high: float) -> None:
     if not np.isfinite(mean):
         return
     err = None
     if np.isfinite(low) and np.isfinite(high):
         err = [[mean - low], [high - mean]]
-    ax.errorbar(vi + 0.18, mean, yerr=err, fmt="o", color=sweep_colours(sweep)[vi],
+    ax.errorbar(value_index + 0.18, mean, yerr=err, fmt="o",
+                color=sweep_colours(sweep)[value_index],
                 markeredgecolor="black", markeredgewidth=0.6, markersize=7, capsize=4,
                 elinewidth=1.6, zorder=3)
 
 
-def _seeds_and_means(ax: Axes, sweep: Sweep, column: str, mean: str, low: str,
-                     high: str, points: pd.DataFrame | None = None) -> None:
+def _seeds_and_means(ax: Axes, sweep: Sweep, column: str,
+                     location: Callable[[ValueSummary], tuple[float, float, float]],
+                     points: pd.DataFrame | None = None) -> None:
     """Every complete seed's ``column`` (from ``points``, by default the complete runs) as a
-    point, and the summary's ``mean`` (or other location) with its interval beside them."""
+    point, and each value's ``location`` (mean or IQM, low, high) beside them."""
     if points is None:
         points = sweep.trials[sweep.trials["outcome"] == Outcome.COMPLETE]
     _seed_points(ax, sweep, points, column)
-    for vi, row in sweep.summary.iterrows():
-        _mean_mark(ax, sweep, int(vi), row[mean], row[low], row[high])
+    for value_index, row in enumerate(sweep.rows):
+        _mean_mark(ax, sweep, value_index, *location(row))
 
 
 def _failed_marks(ax: Axes, sweep: Sweep) -> bool:
-    failed = sweep.summary["failed"]
-    for vi, count in failed.items():
+    for value_index, count in enumerate(r.failed for r in sweep.rows):
         if count:
-            ax.annotate(f"x {count} failed", (int(vi), 0.02), xycoords=("data", "axes fraction"),
+            ax.annotate(f"x {count} failed", (int(value_index), 0.02),
+                        xycoords=("data", "axes fraction"),
                         ha="center", va="bottom", fontsize=9, color=FAILED_COLOUR)
-    return bool(failed.any())
+    return any(r.failed for r in sweep.rows)
 
 
 MEAN_MARK = f"mean, {SHORT_INTERVAL_NAME}"
@@ -200,10 +206,11 @@ def _two_lines(label: str) -> str:
     return label.replace(" (", "\n(", 1)
 
 
-def training_time(sweep: Sweep, path: Path) -> Path:
+def draw_training_time(sweep: Sweep, path: Path) -> Path:
     """Training time of each run against the value, with mean and interval."""
     fig, (ax,) = new_figure(SINGLE)
-    _seeds_and_means(ax, sweep, sweep.time_attr, "time_mean", "time_low", "time_high")
+    _seeds_and_means(ax, sweep, sweep.time_attr,
+                     lambda r: (r.time_mean, r.time_low, r.time_high))
     _value_axis(ax, sweep)
     ax.set_ylabel(f"training time per run ({sweep.time_unit})")
     ax.set_ylim(bottom=0)
@@ -222,32 +229,32 @@ legend needs no entry for the shades); worse stays unshaded."""
 def _answers(sweep: Sweep) -> pd.Series:
     """Each value's answer against the best, as the summary's answer column writes it; empty
     for a study of one value, which is trivially the best."""
-    answers = sweep.summary["answer"].fillna("").astype(str)
+    answers = pd.Series([r.answer for r in sweep.rows], dtype=str)
     return answers if len(sweep.values) > 1 else answers.map(lambda _: "")
 
 
 def _shade_answers(ax: Axes, answers: pd.Series) -> None:
     """Shade each value's column by its answer and write the answer above it."""
-    for vi, answer in answers.items():
+    for value_index, answer in answers.items():
         colour, alpha = ANSWER_SHADES.get(answer, (None, 0.0))
         if colour is not None:
-            ax.axvspan(int(vi) - 0.45, int(vi) + 0.45, color=colour, alpha=alpha,
+            ax.axvspan(int(value_index) - 0.45, int(value_index) + 0.45, color=colour, alpha=alpha,
                        linewidth=0, zorder=0)
         if answer:
-            ax.annotate(answer, (int(vi), 0.98), xycoords=("data", "axes fraction"),
+            ax.annotate(answer, (int(value_index), 0.98), xycoords=("data", "axes fraction"),
                         ha="center", va="top", fontsize=9, color="#333333")
     if answers.astype(bool).any():
         ax.margins(y=0.15)
 
 
-def final_score(sweep: Sweep, path: Path) -> Path:
+def draw_final_score(sweep: Sweep, path: Path) -> Path:
     """Final score of each seed against the value, with each value's IQM (what the answers are
     about) and its interval; each value's column shaded by its answer against the best (best,
     equivalent, undecided; worse unshaded), the answer written above it."""
     several = len(sweep.values) > 1
     fig, (ax,) = new_figure(SINGLE if several else (SINGLE[0] * 0.6, SINGLE[1]))
     _shade_answers(ax, _answers(sweep))
-    _seeds_and_means(ax, sweep, "final_score", "iqm", "iqm_low", "iqm_high")
+    _seeds_and_means(ax, sweep, "final_score", lambda r: (r.iqm, r.iqm_low, r.iqm_high))
     _value_axis(ax, sweep)
     ax.set_ylabel("final score (mean evaluation return,\ndeterministic policy)"
                   if sweep.by_evaluation else
@@ -260,11 +267,12 @@ def final_score(sweep: Sweep, path: Path) -> Path:
     return save(fig, path)
 
 
-def sample_efficiency(sweep: Sweep, path: Path) -> Path:
+def draw_sample_efficiency(sweep: Sweep, path: Path) -> Path:
     """AUC (mean reward over the whole learning curve) of each seed against the value."""
     several = len(sweep.values) > 1
     fig, (ax,) = new_figure(SINGLE if several else (SINGLE[0] * 0.6, SINGLE[1]))
-    _seeds_and_means(ax, sweep, "auc", "auc_mean", "auc_low", "auc_high", points=sweep.seeds)
+    _seeds_and_means(ax, sweep, "auc", lambda r: (r.auc_mean, r.auc_low, r.auc_high),
+                     points=sweep.seeds)
     _value_axis(ax, sweep)
     ax.set_ylabel("AUC: mean episode reward\nover the whole learning curve")
     if _failed_marks(ax, sweep):
@@ -282,7 +290,7 @@ def _threshold_text(sweep: Sweep) -> str:
     return f"threshold: mean episode reward >= {sweep.threshold:.4g} ({how})"
 
 
-def time_to_threshold(sweep: Sweep, path: Path) -> Path:
+def draw_time_to_threshold(sweep: Sweep, path: Path) -> Path:
     """Env steps (a) and seconds (b) until each seed's curve first reached the threshold:
     every seed that reached it, the mean over those seeds with its interval, and how many of
     the complete seeds reached it; values where none did are marked."""
@@ -294,19 +302,20 @@ def time_to_threshold(sweep: Sweep, path: Path) -> Path:
     for ax, (column, label, title) in zip(axes, panels, strict=True):
         reached = seeds[seeds[column].notna()]
         _seed_points(ax, sweep, reached, column)
-        for vi, row in sweep.summary.iterrows():
-            mean, low, high = (sweep.reach.at[vi, f"{column}_{part}"]
+        for value_index, row in enumerate(sweep.rows):
+            mean, low, high = (sweep.reach.at[value_index, f"{column}_{part}"]
                                for part in ("mean", "low", "high"))
-            _mean_mark(ax, sweep, int(vi), mean, low, high)
-            if row["complete"] == 0:
+            _mean_mark(ax, sweep, value_index, mean, low, high)
+            if row.complete == 0:
                 continue
-            colour = FAILED_COLOUR if row["reached"] == 0 else "black"
-            ax.annotate(f"{row['reached']}/{row['complete']}", (int(vi), 1.0),
+            colour = FAILED_COLOUR if row.reached == 0 else "black"
+            ax.annotate(f"{row.reached}/{row.complete}", (value_index, 1.0),
                         xycoords=("data", "axes fraction"), ha="center", va="top", fontsize=9,
                         color=colour)
-            if row["reached"] == 0:
+            if row.reached == 0:
                 none_reached = True
-                ax.annotate("none\nreached", (int(vi), 0.04), xycoords=("data", "axes fraction"),
+                ax.annotate("none\nreached", (int(value_index), 0.04),
+                            xycoords=("data", "axes fraction"),
                             ha="center", va="bottom", fontsize=9, color=FAILED_COLOUR)
         _value_axis(ax, sweep)
         ax.set_ylabel(label)
@@ -329,26 +338,26 @@ def time_to_threshold(sweep: Sweep, path: Path) -> Path:
     return save(fig, path)
 
 
-def improvement(sweep: Sweep, path: Path) -> Path:
+def draw_improvement(sweep: Sweep, path: Path) -> Path:
     """Probability of improvement of the best value over each other value, with its Newcombe
     score-type interval, against the value; a line at 0.5 (no improvement either way)."""
     fig, (ax,) = new_figure(SINGLE)
     best = sweep.best
     ax.axhline(0.5, color=MUTED, linestyle="--", linewidth=1.2, zorder=1)
-    for vi, row in sweep.summary.iterrows():
-        vi = int(vi)
-        if vi == best:
-            ax.annotate("best", (vi, 0.5), ha="center", va="center", fontsize=10,
+    for value_index, row in enumerate(sweep.rows):
+        if value_index == best:
+            ax.annotate("best", (value_index, 0.5), ha="center", va="center", fontsize=10,
                         color=BEST_COLOUR, fontweight="bold")
             continue
-        p = row["p_improvement"]
+        p = row.p_improvement
         if not np.isfinite(p):
-            ax.annotate("n/a", (vi, 0.5), ha="center", va="center", fontsize=9, color=MUTED)
+            ax.annotate("n/a", (value_index, 0.5), ha="center", va="center", fontsize=9,
+                        color=MUTED)
             continue
         err = None
-        if np.isfinite(row["p_improvement_low"]) and np.isfinite(row["p_improvement_high"]):
-            err = [[p - row["p_improvement_low"]], [row["p_improvement_high"] - p]]
-        ax.errorbar(vi, p, yerr=err, fmt="o", color=sweep_colours(sweep)[vi],
+        if np.isfinite(row.p_improvement_low) and np.isfinite(row.p_improvement_high):
+            err = [[p - row.p_improvement_low], [row.p_improvement_high - p]]
+        ax.errorbar(value_index, p, yerr=err, fmt="o", color=sweep_colours(sweep)[value_index],
                     markeredgecolor="black", markeredgewidth=0.6, markersize=7, capsize=4,
                     elinewidth=1.6, zorder=3)
     _value_axis(ax, sweep)
@@ -366,16 +375,16 @@ def improvement(sweep: Sweep, path: Path) -> Path:
     return save(fig, path)
 
 
-def legend_label(sweep: Sweep, vi: int) -> str:
+def legend_label(sweep: Sweep, value_index: int) -> str:
     """A value as the legends write it: its label and the seeds behind its mean (and, for a
     value the race dropped, the round after which it was)."""
-    row = sweep.summary.iloc[vi]
-    text = f"{row['value']}  (n={row['complete']}"
-    for name in (Outcome.FAILED, Outcome.PRUNED):
-        if row[name]:
-            text += f", {row[name]} {name}"
+    row = sweep.rows[value_index]
+    text = f"{row.value}  (n={row.complete}"
+    for name, count in ((Outcome.FAILED, row.failed), (Outcome.PRUNED, row.pruned)):
+        if count:
+            text += f", {count} {name}"
     text += ")"
-    if vi in sweep.dropped:  # a second line: the legends sit beside the axes
-        text += f"\ndropped after round {sweep.dropped[vi].round}"
+    if value_index in sweep.dropped:  # a second line: the legends sit beside the axes
+        text += f"\ndropped after round {sweep.dropped[value_index].round}"
     return text
 

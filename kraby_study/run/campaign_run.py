@@ -37,7 +37,8 @@ RunStage = Callable[[DictConfig, StudyPlan], tuple[CommandRun, Tally]]
 
 def stage_plan(campaign: Campaign, stage: Stage) -> tuple[DictConfig, StudyPlan]:
     """A stage's config and plan, its earlier stages' winners read from the store."""
-    lookup = StoreWinners(names={s.study: s.name for s in campaign.before(stage)})
+    lookup = StoreWinners(names={s.study: s.name for s in campaign.before(stage)},
+                          recorders=[s.name for s in campaign.stages])
     cfg = resumed_stage(campaign, stage, lookup)
     inputs = [i.stored() for i in lookup.inputs if i.setting != stage.parameter]
     plan = dataclasses.replace(expand_study(cfg), inputs=inputs,
@@ -80,7 +81,8 @@ def check_stored(campaign: Campaign) -> None:
 
 
 def selected_text(cfg: DictConfig, stage: Stage) -> str:
-    """``n_epochs=10 (fastest_tied; documented 30)`` from the stored stage."""
+    """``n_epochs=10 (fastest_equivalent, mean final score -0.5; documented 30)`` from the
+    stored stage."""
     with opened(str(cfg.storage), create=False, writer=False) as store:
         chosen = sweep_selection(store.load(stage.name), CompareOptions.of(cfg))
     if chosen is None:

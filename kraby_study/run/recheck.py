@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 from optuna.trial import FrozenTrial, TrialState
 
-from kraby_study.records.attributes import TrialAttrs, TrialResult
+from kraby_study.records.attributes import RUN_MEASURES, TrialAttrs, TrialResult
 from kraby_study.records.stored import Outcome, counted, outcome
 from kraby_study.records.values import ranking, score
 
@@ -108,7 +108,7 @@ def first_seed(original: FrozenTrial) -> int:
 
 def combined(original: FrozenTrial, result: TrialResult) -> TrialResult:
     """A complete recheck's result with the original trial's seeds first: every seed's score,
-    the score their mean (likewise the training reward and the evaluation errors). Its CPU
+    the score their mean (the training reward too), every per-seed measure both lists. Its CPU
     seconds, env steps and times stay its own, so the search's spending counts each seed once.
     A recheck that did not complete is returned as it is."""
     before = TrialAttrs.of(original)
@@ -119,7 +119,11 @@ def combined(original: FrozenTrial, result: TrialResult) -> TrialResult:
                                          (result.train_reward, result.scores)) if r is not None]
     train_reward = (math.fsum(r * n for r, n in rewards) / sum(n for _, n in rewards)
                     if rewards else None)
-    errors = ([*before.eval_errors, *result.eval_errors]
-              if before.eval_errors and result.eval_errors else result.eval_errors)
+    # Every per-seed measure (the evaluation errors and sds) lists the original's seeds first.
+    per_seed = {}
+    for measure in RUN_MEASURES:
+        if measure.per_seed:
+            old, new = getattr(before, measure.attribute), getattr(result, measure.attribute)
+            per_seed[measure.attribute] = [*old, *new] if old and new else new
     return dataclasses.replace(result, scores=scores, final_score=math.fsum(scores) / len(scores),
-                               train_reward=train_reward, eval_errors=errors)
+                               train_reward=train_reward, **per_seed)

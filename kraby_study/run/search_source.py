@@ -381,8 +381,8 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
     ledger.update(StudyAttrs(sampler=str(cfg.search.sampler), sampler_seed=int(cfg.search.seed),
                              planned=int(cfg.search.trials), cpu_budget=search_cpu_budget(cfg)))
     if len(objectives(cfg)) == 2 and ledger.attrs.select is None and not ledger.trials():
-        # A new front is selected by evidence; a search stored before rules were stored keeps
-        # fastest_tied (answers.search_front.front_rule), so it selects as it did.
+        # A new front is selected by evidence; a stored search's attributes are not rewritten
+        # (answers.search_front.front_rule answers one without a rule by the same rule).
         ledger.update(StudyAttrs(select=SelectRule.FASTEST_EQUIVALENT.value))
     opening = take_opening(ledger)
     if opening:  # resumed or joined: not the random trials an earlier command drew

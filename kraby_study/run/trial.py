@@ -64,7 +64,7 @@ def build_model(spec: TrialSpec, env: Any, seed: int, logs: Path | None = None) 
     arch = list(ppo["net_arch"])
     policy_kwargs: dict[str, Any] = {"net_arch": {"pi": arch, "vf": arch},
                                      "activation_fn": activation}
-    # Only settings away from SB3's defaults are passed: the same call as before they existed.
+    # Only settings away from SB3's defaults are passed: SB3 keeps its own default otherwise.
     for name in ("ortho_init", "log_std_init"):
         if name in ppo:
             policy_kwargs[name] = ppo[name]
@@ -152,6 +152,8 @@ class _Seed:
     train_reward: float | None = None
     eval_error: float | None = None
     """The standard error of an evaluation score from its episodes."""
+    eval_sd: float | None = None
+    """The sd of the returns of its evaluation episodes (NaN below 2 episodes)."""
     model: Any = None
     normalizer: Any = None
     """The run's VecNormalize (its statistics as training left them), or None."""
@@ -191,6 +193,8 @@ def _score(spec: TrialSpec, run: _Seed, seed: int) -> None:
         evaluation = adapter_for(env).evaluate(run.model, env, spec.eval_episodes,
                                                run.normalizer, seed=own)
         run.score, run.eval_error = evaluation.mean, evaluation.error
+        returns = np.asarray(evaluation.returns, dtype=float)
+        run.eval_sd = float(np.std(returns, ddof=1)) if len(returns) > 1 else math.nan
     else:
         run.score = run.train_reward
     if run.score is None or not math.isfinite(run.score):
@@ -288,6 +292,8 @@ def _result(spec: TrialSpec, runs: list[_Seed], started: str, seconds: float,
         if spec.objective == "evaluation":
             result.eval_errors = [float(r.eval_error) for r in runs  # type: ignore[arg-type]
                                   if r.eval_error is not None]
+            result.eval_sds = [float(r.eval_sd) for r in runs  # type: ignore[arg-type]
+                               if r.eval_sd is not None]
         if spec.model_path:
             best = max(runs, key=lambda r: float(r.score or -math.inf))
             Path(spec.model_path).parent.mkdir(parents=True, exist_ok=True)

@@ -43,7 +43,7 @@ if TYPE_CHECKING:
 ROW_ATTRS = ("key", "retry_of", "failure", "wall_time", "cpu_time", "env_steps", "scores",
              "enqueued")
 """The trial attributes a row holds: what counting reads (key, retry_of, failure), the
-fastest_tied rule's training time (wall_time; cpu_time on a confirm study), the env steps a
+fastest_equivalent rule's training time (wall_time; cpu_time on a confirm study), the env steps a
 dry run's estimate divides by wall_time (env_steps), the seeds' scores a two-objective
 search's ties are decided on (scores), and which trial is its floor (enqueued)."""
 SQLITE_PATIENCE = 60
