@@ -8,7 +8,7 @@ FILE is an rl-zoo3 hyperparameter file as ``kraby-study best --format zoo`` writ
 its settings for the id and rl-zoo3's own (its installed ``hyperparams/ppo.yml``) are trained
 by rl-zoo3's own trainer, as a user of rl-zoo3 would: ``python -m rl_zoo3.train --algo ppo
 --env ID --seed S [-conf FILE] [-n N] --eval-freq -1 --vec-env dummy --num-threads 1 -f DIR``,
-one subprocess a run, each in its own folder, on seeds the project never used (500 and up by
+one subprocess a run, each in its own folder, on seeds the project never used (600-619 by
 default), the two settings alternating seed by seed. A run's CPU seconds are the child's
 resource usage (user + system, from ``os.wait4``): Python's start-up and imports included, a
 few seconds a run alike for both settings. A run whose folder already holds its model and its
@@ -55,7 +55,7 @@ from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import yaml
@@ -69,8 +69,11 @@ EVAL_ENVS = 10
 """A model is scored on EVAL_ENVS envs stepped together, the i-th seeded EVAL_SEED_OFFSET +
 100 x (training seed) + i: apart from every training env (rl-zoo3 seeds S, S + 1, ... for
 seed S) and from other seeds' evaluation envs, and the same for both settings of a seed."""
-SEEDS = list(range(500, 520))
-"""Default seeds: 20 the project's studies never used (they train 0-99 and confirm 1000 up)."""
+SEEDS = list(range(600, 620))
+"""Default seeds: 20 the project's studies do not train by default (its runs start at seed 0,
+its confirms at 1000). Not 500-513: the first such rerun (issue 83) trained those with
+rl-zoo3's trainer, which repeats a run from its seed on one machine, so they would give its
+runs again rather than new evidence."""
 RESAMPLES = 9_999
 LEVEL = 0.95
 ALPHA = 0.05
@@ -104,7 +107,7 @@ class Run:
     folder: str = ""
 
 
-def fail(message: str) -> None:
+def fail(message: str) -> NoReturn:
     """Stop on bad input: one line, exit code 2."""
     print(f"bench_zoo_rerun: {message}", file=sys.stderr)
     raise SystemExit(2)
@@ -126,6 +129,10 @@ def read_entry(path: Path, env_id: str | None) -> tuple[str, dict[str, Any]]:
         env_id = str(next(iter(table)))
     if env_id not in table:
         fail(f"{path} has no entry for {env_id} (it has {', '.join(map(str, table))})")
+    import gymnasium
+
+    if env_id not in gymnasium.registry:
+        fail(f"{env_id} is not a registered Gymnasium id")
     return env_id, dict(table[env_id])
 
 
@@ -298,6 +305,11 @@ def number(value: float, digits: int = 1) -> str:
     return "-" if not math.isfinite(value) else f"{value:,.{digits}f}"
 
 
+def p_text(p: float) -> str:
+    """A p-value to 3 decimals, '< 0.001' below; '-' for NaN."""
+    return "-" if not math.isfinite(p) else "< 0.001" if p < 0.001 else f"{p:.3f}"
+
+
 def row(label: str, source: str, runs: list[Run], fail_below: float | None) -> list[str]:
     """A setting's table row from its runs."""
     scored = np.asarray([r.score for r in runs if math.isfinite(r.score)], dtype=float)
@@ -344,11 +356,11 @@ def compare(first: list[Run], second: list[Run], names: tuple[str, str],
             else "below 4 seeds nothing is trimmed, so it is Welch's t-test")
     print(f"test: Yuen's trimmed-mean t-test (scipy.stats.ttest_ind trim=0.25, "
           f"equal_var=False; {trim}), alternative {alternative} ({said}): "
-          f"p {number(p, 3)}; alpha {ALPHA}: {answer}; n {len(a)} and {len(b)}")
+          f"p {p_text(p)}; alpha {ALPHA}: {answer}; n {len(a)} and {len(b)}")
     cpu = [np.mean([r.cpu for r in runs]) if runs else math.nan for runs in (first, second)]
     print(f"CPU s a run, {names[0]} / {names[1]}: {number(cpu[0] / cpu[1], 2)}")
     return (f"bench_zoo_rerun: IQM difference {number(difference)} [{number(low)}, "
-            f"{number(high)}]; Yuen p {number(p, 3)} (n {len(a)} and {len(b)})")
+            f"{number(high)}]; Yuen p {p_text(p)} (n {len(a)} and {len(b)})")
 
 
 def write_rows(path: Path, env_id: str, runs: list[Run]) -> None:
@@ -369,7 +381,7 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
                         "zoo)")
     parser.add_argument("--env", help="env id (default: the file's only id)")
     parser.add_argument("--seeds", type=int, nargs="+", default=SEEDS,
-                        help="training seeds (default 500-519)")
+                        help="training seeds (default 600-619)")
     parser.add_argument("--steps", type=int, help="env steps a run (rl-zoo3's -n; default: "
                         "each setting's n_timesteps)")
     parser.add_argument("--episodes", type=int, default=200, help="evaluation episodes a model")
