@@ -67,6 +67,9 @@ SMOKE = [
                  id="bench_ray"),
     pytest.param("bench_ray_fault.py", ["--steps", "1024", "--seeds", "1", "--after", "2"],
                  "node lost at", marks=slow, id="bench_ray_fault"),
+    pytest.param("bench_zoo_rerun.py", [str(ROOT / "docs/results/pendulum_beats_zoo.yml"),
+                                        "--smoke"],
+                 "bench_zoo_rerun: IQM difference", marks=slow, id="bench_zoo_rerun"),
 ]
 
 
@@ -87,6 +90,93 @@ def test_every_benchmark_is_smoke_tested_and_documented() -> None:
     pages = "".join(page.read_text() for page in (ROOT / "docs/benchmarks").glob("*.md")
                     if page.name != "index.md")
     assert [name for name in sorted(scripts) if name not in pages] == []
+
+
+@slow
+def test_zoo_rerun_sets_the_confirm_of_the_same_settings_beside(tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]
+                                                               ) -> None:
+    """bench_zoo_rerun finds in a confirm study the configurations whose stored settings are a
+    handed-back file's and rl-zoo3's own (settings as a confirm stores them, composed from
+    the config; a third configuration differs in gamma alone), with their seeds, scores and
+    CPU seconds; a file whose settings the confirm does not hold is refused in one line."""
+    pytest.importorskip("rl_zoo3")
+    import csv
+    import json
+
+    import yaml
+    from conftest import sqlite_url
+    from optuna.distributions import CategoricalDistribution
+    from optuna.trial import TrialState, create_trial
+    from synthetic import add_trials, define
+
+    from kraby_study.config.compose import compose_config
+    from kraby_study.config.zoo import translate, zoo_version
+    from kraby_study.plan.settings import resolved_settings
+    from kraby_study.records.attributes import TrialAttrs
+    from kraby_study.store.store import Store
+
+    sys.path.insert(0, str(BENCHMARKS))
+    import bench_zoo_rerun as rerun
+
+    env_id, pick = rerun.read_entry(ROOT / "docs/results/mountaincar_pick.yml", None)
+    _, zoo = rerun.zoo_entry(env_id)
+    base = ["env=gym", f"env.id={env_id}", "ppo=zoo"]
+    read = translate(env_id, pick)
+    as_pick = [*base, *(f"ppo.{k}={json.dumps(v)}" for k, v in read.ppo.items()),
+               *(f"env.{k}={json.dumps(v)}" for k, v in read.env.items())]
+    settings = {"zoo": resolved_settings(compose_config(base)),
+                "t34": resolved_settings(compose_config(as_pick)),
+                "t7": resolved_settings(compose_config([*as_pick, "ppo.gamma=0.99"]))}
+    assert settings["t34"] != settings["zoo"]
+    labels = list(settings)
+    url = sqlite_url(tmp_path / "k.db")
+    store = Store(url)
+    try:
+        define(store, "mcc-confirm", "confirm", {"kind": "confirm", "parameter": "config",
+                                                 "values": labels}, 6)
+        add_trials(store, "mcc-confirm", [create_trial(
+            state=TrialState.COMPLETE, value=10.0 * vi + seed, params={"config": label},
+            distributions={"config": CategoricalDistribution(labels)},
+            user_attrs=TrialAttrs(key=f"v{vi}-s{seed}", seed=1000 + seed,
+                                  settings=settings[label], final_score=10.0 * vi + seed,
+                                  cpu_time=5.0 + vi).stored())
+            for vi, label in enumerate(labels) for seed in range(2)])
+    finally:
+        store.close()
+
+    runs, found = rerun.confirm_runs(url, "mcc-confirm", env_id, {"pick": pick, "zoo": zoo})
+    assert found == {"pick": "t34", "zoo": "zoo"}
+    assert sorted((r.setting, r.seed, r.score, r.cpu) for r in runs) == [
+        ("pick", 1000, 10.0, 6.0), ("pick", 1001, 11.0, 6.0),
+        ("zoo", 1000, 0.0, 5.0), ("zoo", 1001, 1.0, 5.0)]
+    other = tmp_path / "other.yml"
+    other.write_text(yaml.safe_dump({env_id: {**pick, "gamma": 0.5}}))
+    runs, found = rerun.confirm_runs(url, "mcc-confirm", env_id, {"other": {**pick,
+                                                                             "gamma": 0.5}})
+    assert (runs, found) == ([], {})
+    with pytest.raises(SystemExit) as stopped:  # before anything trains
+        rerun.main([str(other), "--storage", url, "--confirm", "mcc-confirm", "--folder",
+                    str(tmp_path / "runs")])
+    assert stopped.value.code == 2 and not (tmp_path / "runs").exists()
+    assert capsys.readouterr().err == ("bench_zoo_rerun: confirm 'mcc-confirm' holds no "
+                                       "configuration with the settings of other.yml for "
+                                       f"{env_id}\n")
+
+    out = tmp_path / "rows.csv"
+    rerun.main([str(ROOT / "docs/results/mountaincar_pick.yml"), "--smoke", "--storage", url,
+                "--confirm", "mcc-confirm", "--folder", str(tmp_path / "runs"), "--out",
+                str(out)])
+    table = capsys.readouterr().out
+    assert ("| mountaincar_pick.yml | confirm 'mcc-confirm': t34 | 2 | 10.5 | 10.5 [10.0, 11.0] "
+            "| - | 6.0 |") in table
+    assert (f"| rl-zoo3 {zoo_version()} ppo.yml | confirm 'mcc-confirm': zoo | 2 | 0.5 |"
+            in table)
+    rows = list(csv.DictReader(out.open()))
+    assert [(r["source"], r["seed"]) for r in rows] == [
+        ("rerun", "500"), ("rerun", "500"), *[("confirm 'mcc-confirm': t34", s)
+                                              for s in ("1000", "1001")],
+        *[("confirm 'mcc-confirm': zoo", s) for s in ("1000", "1001")]]
 
 
 EXPERIMENTS = sorted(path.name for path in (ROOT / "experiments").glob("*.py"))
