@@ -1,0 +1,129 @@
+"""A study store opened by URL: the studies it holds, each study's runs and answers.
+
+Each call reads the store afresh and closes it, so a notebook sees what a command running
+elsewhere has written since; nothing here writes. Listing the studies reads no Optuna.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
+
+from kraby_study.api.answers import Answers, Runs, read_answers, read_runs
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from kraby_study.answers.standing import StudyStanding
+
+
+@dataclass(frozen=True)
+class StudyInfo:
+    """Where one stored study stands.
+
+    Attributes:
+        name: Its name in the store.
+        kind: ``sweep``, ``train``, ``search``, ``confirm`` or ``optuna``.
+        complete: Complete runs (or trials).
+        failed: Failed runs.
+        pruned: Pruned runs.
+        running: Runs running now, here or elsewhere.
+        planned: Runs planned (a search: its trial total).
+        ran_on: Where its runs ran (``1 node``, ``3 nodes, 2 CPU models``; ``-`` for none).
+        selected: What it selects so far, in a few words (``-`` when nothing is complete).
+    """
+
+    name: str
+    kind: str
+    complete: int
+    failed: int
+    pruned: int
+    running: int
+    planned: int
+    ran_on: str
+    selected: str
+
+
+def study_info(standing: StudyStanding) -> StudyInfo:
+    """A study's standing as the API hands it out."""
+    tally = standing.tally
+    return StudyInfo(name=standing.name, kind=standing.kind.value, complete=tally.complete,
+                     failed=tally.failed, pruned=tally.pruned, running=tally.running,
+                     planned=tally.planned, ran_on=standing.placement.text(),
+                     selected=standing.selected)
+
+
+@dataclass(frozen=True)
+class StudyStore:
+    """The studies of one store (SQLite file or PostgreSQL database), read-only.
+
+    Attributes:
+        url: The store's database URL.
+    """
+
+    url: str
+
+    def studies(self) -> list[StudyInfo]:
+        """Every study in the store with its progress, in the order Optuna lists them.
+
+        Raises:
+            StoreError: No store at the URL, or it cannot be read; one line.
+        """
+        from kraby_study.answers.standing import store_standings
+
+        return [study_info(s) for s in store_standings(self.url)]
+
+    def studies_frame(self) -> pd.DataFrame:
+        """`studies` as a frame, one row per study."""
+        import pandas as pd
+
+        return pd.DataFrame([asdict(s) for s in self.studies()],
+                            columns=list(StudyInfo.__dataclass_fields__))
+
+    def runs(self, study: str) -> Runs:
+        """A study's counted runs (a sweep's value x seed, a search's trials).
+
+        Raises:
+            StoreError: No store, or no study of that name; one line.
+        """
+        return read_runs(self.url, study)
+
+    def answers(self, study: str, margin: float | None = None, select: str | None = None,
+                min_seeds: int = 2) -> Answers:
+        """A sweep's (or confirm study's) answers: each value best, equivalent, worse or
+        undecided against the best, and the value its rule selects.
+
+        Args:
+            study: The stored study's name.
+            margin: The margin as a fraction of the best's |IQM| (default 0.2).
+            select: A selection rule to apply instead of the study's stored one.
+            min_seeds: The fewest complete seeds a value needs to be compared.
+
+        Raises:
+            StoreError: No store, no study of that name, or a search; one line.
+        """
+        return read_answers(self.url, study, margin, select, min_seeds)
+
+
+def open_store(url: str = "sqlite:///studies/kraby.db") -> StudyStore:
+    """Open a study store by its database URL, to read its studies.
+
+    Args:
+        url: ``sqlite:///PATH`` or a PostgreSQL URL (default: the commands' default store).
+
+    Returns:
+        The `StudyStore`; nothing is read until one of its methods is called.
+
+    Raises:
+        ConfigError: The URL is not a supported database URL; one line.
+
+    Example:
+        >>> import kraby_study as ks
+        >>> store = ks.open_store("sqlite:///example.db")
+        >>> [s.name for s in store.studies()][:1]
+        ['clip_range']
+    """
+    from kraby_study.store.url import check_url
+
+    check_url(url)
+    return StudyStore(url)
