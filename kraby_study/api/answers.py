@@ -229,7 +229,7 @@ def read_runs(url: str, name: str) -> Runs:
     with opened_for_reading(url) as store:
         data = load_study(store, select_studies(store, name)[0])
     labels: dict[int, str] = {}
-    if data.kind.swept or data.kind.value in ("train", "confirm"):
+    if data.kind.seeded:
         rows = sweep_evidence(data).trials
         labels = dict(zip(rows["number"], rows["value"], strict=True))
     runs = []
@@ -260,7 +260,7 @@ def read_answers(url: str, name: str, margin: float | None = None,
                              min_seeds=min_seeds, select=select)
     with opened_for_reading(url) as store:
         data = load_study(store, select_studies(store, name)[0])
-        if not (data.kind.swept or data.kind.value in ("train", "confirm")):
+        if not data.kind.seeded:
             raise StoreError(f"study {name!r} is a {data.kind.value}: its trials are not "
                              "answered against a best; read its runs")
         sweep = build_sweep(data, options)

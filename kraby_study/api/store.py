@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING
 
 from kraby_study.api.answers import Answers, Runs, read_answers, read_runs
+from kraby_study.config.storage import DEFAULT_STORAGE
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -105,7 +106,7 @@ class StudyStore:
         return read_answers(self.url, study, margin, select, min_seeds)
 
 
-def open_store(url: str = "sqlite:///studies/kraby.db") -> StudyStore:
+def open_store(url: str = DEFAULT_STORAGE) -> StudyStore:
     """Open a study store by its database URL, to read its studies.
 
     Args:
