@@ -18,7 +18,7 @@ from optuna.trial import TrialState, create_trial
 from synthetic import DIVERGED, Run, add_search, add_sweep, add_trials, define, sweep_runs
 
 from kraby_study.answers.standing import StudyStanding, store_standings, study_standing
-from kraby_study.api.store import study_info
+from kraby_study.api.answers import study_info
 from kraby_study.cli import standings_table
 from kraby_study.config.compose import compose_config
 from kraby_study.config.schema import KrabyConfig

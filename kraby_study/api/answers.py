@@ -1,5 +1,6 @@
-"""The API's one reader of answers: a stored study's runs and its four answers as typed
-objects, and the same four answers over any seed scores.
+"""The API's one reader of the answers layer: where each stored study stands, a study's runs,
+its four answers and what its rule selected, as typed objects; and the same four answers over
+any seed scores.
 
 Every value of a sweep is answered on the interquartile mean (IQM) of its seeds' final
 scores, against the value with the highest IQM, at a margin that is a fraction of the best's
@@ -8,7 +9,8 @@ the best: multiple comparisons with the best with a margin, Edwards and Hsu 1983
 and Matejcik's Bonferroni form); **worse** (shown below it by more than the margin: a closed
 Holm step-down); **undecided** (neither). Each kind of wrong answer has probability at most
 alpha. The comparison itself is `kraby_study.decision.comparison.compare`; this module
-only reads it, and the stored studies through `kraby_study.answers`.
+only reads it, and the stored studies through `kraby_study.answers`: every other module of
+the API that needs an answer asks this one.
 """
 
 from __future__ import annotations
@@ -23,12 +25,50 @@ from kraby_study.errors import StoreError
 if TYPE_CHECKING:
     import pandas as pd
 
+    from kraby_study.answers.selected import Selection
+    from kraby_study.answers.standing import StudyStanding
     from kraby_study.decision.comparison import Comparison
 
 MARGIN = 0.2
 """The default margin, as a fraction of the best value's |IQM| (``compare.margin``)."""
 ALPHA = 0.05
 """The default error rate of each kind of wrong answer."""
+
+
+@dataclass(frozen=True)
+class StudyInfo:
+    """Where one stored study stands.
+
+    Attributes:
+        name: Its name in the store.
+        kind: ``sweep``, ``train``, ``search``, ``confirm`` or ``optuna``.
+        complete: Complete runs (or trials).
+        failed: Failed runs.
+        pruned: Pruned runs.
+        running: Runs running now, here or elsewhere.
+        planned: Runs planned (a search: its trial total).
+        ran_on: Where its runs ran (``1 node``, ``3 nodes, 2 CPU models``; ``-`` for none).
+        selected: What it selects so far, in a few words (``-`` when nothing is complete).
+    """
+
+    name: str
+    kind: str
+    complete: int
+    failed: int
+    pruned: int
+    running: int
+    planned: int
+    ran_on: str
+    selected: str
+
+
+def study_info(standing: StudyStanding) -> StudyInfo:
+    """A study's standing as the API hands it out."""
+    tally = standing.tally
+    return StudyInfo(name=standing.name, kind=standing.kind.value, complete=tally.complete,
+                     failed=tally.failed, pruned=tally.pruned, running=tally.running,
+                     planned=tally.planned, ran_on=standing.placement.text(),
+                     selected=standing.selected)
 
 
 @dataclass(frozen=True)
@@ -276,3 +316,27 @@ def read_answers(url: str, name: str, margin: float | None = None,
         selected = value_label(chosen.value)
     return _answers(sweep.comparison, scores, labels, answers_name(ALPHA), study=data.name,
                     parameter=sweep.parameter or None, rule=str(sweep.rule), selected=selected)
+
+
+def read_studies(url: str) -> list[StudyInfo]:
+    """Where every study of a store stands (`kraby_study.api.store.StudyStore.studies`), read
+    without Optuna."""
+    from kraby_study.answers.standing import store_standings
+
+    return [study_info(s) for s in store_standings(url)]
+
+
+def read_selection(url: str, study: str, campaign: str | None, margin: float | None,
+                   select: str | None, min_seeds: int) -> Selection:
+    """What a stored study's rule selected, or what a finished campaign ends with
+    (`kraby_study.api.settings_files.best`)."""
+    from kraby_study.answers.campaign import campaign_selection
+    from kraby_study.answers.selected import require_selection
+    from kraby_study.decision.comparison import CompareOptions
+    from kraby_study.store.store import opened
+
+    options = CompareOptions(margin=MARGIN if margin is None else float(margin),
+                             min_seeds=min_seeds, select=select)
+    with opened(url, create=False, writer=False) as store:
+        return (campaign_selection(store, campaign, options) if campaign
+                else require_selection(store.load(study), options))

@@ -67,7 +67,7 @@ def confirm(config: Config, stream: TextIO | None = None) -> RunResult:
         ...                      "storage=sqlite:///example.db"], command="confirm")
         >>> result = ks.confirm(config, stream=io.StringIO())
         >>> result.study, result.complete
-        ('confirm-tuned', 2)
+        ('confirm-ppo=tuned', 2)
     """
     from kraby_study.run.executor import executor_for
     from kraby_study.run.study_run import closing_line, run_plan

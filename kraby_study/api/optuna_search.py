@@ -62,15 +62,14 @@ def search(config: Config, stream: TextIO | None = None) -> RunResult:
     Example:
         >>> import io
         >>> import kraby_study as ks
-        >>> config = ks.compose(["search.trials=2", "search.sampler=random",
-        ...                      "search.pruner=none", "search.enqueue=[]", "budget=smoke",
-        ...                      "budget.steps=512", "budget.curve_every=64", "budget.seeds=1",
-        ...                      "ppo.n_envs=4", "ppo.n_steps=32", "ppo.n_epochs=2",
-        ...                      "ppo.net_arch=[8]", "save_models=false", "workers=1",
+        >>> config = ks.compose(["search.trials=1", "budget=smoke", "budget.steps=512",
+        ...                      "budget.curve_every=64", "budget.seeds=1", "ppo.n_envs=8",
+        ...                      "ppo.n_steps=32", "ppo.n_epochs=2", "ppo.net_arch=[8]",
+        ...                      "save_models=false", "workers=1",
         ...                      "storage=sqlite:///example.db"], command="search")
-        >>> result = ks.search(config, stream=io.StringIO())
+        >>> result = ks.search(config, stream=io.StringIO())  # the enqueued ppo=tuned first
         >>> result.study, result.complete
-        ('ppo_search', 2)
+        ('ppo_search', 1)
     """
     from kraby_study.answers.standing import study_standing
     from kraby_study.plan.space import objectives

@@ -88,19 +88,14 @@ def best(config: Config, study: str | None = None, campaign: str | None = None) 
         >>> chosen.description.startswith("clip_range=")
         True
     """
-    from kraby_study.answers.campaign import campaign_selection
-    from kraby_study.answers.selected import require_selection
-    from kraby_study.decision.comparison import CompareOptions
-    from kraby_study.store.store import opened
+    from kraby_study.api.answers import read_selection
 
     if study and campaign:
         raise ConfigError("give --campaign NAME or --study-name NAME, not both")
     cfg = config.cfg
     name = study or str(cfg.search.name)
-    options = CompareOptions.of(cfg)
-    with opened(cfg.storage, create=False, writer=False) as store:
-        chosen = (campaign_selection(store, campaign, options) if campaign
-                  else require_selection(store.load(name), options))
+    chosen = read_selection(str(cfg.storage), name, campaign, cfg.compare.margin,
+                            cfg.compare.select, int(cfg.report.min_seeds))
     return Best(description=chosen.description, settings=chosen.settings,
                 env_keys=list(chosen.env_keys),
                 source=f"campaign {campaign!r}" if campaign else f"study {name!r}",

@@ -9,49 +9,18 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING
 
-from kraby_study.api.answers import Answers, Runs, read_answers, read_runs
+from kraby_study.api.answers import (
+    Answers,
+    Runs,
+    StudyInfo,
+    read_answers,
+    read_runs,
+    read_studies,
+)
 from kraby_study.config.storage import DEFAULT_STORAGE
 
 if TYPE_CHECKING:
     import pandas as pd
-
-    from kraby_study.answers.standing import StudyStanding
-
-
-@dataclass(frozen=True)
-class StudyInfo:
-    """Where one stored study stands.
-
-    Attributes:
-        name: Its name in the store.
-        kind: ``sweep``, ``train``, ``search``, ``confirm`` or ``optuna``.
-        complete: Complete runs (or trials).
-        failed: Failed runs.
-        pruned: Pruned runs.
-        running: Runs running now, here or elsewhere.
-        planned: Runs planned (a search: its trial total).
-        ran_on: Where its runs ran (``1 node``, ``3 nodes, 2 CPU models``; ``-`` for none).
-        selected: What it selects so far, in a few words (``-`` when nothing is complete).
-    """
-
-    name: str
-    kind: str
-    complete: int
-    failed: int
-    pruned: int
-    running: int
-    planned: int
-    ran_on: str
-    selected: str
-
-
-def study_info(standing: StudyStanding) -> StudyInfo:
-    """A study's standing as the API hands it out."""
-    tally = standing.tally
-    return StudyInfo(name=standing.name, kind=standing.kind.value, complete=tally.complete,
-                     failed=tally.failed, pruned=tally.pruned, running=tally.running,
-                     planned=tally.planned, ran_on=standing.placement.text(),
-                     selected=standing.selected)
 
 
 @dataclass(frozen=True)
@@ -70,9 +39,7 @@ class StudyStore:
         Raises:
             StoreError: No store at the URL, or it cannot be read; one line.
         """
-        from kraby_study.answers.standing import store_standings
-
-        return [study_info(s) for s in store_standings(self.url)]
+        return read_studies(self.url)
 
     def studies_frame(self) -> pd.DataFrame:
         """`studies` as a frame, one row per study."""
