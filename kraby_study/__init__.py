@@ -3,7 +3,7 @@ on top.
 
 The public API (`kraby_study.api`), re-exported here.
 
-Example:
+Examples:
     >>> import kraby_study as ks
     >>> found = ks.compare({"a": [10.0, 10.2, 9.9, 10.1, 10.0, 9.8],
     ...                     "b": [9.9, 9.7, 9.8, 10.0, 9.6, 9.8]})

@@ -12,7 +12,7 @@ A bad input raises `ConfigError` (a setting) or `StoreError` (the store), each w
 message, before any work starts. Importing this package loads no Hydra, Optuna, database,
 statistics or training code: each call imports what it needs.
 
-Example:
+Examples:
     >>> import kraby_study as ks
     >>> config = ks.compose(["study=ent_coef", "budget=smoke"])
     >>> config.cfg.budget.seeds

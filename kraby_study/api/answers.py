@@ -218,7 +218,7 @@ def compare(scores: Mapping[Hashable, Sequence[float]], margin: float = MARGIN,
     Returns:
         The `Answers`.
 
-    Example:
+    Examples:
         >>> import kraby_study as ks
         >>> found = ks.compare({"a": [10.0, 10.2, 9.9, 10.1, 10.0, 9.8],
         ...                     "b": [5.0, 5.3, 4.9, 5.2, 5.1, 4.8]})

@@ -28,7 +28,7 @@ TRAINING = ("run", "train", "search", "confirm")
 def with_default(overrides: Sequence[str], group: str, option: str) -> list[str]:
     """The overrides, choosing ``group=option`` first unless the user chose that group.
 
-    Example:
+    Examples:
         >>> with_default(["ppo.gamma=0.9"], "budget", "quick")
         ['budget=quick', 'ppo.gamma=0.9']
     """
@@ -39,7 +39,7 @@ def with_default(overrides: Sequence[str], group: str, option: str) -> list[str]
 def command_overrides(overrides: Sequence[str], command: str) -> list[str]:
     """The overrides with the command's own default groups placed first.
 
-    Example:
+    Examples:
         >>> command_overrides(["env=gym"], "search")
         ['search=gym', 'budget=quick', 'env=gym']
     """
@@ -107,7 +107,7 @@ def compose(overrides: Sequence[str] = (), command: str = "run") -> Config:
         ConfigError: A setting is unknown, mistyped or out of range, or a folder the command
             writes to cannot be written; one line.
 
-    Example:
+    Examples:
         >>> import kraby_study as ks
         >>> config = ks.compose(["study=ent_coef", "budget=smoke"])
         >>> config.cfg.study.parameter

@@ -47,7 +47,7 @@ def preview(config: Config) -> Preview:
     Returns:
         The `Preview`.
 
-    Example:
+    Examples:
         >>> import kraby_study as ks
         >>> shown = ks.preview(ks.compose(["study=ent_coef", "budget=quick"]))
         >>> shown.lines[1]

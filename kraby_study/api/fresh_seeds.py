@@ -57,7 +57,7 @@ def confirm(config: Config, stream: TextIO | None = None) -> RunResult:
     Returns:
         How the confirm study ended (`RunResult`).
 
-    Example:
+    Examples:
         >>> import io
         >>> import kraby_study as ks
         >>> config = ks.compose(["confirm.baselines=[tuned]", "confirm.seeds=2",

@@ -59,7 +59,7 @@ def search(config: Config, stream: TextIO | None = None) -> RunResult:
         How it ended; ``message`` names the best trial, or the front of a two-objective
         search (`RunResult`).
 
-    Example:
+    Examples:
         >>> import io
         >>> import kraby_study as ks
         >>> config = ks.compose(["search.trials=1", "budget=smoke", "budget.steps=512",

@@ -83,7 +83,7 @@ def write_report(config: Config, study: str | None = None, fmt: str = "png",
         ConfigError: A bad format or output folder; one line.
         StoreError: No store, no study or no study of that name; one line.
 
-    Example:
+    Examples:
         >>> import kraby_study as ks
         >>> written = ks.write_report(ks.compose(["storage=sqlite:///example.db", "out=example"],
         ...                                command="report"), study="clip_range", policy=False)

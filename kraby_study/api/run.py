@@ -77,7 +77,7 @@ def run_sweep(config: Config, stream: TextIO | None = None) -> RunResult:
         ConfigError: The plan cannot be made; one line, before anything runs.
         StoreError: The store holds the study with another definition; one line.
 
-    Example:
+    Examples:
         >>> import io
         >>> import kraby_study as ks
         >>> tiny = ["budget=smoke", "budget.steps=512", "budget.curve_every=64",
@@ -139,7 +139,7 @@ def train(config: Config, stream: TextIO | None = None) -> RunResult:
     Returns:
         How it ended, with its final score and model path (`RunResult`).
 
-    Example:
+    Examples:
         >>> import io
         >>> import kraby_study as ks
         >>> config = ks.compose(["budget=smoke", "budget.steps=512", "budget.curve_every=64",

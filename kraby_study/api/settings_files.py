@@ -81,7 +81,7 @@ def best(config: Config, study: str | None = None, campaign: str | None = None) 
         ConfigError: Both a study and a campaign; one line.
         StoreError: No store, no such study, or nothing selected yet; one line.
 
-    Example:
+    Examples:
         >>> import kraby_study as ks
         >>> chosen = ks.best(ks.compose(["storage=sqlite:///example.db"], command="best"),
         ...                  study="clip_range")
@@ -112,7 +112,7 @@ def zoo_best(overrides: Sequence[str] = (), fmt: str = "ppo") -> Best:
         overrides: Overrides with ``env=gym env.id=ID``.
         fmt: ``ppo`` to save them as a ppo config file, ``zoo`` as an rl-zoo3 file.
 
-    Example:
+    Examples:
         With the ``[zoo]`` extra installed, ``zoo_best(["env=gym", "env.id=CartPole-v1"])``
         holds rl-zoo3's settings for CartPole-v1, saved by default as ``zoo_CartPole-v1``.
     """
@@ -145,6 +145,14 @@ def save_ppo_config(chosen: Best, name: str | None = None) -> Path:
 
     Returns:
         The file written.
+
+    Examples:
+        >>> import kraby_study as ks
+        >>> from kraby_study.api.settings_files import save_ppo_config
+        >>> chosen = ks.best(ks.compose(["storage=sqlite:///example.db"], command="best"),
+        ...                  study="clip_range")
+        >>> save_ppo_config(chosen).as_posix()
+        'conf/ppo/best_clip_range.yaml'
     """
     from kraby_study.config.conf_dirs import USER_CONF_DIR
     from kraby_study.config.ppo_file import write_ppo_config
@@ -165,6 +173,11 @@ def save_zoo_file(chosen: Best, name: str | None = None) -> ZooFile:
 
     Returns:
         The file written and the command that trains it (`ZooFile`).
+
+    Examples:
+        A study on ``env=gym env.id=Pendulum-v1`` saved as ``pendulum`` gives
+        ``./zoo/pendulum.yml`` and ``python -m rl_zoo3.train --algo ppo --env Pendulum-v1
+        -conf zoo/pendulum.yml``; the leg's settings are refused (no Gymnasium id).
     """
     from kraby_study.config.zoo import study_settings, train_command, write_hyperparams
     from kraby_study.plan.spec import OPTIONAL_PPO

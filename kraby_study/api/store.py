@@ -42,7 +42,13 @@ class StudyStore:
         return read_studies(self.url)
 
     def studies_frame(self) -> pd.DataFrame:
-        """`studies` as a frame, one row per study."""
+        """`studies` as a frame, one row per study.
+
+        Examples:
+            >>> import kraby_study as ks
+            >>> list(ks.open_store("sqlite:///example.db").studies_frame()["name"])[:1]
+            ['clip_range']
+        """
         import pandas as pd
 
         return pd.DataFrame([asdict(s) for s in self.studies()],
@@ -53,6 +59,12 @@ class StudyStore:
 
         Raises:
             StoreError: No store, or no study of that name; one line.
+
+        Examples:
+            >>> import kraby_study as ks
+            >>> runs = ks.open_store("sqlite:///example.db").runs("clip_range")
+            >>> len(runs), sorted({run.value for run in runs})
+            (4, ['0.1', '0.2'])
         """
         return read_runs(self.url, study)
 
@@ -69,6 +81,12 @@ class StudyStore:
 
         Raises:
             StoreError: No store, no study of that name, or a search; one line.
+
+        Examples:
+            >>> import kraby_study as ks
+            >>> found = ks.open_store("sqlite:///example.db").answers("clip_range")
+            >>> found.parameter, [v.seeds for v in found.values]
+            ('ppo.clip_range', [2, 2])
         """
         return read_answers(self.url, study, margin, select, min_seeds)
 
@@ -85,7 +103,7 @@ def open_store(url: str = DEFAULT_STORAGE) -> StudyStore:
     Raises:
         ConfigError: The URL is not a supported database URL; one line.
 
-    Example:
+    Examples:
         >>> import kraby_study as ks
         >>> store = ks.open_store("sqlite:///example.db")
         >>> [s.name for s in store.studies()][:1]
