@@ -221,7 +221,7 @@ def dry_run(args: argparse.Namespace) -> bool:
     return bool(getattr(args, "dry_run", False) or getattr(args, "cfg", None))
 
 
-def ended(result: RunResult) -> int:
+def finish(result: RunResult) -> int:
     """Print how a training command ended and return its exit code: 130 interrupted, 1 when
     runs ended in errors (said on stderr, counted), else 0; a divergence is a result, not an
     error."""
@@ -238,7 +238,7 @@ def run_or_preview(args: argparse.Namespace, config: Config,
     if dry_run(args):
         print(api.preview(config).text())
         return 0
-    return ended(work(config))
+    return finish(work(config))
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -249,7 +249,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     """One training run, stored like a trial, its model saved."""
-    return ended(api.train(api.compose(flag_overrides(args, [STORAGE]), command="train")))
+    return finish(api.train(api.compose(flag_overrides(args, [STORAGE]), command="train")))
 
 
 def cmd_list(args: argparse.Namespace) -> int:

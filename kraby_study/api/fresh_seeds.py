@@ -8,7 +8,7 @@ from functools import partial
 from typing import TYPE_CHECKING, TextIO
 
 from kraby_study.api.config import Config
-from kraby_study.api.outcome import RunResult, output, ran
+from kraby_study.api.outcome import RunResult, output, run_result
 from kraby_study.api.run import open_writer, run_options
 
 if TYPE_CHECKING:
@@ -77,6 +77,6 @@ def confirm(config: Config, stream: TextIO | None = None) -> RunResult:
         summary, counts = run_plan(store, plan, executor, executor.workers(cfg.workers),
                                    output(stream), **run_options(cfg))
     planned = counts.planned if plan.racing else len(plan.specs)
-    return ran(plan.name, summary, counts,
+    return run_result(plan.name, summary, counts,
                closing_line("confirm", plan, counts)
                + f"; report it with `kraby-study report --study-name {plan.name}`", planned)

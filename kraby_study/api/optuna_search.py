@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TextIO
 
 from kraby_study.api.config import Config
-from kraby_study.api.outcome import RunResult, output, ran
+from kraby_study.api.outcome import RunResult, output, run_result
 from kraby_study.api.run import open_writer
 from kraby_study.errors import ConfigError
 
@@ -84,6 +84,6 @@ def search(config: Config, stream: TextIO | None = None) -> RunResult:
         state = study_standing(ledger)
     counts = state.tally
     chosen = state.selected if len(objectives(cfg)) == 2 else f"best {state.selected}"
-    return ran(state.name, summary, counts,
+    return run_result(state.name, summary, counts,
                f"search {state.name}: {counts.complete} complete, {counts.pruned} pruned, "
                f"{counts.failed} failed of {counts.planned}; {chosen}")

@@ -61,7 +61,7 @@ def exit_code(summary: CommandRun) -> int:
     return 1 if summary.errors else 0
 
 
-def ran(study: str, summary: CommandRun, counts: Tally, message: str | None,
+def run_result(study: str, summary: CommandRun, counts: Tally, message: str | None,
         planned: int | None = None) -> RunResult:
     """The result of a call that ran one study: ``counts`` of the study (against ``planned``
     runs, else the count's own), ``summary`` of what this call ran."""

@@ -12,7 +12,7 @@ from contextlib import AbstractContextManager
 from typing import TYPE_CHECKING, Any, TextIO
 
 from kraby_study.api.config import Config
-from kraby_study.api.outcome import RunResult, output, ran
+from kraby_study.api.outcome import RunResult, output, run_result
 
 if TYPE_CHECKING:
     from omegaconf import DictConfig
@@ -100,7 +100,7 @@ def run_sweep(config: Config, stream: TextIO | None = None) -> RunResult:
     with executor_for(cfg) as executor:
         summary, counts = run_stage(cfg, plan, executor, stream)
     planned = counts.planned if plan.racing else len(plan.specs)
-    return ran(plan.name, summary, counts, closing_line("study", plan, counts), planned)
+    return run_result(plan.name, summary, counts, closing_line("study", plan, counts), planned)
 
 
 def _run_campaign(config: Config, stream: TextIO) -> RunResult:
@@ -165,5 +165,5 @@ def train(config: Config, stream: TextIO | None = None) -> RunResult:
                                        **run_options(cfg))
             ended = train_outcome(store, plan, summary, int(cfg.seed))
     return dataclasses.replace(
-        ran(plan.name, summary, counts, "\n".join(ended.lines) or None, 1),
+        run_result(plan.name, summary, counts, "\n".join(ended.lines) or None, 1),
         warning=None, exit_code=ended.code, score=ended.score, model_path=ended.model_path)
