@@ -39,7 +39,7 @@ from typing import Any
 
 import sqlalchemy as sa
 
-from kraby_study.cli import open_writer, run_options
+from kraby_study.api.run import open_writer, run_options
 from kraby_study.config.compose import compose_config
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.plan.sweep import expand_study

@@ -1,32 +1,25 @@
 """The kraby-study command: subcommands and flags become Hydra overrides, then work is done.
 
-main() only wires arguments to the functions that do the work; every check that can fail on
-user input runs before anything is written. Each command imports what it needs when it runs,
-so ``--help`` and a refused input load no training, database or statistics code.
+Each command is argument parsing, a call of the Python API (`kraby_study.api`) and
+printing; every check that can fail on user input runs before anything is written. The API
+imports what a call needs when it runs, so ``--help`` and a refused input load no training,
+database or statistics code.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import partial
 from typing import TYPE_CHECKING, Any
 
+from kraby_study import api
 from kraby_study.errors import ClusterLost, ConfigError, DatabaseLost, StoreError, first_line
 from kraby_study.run.provenance import note_command
 
 if TYPE_CHECKING:
-    from omegaconf import DictConfig
-
-    from kraby_study.answers.standing import StudyStanding
-    from kraby_study.plan.preview import Count
-    from kraby_study.plan.spec import StudyPlan
-    from kraby_study.records.stored import Tally
-    from kraby_study.run.executor import Executor
-    from kraby_study.run.runner import CommandRun
+    from kraby_study.api import Best, Config, RunResult, StudyInfo
 
 OVERRIDES_HELP = ("Hydra overrides, e.g. study=ent_coef budget=quick ppo.n_steps=64 workers=2 "
                   "storage=sqlite:///studies/kraby.db")
@@ -214,12 +207,6 @@ def flag_overrides(args: argparse.Namespace, flags: Sequence[Flag]) -> list[str]
     return out + list(args.overrides)
 
 
-def with_default(overrides: Sequence[str], group: str, option: str) -> list[str]:
-    """The overrides, choosing ``group=option`` first unless the user chose that group."""
-    chosen = any(o.startswith(f"{group}=") for o in overrides)
-    return list(overrides) if chosen else [f"{group}={option}", *overrides]
-
-
 def stored_study(overrides: Sequence[str]) -> tuple[str | None, list[str]]:
     """``study=NAME`` names a stored study for best and report (a search or a renamed sweep
     too), not the Hydra group of study files: it is taken out before composing."""
@@ -229,169 +216,51 @@ def stored_study(overrides: Sequence[str]) -> tuple[str | None, list[str]]:
     return (names[0] if names else None), [o for o in overrides if not o.startswith("study=")]
 
 
-def compose_config(overrides: Sequence[str]) -> DictConfig:
-    """The command's config (Hydra and the schema are loaded on first use)."""
-    from kraby_study.config.compose import compose_config as compose
-
-    return compose(overrides)
-
-
-def checked_outputs(cfg: DictConfig) -> DictConfig:
-    """The config of a training command, once the folders it writes to are known writable."""
-    from kraby_study.plan.settings import validate_outputs
-
-    validate_outputs(cfg)
-    return cfg
-
-
-def ended(summary: CommandRun) -> int:
-    """A training command's exit code: 130 interrupted, 1 when runs ended in errors (said on
-    stderr, counted), else 0; a divergence is a result, not an error."""
-    if summary.interrupted:
-        return 130
-    line = summary.errors_line()
-    if line:
-        print(f"kraby-study: {line}", file=sys.stderr)
-        return 1
-    return 0
-
-
-def open_writer(cfg: DictConfig):  # noqa: ANN201 - a context manager of Store
-    """The store a command writes to, with the configured heartbeat timing."""
-    from kraby_study.store.store import opened
-
-    return opened(cfg.storage, heartbeat_interval=int(cfg.heartbeat_interval),
-                  heartbeat_grace=int(cfg.heartbeat_grace))
-
-
-def run_options(cfg: DictConfig) -> dict[str, Any]:
-    """Heartbeat period and database patience of a running command."""
-    return {"heartbeat_seconds": float(cfg.heartbeat_interval),
-            "retry_seconds": float(cfg.db_retry_seconds)}
-
-
 def dry_run(args: argparse.Namespace) -> bool:
     """Whether the command only shows what it would do (``--dry-run`` or ``--cfg job``)."""
     return bool(getattr(args, "dry_run", False) or getattr(args, "cfg", None))
 
 
-def print_preview(cfg: DictConfig, counts: Sequence[Count],
-                  notes: dict[str, list[str]] | None = None) -> int:
-    """A dry run's output: the composed config as YAML, the plan and the estimate."""
-    from omegaconf import OmegaConf
+def finish(result: RunResult) -> int:
+    """Print how a training command ended and return its exit code: 130 interrupted, 1 when
+    runs ended in errors (said on stderr, counted), else 0; a divergence is a result, not an
+    error."""
+    if result.message is not None:
+        print(result.message)
+    if result.warning is not None and not result.interrupted:
+        print(f"kraby-study: {result.warning}", file=sys.stderr)
+    return result.exit_code
 
-    from kraby_study.answers.preview import preview_lines
-    from kraby_study.config.validate import cores
 
-    workers = (int(cfg.workers) if cfg.workers is not None
-               else cores() if str(cfg.executor) == "local" else None)
-    from kraby_study.env import adapter_for
-
-    lines = preview_lines(str(cfg.storage), counts, workers, notes)
-    print(OmegaConf.to_yaml(cfg), end="")
-    print(f"env: {adapter_for(cfg.env).label(cfg.env)}")
-    print("\n".join(lines))
-    return 0
+def run_or_preview(args: argparse.Namespace, config: Config,
+                   work: Callable[[Config], RunResult]) -> int:
+    """``--dry-run``: print what the command would do; else do it."""
+    if dry_run(args):
+        print(api.preview(config).text())
+        return 0
+    return finish(work(config))
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    """Run a study's sweep: every value x seed, resumable."""
-    from kraby_study.answers.resumed import resumed
-    from kraby_study.answers.winners import StoreWinners
-    from kraby_study.config.winner import winners_from
-    from kraby_study.plan.sweep import expand_study
-
-    overrides = flag_overrides(args, [STORAGE, WORKERS])
-    lookup = StoreWinners()
-    with winners_from(lookup):
-        cfg = checked_outputs(compose_config(overrides))
-    if cfg.campaign is not None:
-        if dry_run(args):
-            return preview_campaign(cfg, overrides)
-        return run_campaign_command(cfg, overrides)
-    if cfg.study is not None:
-        cfg = resumed(cfg, str(cfg.study.name))
-    plan = dataclasses.replace(expand_study(cfg), inputs=[i.stored() for i in lookup.inputs])
-    if dry_run(args):
-        from kraby_study.plan.preview import plan_count
-
-        return print_preview(cfg, [plan_count(plan)],
-                             {plan.name: [f"from other studies: {i.text()}"
-                                          for i in lookup.inputs]})
-    # Loaded once the input is known to be good: a refused input answers at once.
-    from kraby_study.run.executor import executor_for
-    from kraby_study.run.study_run import closing_line
-
-    with executor_for(cfg) as executor:
-        summary, counts = run_stage(cfg, plan, executor)
-    print(closing_line("study", plan, counts))
-    return ended(summary)
-
-
-def run_stage(cfg: DictConfig, plan: StudyPlan, executor: Executor) -> tuple[CommandRun, Tally]:
-    """Run a plan on the command's store and executor: (what this command ran, the plan's
-    outcomes)."""
-    from kraby_study.run.study_run import run_plan
-
-    with open_writer(cfg) as store:
-        return run_plan(store, plan, executor, executor.workers(cfg.workers), sys.stdout,
-                        **run_options(cfg))
-
-
-def run_campaign_command(cfg: DictConfig, overrides: Sequence[str]) -> int:
-    """``run campaign=NAME``: every stage in order, resumable."""
-    from kraby_study.plan.campaign import campaign_of
-    from kraby_study.run.campaign_run import run_campaign
-    from kraby_study.run.executor import executor_for
-
-    campaign = campaign_of(cfg, overrides)
-    with executor_for(cfg) as executor:
-        return run_campaign(campaign, lambda stage_cfg, plan: run_stage(stage_cfg, plan, executor),
-                            sys.stdout)
-
-
-def preview_campaign(cfg: DictConfig, overrides: Sequence[str]) -> int:
-    """``run campaign=NAME --dry-run``: each stage's trials, and its inputs from earlier
-    stages (named, not guessed, while those are not selected)."""
-    from kraby_study.answers.preview import campaign_preview
-    from kraby_study.plan.campaign import campaign_of
-
-    stages = campaign_preview(campaign_of(cfg, overrides))
-    return print_preview(cfg, [s.count for s in stages], {
-        s.count.study: [f"stage {s.stage.number}/{len(stages)} ({s.stage.parameter}, select "
-                        f"{s.stage.select})"] + [f"from earlier stages: {i}" for i in s.inputs]
-        for s in stages})
+    """Run a study's sweep (every value x seed) or a campaign's stages, resumable."""
+    config = api.compose(flag_overrides(args, [STORAGE, WORKERS]), command="run")
+    return run_or_preview(args, config, api.run_sweep)
 
 
 def cmd_train(args: argparse.Namespace) -> int:
     """One training run, stored like a trial, its model saved."""
-    from kraby_study.plan.train import train_plan
-    from kraby_study.run.executor import executor_for
-    from kraby_study.run.study_run import run_plan, train_outcome
-
-    cfg = checked_outputs(compose_config(with_default(flag_overrides(args, [STORAGE]), "ppo",
-                                                      "tuned")))
-    if cfg.racing.enabled:
-        raise ConfigError("racing is for run and confirm: train makes one run")
-    plan = train_plan(cfg)
-    with executor_for(cfg) as executor:
-        # One run: its worker starts importing torch and SB3 while the store opens.
-        executor.prestart(1)
-        with open_writer(cfg) as store:
-            summary, _ = run_plan(store, plan, executor, 1, sys.stdout, **run_options(cfg))
-            return train_outcome(store, plan, summary, int(cfg.seed), sys.stdout)
+    return finish(api.train(api.compose(flag_overrides(args, [STORAGE]), command="train")))
 
 
 def cmd_list(args: argparse.Namespace) -> int:
     """The studies in the store with their progress."""
-    from kraby_study.answers.standing import store_standings
     from kraby_study.config.storage import plain_storage
 
     overrides = flag_overrides(args, [STORAGE])
     # A plain storage=URL (or none) needs no composed config: Hydra would cost a third of
     # the command.
-    url = plain_storage(overrides) or str(compose_config(overrides).storage)
-    rows = store_standings(url)
+    url = plain_storage(overrides) or str(api.compose(overrides, command="list").cfg.storage)
+    rows = api.open_store(url).studies()
     if not rows:
         print(f"no studies in {url}")
         return 0
@@ -400,13 +269,12 @@ def cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
-def standings_table(rows: Sequence[StudyStanding]) -> list[str]:
+def standings_table(rows: Sequence[StudyInfo]) -> list[str]:
     """``list``'s table: one line per study, columns padded to their widest cell."""
     header = ("study", "kind", "complete", "failed", "pruned", "running", "ran on",
               "selected so far")
-    table = [header] + [(p.name, p.kind.value, f"{p.tally.complete}/{p.tally.planned}",
-                         str(p.tally.failed), str(p.tally.pruned), str(p.tally.running),
-                         p.placement.text(), p.selected) for p in rows]
+    table = [header] + [(p.name, p.kind, f"{p.complete}/{p.planned}", str(p.failed),
+                         str(p.pruned), str(p.running), p.ran_on, p.selected) for p in rows]
     widths = [max(len(row[i]) for row in table) for i in range(len(header))]
     return ["  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True))
             for row in table]
@@ -414,95 +282,25 @@ def standings_table(rows: Sequence[StudyStanding]) -> list[str]:
 
 def cmd_optuna(args: argparse.Namespace) -> int:
     """An Optuna search over conf/search/<space>.yaml, into the same store."""
-    from kraby_study.answers.resumed import resumed
-    from kraby_study.answers.standing import study_standing
-    from kraby_study.config.compose import composed
-    from kraby_study.plan.settings import settings_with_ppo
-    from kraby_study.plan.space import objectives, validate_search
-    from kraby_study.run.executor import executor_for
-    from kraby_study.run.search_source import run_search
-
-    overrides = with_default(flag_overrides(args, SEARCH_FLAGS), "budget", "quick")
-    if "env=gym" in overrides:
-        # The default space searches the leg's observation too; a gym env's space has no env.
-        overrides = with_default(overrides, "search", "gym")
-    config = composed(overrides)
-    cfg = checked_outputs(config.cfg)
-    if cfg.racing.enabled:
-        raise ConfigError("racing is for run and confirm: a search races its trials' seeds "
-                          "with --pruner wilcoxon")
-    cfg = resumed(cfg, str(cfg.search.name))
-    if cfg.search.enqueue is None:  # a new search starts from the settings it was given
-        cfg.search.enqueue = [config.ppo]
-    validate_search(cfg)
-    starts = [(f"ppo={name}", settings_with_ppo(name, overrides))
-              for name in cfg.search.enqueue]
-    if dry_run(args):
-        from kraby_study.plan.preview import search_count
-        from kraby_study.plan.space import method_text
-
-        return print_preview(cfg, [search_count(cfg)], {str(cfg.search.name): [method_text(cfg)]})
-    with executor_for(cfg) as executor, open_writer(cfg) as store:
-        summary, ledger = run_search(store, cfg, executor, executor.workers(cfg.workers),
-                                     sys.stdout, starts=starts)
-        state = study_standing(ledger)
-    counts = state.tally
-    chosen = state.selected if len(objectives(cfg)) == 2 else f"best {state.selected}"
-    print(f"search {state.name}: {counts.complete} complete, {counts.pruned} pruned, "
-          f"{counts.failed} failed of {counts.planned}; {chosen}")
-    return ended(summary)
+    config = api.compose(flag_overrides(args, SEARCH_FLAGS), command="search")
+    return run_or_preview(args, config, api.search)
 
 
 def cmd_confirm(args: argparse.Namespace) -> int:
     """Retrain a study's top configurations (and baselines) on fresh seeds."""
-    from kraby_study.answers.configurations import confirmed_study
-    from kraby_study.answers.resumed import resumed
-    from kraby_study.plan.confirm import baseline_arm, confirm_name, confirm_plan, confirm_rule
-    from kraby_study.run.executor import executor_for
-    from kraby_study.run.study_run import closing_line, run_plan
-    from kraby_study.store.store import opened, opened_for_reading
-
-    overrides = flag_overrides(args, CONFIRM_FLAGS)
-    cfg = checked_outputs(compose_config(with_default(overrides, "budget", "quick")))
-    confirm_rule(cfg, None)  # a rule that is not one is refused before the store is read
-    baselines = [baseline_arm(name, overrides) for name in cfg.confirm.baselines]
-    source = None
-    if cfg.confirm.study is not None:
-        # A dry run never opens a store that is not there (opening would create the file).
-        reader = opened_for_reading if dry_run(args) else partial(opened, create=False,
-                                                                   writer=False)
-        with reader(cfg.storage) as store:
-            source = confirmed_study(store.load(str(cfg.confirm.study)), int(cfg.confirm.top))
-    cfg = resumed(cfg, confirm_name(source.name if source else None,
-                                    [arm.label for arm in baselines], cfg.confirm.name))
-    plan = confirm_plan(cfg, source, baselines)
-    if dry_run(args):
-        from kraby_study.plan.preview import plan_count
-
-        return print_preview(cfg, [plan_count(plan, arms="configurations")])
-    with executor_for(cfg) as executor, open_writer(cfg) as store:
-        summary, counts = run_plan(store, plan, executor, executor.workers(cfg.workers),
-                                   sys.stdout, **run_options(cfg))
-    print(closing_line("confirm", plan, counts)
-          + f"; report it with `kraby-study report --study-name {plan.name}`")
-    return ended(summary)
-
-
-ZOO_DIR = "zoo"
-"""Where ``best --format zoo`` writes rl-zoo3 hyperparameter files, in the working folder."""
+    config = api.compose(flag_overrides(args, CONFIRM_FLAGS), command="confirm")
+    return run_or_preview(args, config, api.confirm)
 
 
 def cmd_best(args: argparse.Namespace) -> int:
     """Print a study's selected settings and write them as a ppo config file, or as an rl-zoo3
     hyperparameter file (``--format zoo``)."""
-    from pathlib import Path
-
-    from kraby_study.answers.campaign import campaign_selection
-    from kraby_study.answers.selected import require_selection
-    from kraby_study.config.conf_dirs import USER_CONF_DIR
-    from kraby_study.config.ppo_file import write_ppo_config
-    from kraby_study.decision.comparison import CompareOptions
-    from kraby_study.store.store import opened
+    from kraby_study.api.settings_files import (
+        checked_name,
+        default_name,
+        save_ppo_config,
+        save_zoo_file,
+    )
 
     chosen, overrides = stored_study(flag_overrides(args, [STORAGE, BEST_OF]))
     if args.zoo:
@@ -512,53 +310,26 @@ def cmd_best(args: argparse.Namespace) -> int:
         return write_zoo(overrides, args.name, args.format)
     if chosen and args.campaign:
         raise ConfigError("give --campaign NAME or --study-name NAME, not both")
-    cfg = compose_config(overrides)
-    name = chosen or str(cfg.search.name)
-    config_name = args.name or (f"campaign_{args.campaign}" if args.campaign else f"best_{name}")
-    if not config_name.replace("_", "").replace("-", "").isalnum():
-        raise ConfigError(f"--name {config_name!r}: use letters, digits, _ and -")
-    options = CompareOptions.of(cfg)
-    with opened(cfg.storage, create=False, writer=False) as store:
-        chosen = (campaign_selection(store, args.campaign, options) if args.campaign
-                  else require_selection(store.load(name), options))
+    config = api.compose(overrides, command="best")
+    name = checked_name(args.name or default_name(config, chosen, args.campaign))
+    found = api.best(config, study=chosen, campaign=args.campaign)
     if args.format == "zoo":
-        what = f"campaign {args.campaign!r}" if args.campaign else f"study {name!r}"
-        if chosen.steps is None:
-            raise StoreError(f"{what} stores no budget steps for its selected trial, which an "
-                             "rl-zoo3 file needs as n_timesteps")
-        for line in chosen.front:
-            print(line)
-        print(f"best: {chosen.description}")
-        return write_hyperparams_file(chosen.settings, chosen.steps, chosen.description,
-                                      config_name, what)
-    path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
-    write_ppo_config(chosen.settings, chosen.env_keys, chosen.description, path)
-    for line in chosen.front:
+        written = save_zoo_file(found, name)
+        print_best(found)
+        print(f"wrote {written.path}: train it with `{written.train_command}`")
+        return 0
+    path = save_ppo_config(found, name)
+    print_best(found)
+    print(f"wrote {path}: use it with `kraby-study train ppo={name}` or "
+          f"`kraby-study run ppo={name} study=...`")
+    return 0
+
+
+def print_best(found: Best) -> None:
+    """``best``'s lines: a two-objective search's front, then what was selected."""
+    for line in found.front:
         print(line)
-    print(f"best: {chosen.description}")
-    print(f"wrote {path}: use it with `kraby-study train ppo={config_name}` or "
-          f"`kraby-study run ppo={config_name} study=...`")
-    return 0
-
-
-def write_hyperparams_file(settings: dict[str, Any], steps: int, description: str,
-                           config_name: str, what: str) -> int:
-    """``best --format zoo``: write stored or composed settings (``env`` and ``ppo``) and a
-    budget as ./zoo/NAME.yml, an rl-zoo3 hyperparameter file for their Gymnasium id; refused in
-    one line, before anything is written, when they are not a Gymnasium id's."""
-    from pathlib import Path
-
-    from kraby_study.config.zoo import study_settings, train_command, write_hyperparams
-    from kraby_study.plan.spec import OPTIONAL_PPO
-
-    complete = {"env": settings.get("env", {}),
-                "ppo": {**OPTIONAL_PPO, **settings.get("ppo", {})}}
-    read = study_settings(complete, steps, what)
-    path = Path(ZOO_DIR) / f"{config_name}.yml"
-    packages = [str(p) for p in complete["env"].get("packages", [])]
-    write_hyperparams(read, description, path, packages)
-    print(f"wrote {path}: train it with `{train_command(read.env_id, path, packages)}`")
-    return 0
+    print(f"best: {found.description}")
 
 
 def write_zoo(overrides: Sequence[str], name: str | None, fmt: str = "ppo") -> int:
@@ -566,51 +337,27 @@ def write_zoo(overrides: Sequence[str], name: str | None, fmt: str = "ppo") -> i
     command's own ppo overrides) as ./conf/ppo/NAME.yaml, so they can be read and changed, or
     (``--format zoo``) back as an rl-zoo3 file at budget.steps (default budget=zoo, its own
     n_timesteps)."""
-    import re
-    from pathlib import Path
+    from kraby_study.api.settings_files import save_ppo_config, save_zoo_file, zoo_best
 
-    from kraby_study.config.conf_dirs import USER_CONF_DIR
-    from kraby_study.config.ppo_file import write_ppo_config
-    from kraby_study.config.validate import to_container
-    from kraby_study.config.zoo import zoo_settings
-
-    chosen = [*(o for o in overrides if not o.startswith("ppo=")), "ppo=zoo"]
-    cfg = compose_config(with_default(chosen, "budget", "zoo") if fmt == "zoo" else chosen)
-    read = zoo_settings(str(cfg.env.id))
-    config_name = name or "zoo_" + re.sub(r"[^A-Za-z0-9_-]+", "_", read.env_id)
-    if not config_name.replace("_", "").replace("-", "").isalnum():
-        raise ConfigError(f"--name {config_name!r}: use letters, digits, _ and -")
-    settings = {"env": to_container(cfg.env), "ppo": to_container(cfg.ppo)}
+    found = zoo_best(overrides, fmt)
     if fmt == "zoo":
-        return write_hyperparams_file(
-            settings, int(cfg.budget.steps),
-            f"rl-zoo3 {read.version}'s PPO settings for {read.env_id}, as ppo=zoo reads them",
-            config_name, f"ppo=zoo for {read.env_id}")
-    path = Path(USER_CONF_DIR) / "ppo" / f"{config_name}.yaml"
-    write_ppo_config(settings, [],
-                     f"rl-zoo3 {read.version}'s PPO settings for {read.env_id} (its budget, "
-                     f"n_timesteps {read.n_timesteps:,}, is budget=zoo)", path)
-    print(f"wrote {path}: use it with `kraby-study train env=gym env.id={read.env_id} "
-          f"ppo={config_name}`")
+        written = save_zoo_file(found, name)
+        print(f"wrote {written.path}: train it with `{written.train_command}`")
+        return 0
+    path = save_ppo_config(found, name)
+    print(f"wrote {path}: use it with `kraby-study train env=gym "
+          f"env.id={found.settings['env']['id']} ppo={path.stem}`")
     return 0
 
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Redraw the figures and tables of the stored studies."""
-    from types import SimpleNamespace
-
-    from omegaconf import OmegaConf
-
-    from kraby_study.report import run_report
-
     chosen, overrides = stored_study(flag_overrides(args, [STORAGE, REPORTED, OUT]))
-    cfg = compose_config(overrides)
-    # The report's options with the comparison's: a report may re-analyse any study at any
-    # margin, and read another rule than the stored one (compare.select).
-    options = SimpleNamespace(**OmegaConf.to_container(cfg.report), margin=cfg.compare.margin,
-                              select=cfg.compare.select)
-    return run_report(cfg.storage, cfg.out, study=chosen, fmt=args.format, stream=sys.stdout,
-                      policy=not args.no_policy, options=options)
+    written = api.write_report(api.compose(overrides, command="report"), study=chosen,
+                         fmt=args.format, policy=not args.no_policy)
+    for line in written.lines():
+        print(line)
+    return 0
 
 
 class _Parser(argparse.ArgumentParser):

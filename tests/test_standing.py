@@ -18,6 +18,7 @@ from optuna.trial import TrialState, create_trial
 from synthetic import DIVERGED, Run, add_search, add_sweep, add_trials, define, sweep_runs
 
 from kraby_study.answers.standing import StudyStanding, store_standings, study_standing
+from kraby_study.api.answers import study_info
 from kraby_study.cli import standings_table
 from kraby_study.config.compose import compose_config
 from kraby_study.config.schema import KrabyConfig
@@ -195,7 +196,8 @@ def test_rows_give_the_standings_optunas_trials_give(store_url: str, workdir: Pa
     capsys.readouterr()
     assert run_cli("list", f"storage={store_url}") == 0
     out = capsys.readouterr().out
-    assert out == "".join(f"{line}\n" for line in standings_table(expected))
+    assert out == "".join(f"{line}\n" for line in standings_table(
+        [study_info(s) for s in expected]))
     assert "ran on" in out.splitlines()[0] and "3 nodes, 2 CPU models" in out
 
 

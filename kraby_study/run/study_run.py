@@ -3,6 +3,7 @@ queued, run on the executor and recorded, fixed or raced."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TextIO
 
 from kraby_study.plan.spec import StudyPlan
@@ -55,22 +56,32 @@ def closing_line(noun: str, plan: StudyPlan, counts: Tally) -> str:
                if counts.ended < total else ""))
 
 
-def train_outcome(store: Store, plan: StudyPlan, summary: CommandRun, seed: int,
-                  stream: TextIO) -> int:
-    """Print how a ``train`` run ended (score, model) and return the command's exit code: 0
-    complete, 1 failed or not run, 130 interrupted."""
+@dataclass(frozen=True)
+class TrainOutcome:
+    """How a ``train`` run ended: the lines that say so, the exit code (0 complete, 1 failed
+    or not run, 130 interrupted), its final score and where its model is."""
+
+    lines: list[str]
+    code: int
+    score: float | None = None
+    model_path: str | None = None
+
+
+def train_outcome(store: Store, plan: StudyPlan, summary: CommandRun, seed: int
+                  ) -> TrainOutcome:
+    """How a ``train`` run ended (score, model), read from the store."""
     trial = latest_by_key(store.load(plan.name).trials()).get(plan.specs[0].key)
     if trial is None:
-        return 130 if summary.interrupted else 1
+        return TrainOutcome([], 130 if summary.interrupted else 1)
     attrs = TrialAttrs.of(trial)
     line = f"train {plan.name} seed {seed}: {outcome(trial)}"
     if trial.value is not None:
         line += f", final score {trial.value:.4g} over {attrs.env_steps} steps"
     if attrs.failure:
         line += f" ({attrs.failure})"
-    print(line, file=stream)
+    lines = [line]
     if attrs.model_path and trial.value is not None:
-        print(f"model: {attrs.model_path}", file=stream)
-    if summary.interrupted:
-        return 130
-    return 0 if outcome(trial) == Outcome.COMPLETE else 1
+        lines.append(f"model: {attrs.model_path}")
+    code = (130 if summary.interrupted else 0 if outcome(trial) == Outcome.COMPLETE else 1)
+    return TrainOutcome(lines, code, None if trial.value is None else float(trial.value),
+                        attrs.model_path)
