@@ -225,12 +225,14 @@ def compare(scores: Mapping[Hashable, Sequence[float]], margin: float = MARGIN,
         >>> found.best, found.answer("b")
         ('a', 'worse')
     """
-    from kraby_study.decision.comparison import answers_name
-    from kraby_study.decision.comparison import compare as compared
+    from kraby_study.answers.seed_scores import sweep_comparison
+    from kraby_study.decision.comparison import CompareOptions, answers_name
 
-    found = compared(dict(scores), margin=margin, alpha=alpha, min_seeds=min_seeds)
-    return _answers(found, {g: list(v) for g, v in scores.items()}, {g: g for g in scores},
-                    answers_name(alpha))
+    keys = list(scores)
+    by_index = {i: [float(s) for s in scores[key]] for i, key in enumerate(keys)}
+    options = CompareOptions(margin=float(margin), alpha=float(alpha), min_seeds=int(min_seeds))
+    found = sweep_comparison(by_index, (), options)
+    return _answers(found, by_index, dict(enumerate(keys)), answers_name(alpha))
 
 
 def _answers(found: Comparison[Any], scores: Mapping[Any, Sequence[float]],
@@ -290,7 +292,6 @@ def read_answers(url: str, name: str, margin: float | None = None,
                  select: str | None = None, min_seeds: int = 2) -> Answers:
     """A stored sweep's (or confirm study's) answers
     (`kraby_study.api.store.StudyStore.answers`)."""
-    from kraby_study.answers.selected import sweep_selection
     from kraby_study.answers.study_data import load_study, select_studies
     from kraby_study.answers.sweep_evidence import build_sweep
     from kraby_study.decision.comparison import CompareOptions, answers_name
@@ -304,16 +305,12 @@ def read_answers(url: str, name: str, margin: float | None = None,
             raise StoreError(f"study {name!r} is a {data.kind.value}: its trials are not "
                              "answered against a best; read its runs")
         sweep = build_sweep(data, options)
-        chosen = sweep_selection(data.ledger, options) if data.kind.swept else None
     complete = sweep.trials[sweep.trials["outcome"] == "complete"]
-    scores = {i: list(complete.loc[complete["vi"] == i, "final_score"])
+    scores = {i: list(complete.loc[complete["value_index"] == i, "final_score"])
               for i in range(len(sweep.values))}
     labels = dict(enumerate(sweep.labels))
-    selected = None
-    if chosen is not None and chosen.finished:
-        from kraby_study.records.values import value_label
-
-        selected = value_label(chosen.value)
+    # The summary's rows carry the one selection the study's rule made from this comparison.
+    selected = next((row.value for row in sweep.rows if row.selected), None)
     return _answers(sweep.comparison, scores, labels, answers_name(ALPHA), study=data.name,
                     parameter=sweep.parameter or None, rule=str(sweep.rule), selected=selected)
 
