@@ -205,6 +205,8 @@ def flag_overrides(args: argparse.Namespace, flags: Sequence[Flag]) -> list[str]
     out = []
     if getattr(args, "racing", False):
         out.append("racing.enabled=true")
+    if getattr(args, "retry_failed", False):
+        out.append("retry_failed=true")
     if getattr(args, "baseline", None):
         out.append(f"confirm.baselines=[{','.join(args.baseline)}]")
     for flag in flags:
@@ -267,7 +269,8 @@ def open_writer(cfg: DictConfig):  # noqa: ANN201 - a context manager of Store
 def run_options(cfg: DictConfig) -> dict[str, Any]:
     """Heartbeat period and database patience of a running command."""
     return {"heartbeat_seconds": float(cfg.heartbeat_interval),
-            "retry_seconds": float(cfg.db_retry_seconds)}
+            "retry_seconds": float(cfg.db_retry_seconds),
+            "failed_again": bool(cfg.retry_failed)}
 
 
 def dry_run(args: argparse.Namespace) -> bool:
@@ -396,6 +399,8 @@ def cmd_list(args: argparse.Namespace) -> int:
         print(f"no studies in {url}")
         return 0
     for line in standings_table(rows):
+        print(line)
+    for line in filter(None, (row.retry_line() for row in rows)):
         print(line)
     return 0
 
@@ -688,6 +693,10 @@ def build_parser() -> argparse.ArgumentParser:
             "written")
         parsers[name].add_argument("--cfg", choices=("job",),
                                    help="--cfg job is Hydra's spelling of --dry-run")
+        parsers[name].add_argument(
+            "--retry-failed", action="store_true",
+            help="queue the study's failed runs again, with the same seeds and settings, "
+            "before running (complete runs are left alone), as retry_failed=true")
     for name in ("run", "confirm"):
         parsers[name].add_argument(
             "--racing", action="store_true",
