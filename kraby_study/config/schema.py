@@ -358,10 +358,11 @@ class RayConfig:
     runtime_env: dict[str, Any] | None = None
     """Ray's runtime_env for the trials (e.g. {working_dir: ...}); null: every node has the
     project installed at the same path."""
-    start_seconds: int = 600
+    start_seconds: int = 300
     """How long an actor placed on a node may take to start (its process importing torch and
-    the project) before it is taken as hung and its trial runs again elsewhere. An actor
-    waiting for a CPU does not count; one starting is alive, not silent."""
+    the project) before it is taken as hung and its trial runs again. An actor waiting for a
+    CPU does not count; one starting is alive, not silent. Measured (bench_actor_start.py):
+    at most 4.8 s on a fresh interpreter, 14 s beside two training runs on 2 cores."""
 
 
 @dataclass
