@@ -210,15 +210,26 @@ def actors() -> list[int]:
     return [p for p in ray_processes("ray::TrialActor") if cmdline(p).startswith(b"ray::Trial")]
 
 
+def started_trials(db: Path) -> int:
+    """Trials whose actor said they started (their provenance stored)."""
+    if not db.exists():
+        return 0
+    try:
+        with reading(sqlite_url(db)) as reader:
+            return sum("provenance" in t.user_attrs for study in reader.studies()
+                       for t in study.trials)
+    except StoreError:  # the command is still creating the store
+        return 0
+
+
 def killed_midway(workdir: Path, args: list[str], ready: Callable[[], bool],
                   victims: Callable[[], list[int]]) -> tuple[int, str]:
-    """Run a command, SIGKILL ``victims()`` once ``ready()`` holds and both trials have trained
-    a few seconds; (exit code, output) of the command."""
+    """Run a command, SIGKILL ``victims()`` once ``ready()`` holds (both trials started:
+    training, each for many seconds more); (exit code, output) of the command."""
     proc = spawn_cli("run", "study=clip_range", *SLOWER, "budget.seeds=1", "workers=2",
                      "executor=ray", *args, cwd=workdir)
     try:
         wait_for(ready, proc=proc)
-        time.sleep(3)
         kill_all(victims())
         out, _ = proc.communicate(timeout=600)
     finally:
@@ -239,7 +250,7 @@ def test_a_killed_ray_worker_has_its_trial_run_again(workdir: Path) -> None:
     db = workdir / "ray.db"
     before = set(ray_processes("ray/"))
     code, out = killed_midway(workdir, [f"storage={sqlite_url(db)}"],
-                              ready=lambda: len(actors()) == 2 and db.exists(),
+                              ready=lambda: len(actors()) == 2 and started_trials(db) == 2,
                               victims=lambda: actors()[:1])
     assert code == 0, out
     assert "(worker lost on Ray (ActorDiedError)), rerun" in out

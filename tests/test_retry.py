@@ -9,7 +9,7 @@ import os
 from pathlib import Path
 
 import pytest
-from conftest import TINY, load, run_cli
+from conftest import TINY, TINY_SEARCH, load, run_cli
 from gym_fixtures import FIXED, NEEDS_FIX_ID
 from optuna.trial import TrialState
 
@@ -89,19 +89,8 @@ def test_failed_runs_run_again_with_their_seeds_and_settings(
     assert "--retry-failed" not in capsys.readouterr().out
 
 
-TWO_TRIALS = """\
-name: tiny
-sampler: random
-pruner: none
-seed: 3
-startup_trials: 1
-checkpoints: 4
-objective: final_reward
-trials: 2
-enqueue: []
-params:
-  gamma: {path: ppo.gamma, type: float, low: 0.5, high: 0.99}
-"""
+TWO_TRIALS = TINY_SEARCH.replace("trials: 3", "trials: 2")
+"""The tiny search space, two trials."""
 
 
 def test_a_search_retries_its_failed_trials_with_their_parameters(
