@@ -198,6 +198,8 @@ def flag_overrides(args: argparse.Namespace, flags: Sequence[Flag]) -> list[str]
     out = []
     if getattr(args, "racing", False):
         out.append("racing.enabled=true")
+    if getattr(args, "retry_failed", False):
+        out.append("retry_failed=true")
     if getattr(args, "baseline", None):
         out.append(f"confirm.baselines=[{','.join(args.baseline)}]")
     for flag in flags:
@@ -265,6 +267,8 @@ def cmd_list(args: argparse.Namespace) -> int:
         print(f"no studies in {url}")
         return 0
     for line in standings_table(rows):
+        print(line)
+    for line in filter(None, (row.retry for row in rows)):
         print(line)
     return 0
 
@@ -435,6 +439,10 @@ def build_parser() -> argparse.ArgumentParser:
             "written")
         parsers[name].add_argument("--cfg", choices=("job",),
                                    help="--cfg job is Hydra's spelling of --dry-run")
+        parsers[name].add_argument(
+            "--retry-failed", action="store_true",
+            help="queue the study's failed runs again, with the same seeds and settings, "
+            "before running (complete runs are left alone), as retry_failed=true")
     for name in ("run", "confirm"):
         parsers[name].add_argument(
             "--racing", action="store_true",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -202,6 +203,47 @@ def wait_for(predicate: Callable[[], bool], timeout: float = 180.0,
     for p in procs:
         p.kill()
     raise AssertionError("timed out")
+
+
+def _signal_all(pids: Sequence[int], signum: int) -> None:
+    for pid in pids:
+        try:
+            os.kill(pid, signum)
+        except ProcessLookupError:
+            pass
+
+
+def kill_when(predicate: Callable[[], bool], proc: subprocess.Popen[str],
+              victims: Callable[[], list[int]] | None = None, signum: int = signal.SIGKILL,
+              timeout: float = 180.0) -> None:
+    """Signal a command (SIGKILL by default: it and every process below it; or ``victims()``)
+    at a point of its progress, once ``predicate`` (a look at the store) holds.
+
+    Once a look finds it, a second look is taken with the command and its processes stopped
+    (SIGSTOP), and the signal is sent only if that one finds it too: what the predicate read
+    is then what the signal meets, no trial ending between the look and the kill however
+    loaded the machine. A stopped look the writer's lock refuses (SQLite, the command stopped
+    mid-commit) lets the command go on and looks again. Fails as :func:`wait_for` does.
+    """
+    from processes import descendants
+
+    deadline = time.monotonic() + timeout
+    while True:
+        wait_for(predicate, timeout=max(deadline - time.monotonic(), 0.0), proc=proc)
+        group = [proc.pid, *descendants([proc.pid])]
+        _signal_all(group, signal.SIGSTOP)
+        try:
+            try:
+                ready = proc.poll() is None and predicate()
+            except (sa.exc.OperationalError, optuna.exceptions.StorageInternalError):
+                ready = False
+            if ready:
+                _signal_all(group if victims is None else victims(), signum)
+                if victims is None and signum == signal.SIGKILL:
+                    proc.wait()
+                return
+        finally:
+            _signal_all(group, signal.SIGCONT)
 
 
 def write_study_file(root: Path, name: str, parameter: str, values: str, extra: str = "") -> None:

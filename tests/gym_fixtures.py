@@ -1,9 +1,12 @@
 """Gymnasium ids registered on import (``env.packages=[gym_fixtures]``), for the env seam's
-tests: one whose steps raise (a run on it ends in an error, not a divergence), and one tiny
-env that renders without any drawing library."""
+tests: one whose steps raise (a run on it ends in an error, not a divergence), one tiny env
+that renders without any drawing library, and the tiny env on a machine that lacks something
+until it is fixed."""
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -11,6 +14,9 @@ import numpy as np
 
 BROKEN_ID = "KrabyTestBroken-v0"
 TINY_ID = "KrabyTestTiny-v0"
+NEEDS_FIX_ID = "KrabyTestNeedsFix-v0"
+FIXED = "KRABY_TEST_FIXED"
+"""The environment variable naming the file whose presence fixes the machine."""
 
 
 class BrokenEnv(gym.Env):
@@ -53,6 +59,16 @@ class TinyEnv(gym.Env):
         return image
 
 
-for env_id, entry in ((BROKEN_ID, BrokenEnv), (TINY_ID, TinyEnv)):
+class NeedsFixEnv(TinyEnv):
+    """The tiny env on a machine that lacks something: each step raises while the file named
+    by the environment variable ``KRABY_TEST_FIXED`` is missing."""
+
+    def step(self, action: Any) -> Any:
+        if not Path(os.environ.get(FIXED, "/nonexistent")).is_file():
+            raise RuntimeError("this machine is not fixed yet")
+        return super().step(action)
+
+
+for env_id, entry in ((BROKEN_ID, BrokenEnv), (TINY_ID, TinyEnv), (NEEDS_FIX_ID, NeedsFixEnv)):
     if env_id not in gym.registry:
         gym.register(id=env_id, entry_point=entry, max_episode_steps=10)

@@ -278,12 +278,14 @@ def test_a_shard_process_ends_quietly_when_its_owner_is_killed():
          "env.reset()\n"
          "shard = env._world._remotes[0]\n"
          "shard.send('step', [[0.1, 0.2, 0.3]] * 2)\n"
+         "shard._conn.poll(None)\n"  # the shard has answered the step (left unread)
          "print(shard._process.pid, flush=True)\n"
          "time.sleep(60)\n"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert owner.stdout is not None and owner.stderr is not None
     shard = int(owner.stdout.readline())
-    time.sleep(0.5)  # the shard answers the step; dying with it unread resets the pipe
+    # Killed with the shard's answer unread: dying so resets the pipe, which the shard must
+    # take quietly.
     owner.kill()
     owner.wait()
     deadline = time.monotonic() + 10

@@ -153,3 +153,27 @@ def test_optuna_help_offers_the_wilcoxon_pruner(capsys: pytest.CaptureFixture[st
     assert "search.wilcoxon_p" in text and "budget.seeds=5 or more" in text
     # Every pruner the flag offers is one the search accepts.
     assert set(PRUNERS) == {"median", "hyperband", "wilcoxon", "none"}
+
+
+@pytest.mark.parametrize(("argv", "named"), [
+    (["confirm", "confirm.name=confirm-ppo=zoo-X", *TINY], "confirm.name: cannot read the value "
+     "'confirm-ppo=zoo-X' (mismatched input '=' expecting <EOF>)"),
+    (["run", "study=clip_range", "study.values=[0.1,", *TINY],
+     "study.values: cannot read the value"),
+    (["optuna", "search.name=x)", *TINY], "search.name: cannot read the value 'x)'"),
+    (["run", "study=clip_range", "gamma", *TINY], "gamma: not KEY=VALUE"),
+])
+def test_an_override_hydra_cannot_parse_is_one_line_naming_its_key(
+        workdir: Path, one_study: Path, capsys: pytest.CaptureFixture[str], argv: list[str],
+        named: str) -> None:
+    before = file_digest(one_study)
+    err = _one_line_error(capsys, *argv, f"storage={sqlite_url(one_study)}")
+    assert named in err and "None" not in err
+    if "KEY=VALUE" not in named:  # what a value may be, and the key's value quoted
+        assert "a quoted string" in err and err.rstrip().endswith("'")
+    assert file_digest(one_study) == before and not (workdir / "studies").exists()
+
+
+def test_a_quoted_value_with_an_equals_sign_is_read_whole() -> None:
+    cfg = compose_config(["confirm.name='confirm-ppo=zoo-X'"])
+    assert cfg.confirm.name == "confirm-ppo=zoo-X"

@@ -9,7 +9,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -23,10 +22,10 @@ from conftest import (
     children,
     fresh_database,
     has_study,
+    kill_when,
     run_cli,
     spawn_cli,
     tiny_with_steps,
-    wait_for,
 )
 from optuna.trial import TrialState
 
@@ -83,10 +82,9 @@ def _kill_tree(proc) -> None:  # type: ignore[no-untyped-def]
 
 def _three_commands_one_killed(args: list[str], cwd: Path, url: str, name: str) -> list[str]:
     procs = [spawn_cli(*args, cwd=cwd) for _ in range(3)]
-    wait_for(lambda: sum(t.state == TrialState.RUNNING for t in _trials(url, name)) >= 3,
-             proc=procs)
-    time.sleep(0.5)
-    _kill_tree(procs[0])
+    # Killed while the store shows a trial of each command running (one worker each).
+    kill_when(lambda: sum(t.state == TrialState.RUNNING for t in _trials(url, name)) >= 3,
+              procs[0])
     outputs = []
     for proc in procs[1:]:
         out, _ = proc.communicate(timeout=600)

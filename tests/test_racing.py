@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import io
 import math
-import os
-import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -19,16 +17,15 @@ from conftest import (
     FAST_HEARTBEAT,
     SERVER,
     TINY,
-    children,
     file_digest,
     fresh_database,
     has_study,
+    kill_when,
     load,
     run_cli,
     spawn_cli,
     sqlite_url,
     tiny_with_steps,
-    wait_for,
     write_study_file,
 )
 from optuna.trial import TrialState
@@ -449,11 +446,8 @@ def test_a_race_resumes_after_sigkill(workdir: Path) -> None:
     args = ["run", "study=rk", "workers=2", f"storage={db}", *tiny_with_steps(2048),
             "budget.seeds=4", "--racing"]
     proc = spawn_cli(*args, cwd=workdir)
-    wait_for(lambda: has_study(db, "rk") and sum(
-        t.state == TrialState.COMPLETE for t in load(db, "rk").get_trials()) >= 3, proc=proc)
-    for pid in [proc.pid, *children(proc.pid, workers_only=False)]:
-        os.kill(pid, signal.SIGKILL)
-    proc.wait()
+    kill_when(lambda: has_study(db, "rk") and sum(
+        t.state == TrialState.COMPLETE for t in load(db, "rk").get_trials()) >= 3, proc)
     proc = spawn_cli(*args, cwd=workdir)
     out, _ = proc.communicate(timeout=600)
     assert proc.returncode == 0, out

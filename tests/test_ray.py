@@ -5,6 +5,7 @@ stops every one of them."""
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -209,15 +210,26 @@ def actors() -> list[int]:
     return [p for p in ray_processes("ray::TrialActor") if cmdline(p).startswith(b"ray::Trial")]
 
 
+def started_trials(db: Path) -> int:
+    """Trials whose actor said they started (their provenance stored)."""
+    if not db.exists():
+        return 0
+    try:
+        with reading(sqlite_url(db)) as reader:
+            return sum("provenance" in t.user_attrs for study in reader.studies()
+                       for t in study.trials)
+    except StoreError:  # the command is still creating the store
+        return 0
+
+
 def killed_midway(workdir: Path, args: list[str], ready: Callable[[], bool],
                   victims: Callable[[], list[int]]) -> tuple[int, str]:
-    """Run a command, SIGKILL ``victims()`` once ``ready()`` holds and both trials have trained
-    a few seconds; (exit code, output) of the command."""
+    """Run a command, SIGKILL ``victims()`` once ``ready()`` holds (both trials started:
+    training, each for many seconds more); (exit code, output) of the command."""
     proc = spawn_cli("run", "study=clip_range", *SLOWER, "budget.seeds=1", "workers=2",
                      "executor=ray", *args, cwd=workdir)
     try:
         wait_for(ready, proc=proc)
-        time.sleep(3)
         kill_all(victims())
         out, _ = proc.communicate(timeout=600)
     finally:
@@ -238,7 +250,7 @@ def test_a_killed_ray_worker_has_its_trial_run_again(workdir: Path) -> None:
     db = workdir / "ray.db"
     before = set(ray_processes("ray/"))
     code, out = killed_midway(workdir, [f"storage={sqlite_url(db)}"],
-                              ready=lambda: len(actors()) == 2 and db.exists(),
+                              ready=lambda: len(actors()) == 2 and started_trials(db) == 2,
                               victims=lambda: actors()[:1])
     assert code == 0, out
     assert "(worker lost on Ray (ActorDiedError)), rerun" in out
@@ -316,6 +328,37 @@ def test_a_node_without_the_project_fails_its_trial_in_one_line(
     assert reason.startswith("error: Python package 'kraby_study' is not installed on Ray node ")
     assert f"(node id {node[:8]}): install kraby-study there (docs/guide/clusters.md)" in reason
     assert len(reason.splitlines()) == 1
+    # The node fixed (the project installed there: this environment's editable install) and
+    # the cluster started again: the failed trial runs again, on purpose, with its seed and
+    # settings.
+    cluster.stop()
+    for installed in Path(site).glob("__editable__*kraby_study*"):
+        shutil.copy(installed, bare_site)
+    fixed = Cluster(Path(f"{cluster.folder}-fixed"), cluster.port + 1)
+    try:
+        fixed.start(head=True, cpus=0)
+        now = fixed.node_id(fixed.start(head=False, python=str(bare / "bin" / "python")))
+        listed = subprocess.run([sys.executable, "-m", "kraby_study.cli", "list",
+                                 f"storage={sqlite_url(db)}"], capture_output=True, text=True,
+                                check=True, cwd=workdir).stdout
+        # No trial of it started, so no command is stored to quote.
+        assert ("clip_range: 1 failed run(s); to run them again with the same seeds and "
+                "settings: its command with --retry-failed") in listed
+        proc = spawn_cli("run", "study=clip_range", *TINY, "study.values=[0.2]",
+                         "budget.seeds=1", "executor=ray", f"ray.address={fixed.address}",
+                         f"storage={sqlite_url(db)}", "--retry-failed", cwd=workdir)
+        out, _ = proc.communicate(timeout=300)
+    finally:
+        fixed.stop()
+        subprocess.run(["rm", "-rf", str(fixed.folder)], check=False)
+    assert proc.returncode == 0, out
+    study = load(db, "clip_range")
+    first, again = study.get_trials()
+    assert (again.state, again.user_attrs["retry_of"]) == (TrialState.COMPLETE, first.number)
+    assert again.params == first.params and again.user_attrs["seed"] == first.user_attrs["seed"]
+    record = study.user_attrs[PROVENANCE_PREFIX + again.user_attrs["provenance"]]
+    assert record[RAY_NODE] == now != node
+    assert record["retried_failure"] == reason and record["retry_of"] == str(first.number)
 
 
 @pytest.mark.slow
@@ -377,3 +420,63 @@ def test_a_ray_sweep_writes_a_postgresql_store(workdir: Path) -> None:
         assert proc.returncode == 0, out
         states = [t.state for t in load(url, "gamma").get_trials()]
         assert states == [TrialState.COMPLETE] * 4
+
+
+def started_slowly(monkeypatch: pytest.MonkeyPatch, slow: float, patience: float,
+                   start_seconds: float) -> tuple[list, float]:
+    """One tiny trial on a one-CPU Ray instance of this process, in an actor whose start
+    imports a module for ``slow`` seconds: (the pool's events until the trial ended or its
+    actor was let go, how long the import took)."""
+    from slow_actor import SlowTrialActor
+
+    from kraby_study.config.compose import compose_config
+    from kraby_study.plan.sweep import expand_study
+    from kraby_study.run import ray_pool
+
+    tests = str(Path(__file__).resolve().parent)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(
+        [tests, *filter(None, [os.environ.get("PYTHONPATH")])]))
+    monkeypatch.setenv("KRABY_TEST_SLOW_IMPORT", str(slow))
+    monkeypatch.setattr(ray_pool, "TrialActor", SlowTrialActor)
+    spec = expand_study(compose_config(["study=gamma", *TINY, "study.values=[0.9]",
+                                        "budget.seeds=1"])).specs[0]
+    ray = ray_pool.ray
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False,
+             object_store_memory=ray_pool.LOCAL_OBJECT_STORE, _node_ip_address="127.0.0.1")
+    try:
+        pool = ray_pool.RayPool(1, 1, 1, patience=patience, start_seconds=start_seconds)
+        pool.submit(0, spec)
+        (slot,) = pool._slots
+        events: list = []
+        # Progress, not time: the pool is asked until the trial's result or death comes.
+        deadline = time.monotonic() + 300
+        while not any(e.kind in ("result", "died") for e in events):
+            assert time.monotonic() < deadline, events
+            events += pool.events(timeout=0.5)
+        imported = (ray.get(slot.actor.import_seconds.remote())
+                    if events[-1].kind == "result" else slow)
+        pool.close()
+    finally:
+        ray.shutdown()
+    return events, imported
+
+
+@pytest.mark.slow
+def test_an_actor_that_starts_slowly_is_kept(monkeypatch: pytest.MonkeyPatch) -> None:
+    from kraby_study.records.stored import Outcome
+
+    # Its start lasts four times the patience for a silent cluster: alive, not silent.
+    events, imported = started_slowly(monkeypatch, slow=8.0, patience=2.0, start_seconds=600)
+    assert imported >= 8.0
+    assert [e.kind for e in events if e.kind in ("started", "result", "died")] == [
+        "started", "result"]
+    assert events[-1].payload.outcome == Outcome.COMPLETE
+
+
+@pytest.mark.slow
+def test_an_actor_whose_start_outlasts_ray_start_seconds_is_let_go(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    events, _ = started_slowly(monkeypatch, slow=60.0, patience=2.0, start_seconds=3)
+    (died,) = [e for e in events if e.kind == "died"]
+    assert died.payload[1] == "not started after 3 s on its node (ray.start_seconds)"
+    assert not [e for e in events if e.kind in ("started", "result")]

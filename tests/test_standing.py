@@ -196,8 +196,10 @@ def test_rows_give_the_standings_optunas_trials_give(store_url: str, workdir: Pa
     capsys.readouterr()
     assert run_cli("list", f"storage={store_url}") == 0
     out = capsys.readouterr().out
-    assert out == "".join(f"{line}\n" for line in standings_table(
-        [study_info(s) for s in expected]))
+    retries = [line for line in (s.retry_line() for s in expected) if line]
+    assert out == "".join(f"{line}\n" for line in [
+        *standings_table([study_info(s) for s in expected]), *retries])
+    assert "states: 2 failed run(s); to run them again" in out
     assert "ran on" in out.splitlines()[0] and "3 nodes, 2 CPU models" in out
 
 

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import os
 import shutil
 import signal
 import tempfile
-import time
 from pathlib import Path
 
 import pytest
@@ -17,12 +15,12 @@ from conftest import (
     children,
     file_digest,
     has_study,
+    kill_when,
     load,
     run_cli,
     spawn_cli,
     sqlite_url,
     tiny_with_steps,
-    wait_for,
     write_study_file,
 )
 from optuna.trial import TrialState
@@ -234,11 +232,9 @@ def test_killing_a_worker_mid_study_loses_and_duplicates_nothing(workdir: Path,
     db = store_url
     proc = spawn_cli("run", "study=clip_range", "workers=2", f"storage={db}", *SLOWER,
                      *FAST_HEARTBEAT, cwd=workdir)
-    wait_for(lambda: _running_trials(db, "clip_range") == 2, proc=proc)
-    time.sleep(1.0)
-    workers = children(proc.pid)
-    assert workers, "no worker processes found"
-    os.kill(workers[0], signal.SIGKILL)
+    # One worker killed while the store shows both trials running (and so both workers busy).
+    kill_when(lambda: _running_trials(db, "clip_range") == 2 and len(children(proc.pid)) == 2,
+              proc, victims=lambda: children(proc.pid)[:1])
     out, _ = proc.communicate(timeout=300)
     assert proc.returncode == 0, out
     assert "interrupted (worker exit code -9), rerun" in out
@@ -252,19 +248,17 @@ def test_resume_after_the_command_is_killed(workdir: Path, store_url: str) -> No
     db = store_url
     args = ["run", "study=clip_range", "workers=2", f"storage={db}", *SLOWER, *FAST_HEARTBEAT]
     proc = spawn_cli(*args, cwd=workdir)
-    wait_for(lambda: _complete_count(db, "clip_range") >= 2, proc=proc)
-    wait_for(lambda: _running_trials(db, "clip_range") >= 1, proc=proc)
-    for pid in [proc.pid, *children(proc.pid, workers_only=False)]:
-        os.kill(pid, signal.SIGKILL)
-    proc.wait()
+    kill_when(lambda: _complete_count(db, "clip_range") >= 2
+              and _running_trials(db, "clip_range") >= 1, proc)
     done_before = _complete_keys(db, "clip_range")
     assert 2 <= len(done_before) < 8
-    if not db.startswith("sqlite"):
-        time.sleep(5)  # a server waits for the heartbeat grace (4 s) before taking them over
+    # On a server the rerun takes the killed command's trials over once their heartbeat is
+    # stale (heartbeat_grace): it waits for that itself.
     proc = spawn_cli(*args, cwd=workdir)
     out, _ = proc.communicate(timeout=300)
     assert proc.returncode == 0, out
-    assert "left running by a stopped command will run again" in out
+    if db.startswith("sqlite"):  # a server's stale trials may come back only while it runs
+        assert "left running by a stopped command will run again" in out
     study = load(db, "clip_range")
     assert _complete_keys(db, "clip_range") == _planned_keys("clip_range", seeds=2)
     latest = latest_by_key(study.get_trials())
@@ -286,9 +280,10 @@ def test_ctrl_c_stops_cleanly_and_the_rerun_completes(workdir: Path) -> None:
     proc = subprocess.Popen([sys.executable, "-m", "kraby_study.cli", "run", "study=clip_range",
                              "workers=2", *SLOWER], cwd=workdir, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, start_new_session=True)
-    wait_for(lambda: _complete_count(db, "clip_range") >= 1, proc=proc)
-    wait_for(lambda: _running_trials(db, "clip_range") >= 1, proc=proc)
-    os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C sends: the whole group
+    # What a terminal's Ctrl-C sends: SIGINT to the whole process group.
+    kill_when(lambda: _complete_count(db, "clip_range") >= 1
+              and _running_trials(db, "clip_range") >= 1, proc,
+              victims=lambda: [-proc.pid], signum=signal.SIGINT)
     out, _ = proc.communicate(timeout=120)
     assert proc.returncode == 130, out
     assert "interrupted, queued for the next run" in out

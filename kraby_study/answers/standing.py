@@ -35,12 +35,27 @@ class StudyStanding:
     """What it selects so far, in a few words (``-`` when nothing is complete)."""
     placement: Placement
     """Where its trials ran: how many nodes, and on how many CPU models."""
+    command: str | None = None
+    """The command that ran its latest trial (as its provenance stores it), None when no
+    trial of it started."""
+
+    def retry_line(self) -> str | None:
+        """How many counted runs failed and how to run them again, or None when none did."""
+        failed = self.tally.failed
+        if not failed:
+            return None
+        command = self.command or ""
+        if command and "--retry-failed" not in command.split():
+            command += " --retry-failed"
+        how = f"`{command}`" if command else "its command with --retry-failed"
+        return (f"{self.name}: {failed} failed run(s); to run them again with the same seeds "
+                f"and settings: {how}")
 
 
 def study_standing(ledger: StudyLedger) -> StudyStanding:
     """Counts and the selection so far of a study a command holds."""
     return standing(ledger.name, ledger.attrs, ledger.trials(), ledger.maximize, ledger.curves,
-                    ledger.provenances().values())
+                    ledger.provenances())
 
 
 def store_standings(url: str) -> list[StudyStanding]:
@@ -53,17 +68,30 @@ def store_standings(url: str) -> list[StudyStanding]:
     """
     with reading(url) as reader:
         return [standing(study.name, study.attrs, study.trials, study.maximize,
-                         partial(reader.curves, study.name), study.provenance.values())
+                         partial(reader.curves, study.name), study.provenance)
                 for study in reader.studies()]
 
 
 def standing(name: str, attrs: StudyAttrs, trials: Sequence[StoredTrial], maximize: bool,
-             curves: Curves, records: Iterable[Mapping[str, Any]] = ()) -> StudyStanding:
+             curves: Curves, records: Mapping[str, Mapping[str, Any]] | None = None,
+             ) -> StudyStanding:
     """A study's standing from all its trials (Optuna's or rows): counted, tallied against the
-    runs planned, what its rule selects among them, and where they ran (its provenance
-    ``records``)."""
+    runs planned, what its rule selects among them, where they ran and the command that ran
+    the latest (its provenance ``records``, by key)."""
+    records = records or {}
     kept = counted(trials)
     return StudyStanding(name=name, kind=StudyKind.of(attrs.kind),
                          tally=tally(kept, attrs.planned),
                          selected=selected_short(attrs, kept, maximize, curves),
-                         placement=Placement.of(records))
+                         placement=Placement.of(records.values()),
+                         command=latest_command(trials, records))
+
+
+def latest_command(trials: Iterable[StoredTrial],
+                   records: Mapping[str, Mapping[str, Any]]) -> str | None:
+    """The command stored in the provenance of the latest trial that has one."""
+    for trial in sorted(trials, key=lambda t: t.number, reverse=True):
+        command = records.get(str(trial.user_attrs.get("provenance")), {}).get("command")
+        if command:
+            return str(command)
+    return None

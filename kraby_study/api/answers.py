@@ -49,6 +49,8 @@ class StudyInfo:
         planned: Runs planned (a search: its trial total).
         ran_on: Where its runs ran (``1 node``, ``3 nodes, 2 CPU models``; ``-`` for none).
         selected: What it selects so far, in a few words (``-`` when nothing is complete).
+        retry: How many runs failed and the command that runs them again with the same
+            seeds and settings (None when none failed).
     """
 
     name: str
@@ -60,6 +62,7 @@ class StudyInfo:
     planned: int
     ran_on: str
     selected: str
+    retry: str | None = None
 
 
 def study_info(standing: StudyStanding) -> StudyInfo:
@@ -68,7 +71,7 @@ def study_info(standing: StudyStanding) -> StudyInfo:
     return StudyInfo(name=standing.name, kind=standing.kind.value, complete=tally.complete,
                      failed=tally.failed, pruned=tally.pruned, running=tally.running,
                      planned=tally.planned, ran_on=standing.placement.text(),
-                     selected=standing.selected)
+                     selected=standing.selected, retry=standing.retry_line())
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,8 @@ def open_writer(cfg: DictConfig) -> AbstractContextManager[Store]:
 def run_options(cfg: DictConfig) -> dict[str, Any]:
     """Heartbeat period and database patience of a running command."""
     return {"heartbeat_seconds": float(cfg.heartbeat_interval),
-            "retry_seconds": float(cfg.db_retry_seconds)}
+            "retry_seconds": float(cfg.db_retry_seconds),
+            "failed_again": bool(cfg.retry_failed)}
 
 
 def sweep_plan(config: Config) -> tuple[DictConfig, StudyPlan]:

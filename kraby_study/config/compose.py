@@ -11,7 +11,7 @@ from hydra.core.config_search_path import ConfigSearchPath
 from hydra.core.global_hydra import GlobalHydra
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.core.plugins import Plugins
-from hydra.errors import HydraException
+from hydra.errors import HydraException, OverrideParseException
 from hydra.plugins.search_path_plugin import SearchPathPlugin
 from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
@@ -54,6 +54,32 @@ def _one_line(err: BaseException) -> str:
                 parts.append(line)
         current = current.__cause__ or current.__context__
     return re.sub(r"\s+", " ", "; ".join(parts) or type(err).__name__)
+
+
+def unreadable(err: OverrideParseException) -> str:
+    """One line for an override Hydra cannot parse: its key, what Hydra expected, and what a
+    value may be (a word or number, a [list] or {map} with its brackets closed, or a quoted
+    string, which may hold anything)."""
+    text = str(err.override)
+    key, sep, value = text.partition("=")
+    said = str(err.message).splitlines()[0] if err.message else "cannot parse it"
+    if not sep:
+        return f"{text}: not KEY=VALUE ({said})"
+    quote = '"' if "'" in value else "'"
+    return (f"{key}: cannot read the value {value!r} ({said}); a value is a word or number, "
+            f"a [list] or {{map}} with its brackets closed, or a quoted string, which may hold "
+            f"= , brackets and spaces: {key}={quote}{value}{quote}")
+
+
+def check_syntax(overrides: Sequence[str]) -> None:
+    """Refuse an override Hydra's grammar cannot parse, in one line (:func:`unreadable`)
+    instead of Hydra's message and the parser's empty one after it."""
+    parser = OverridesParser.create()
+    for override in overrides:
+        try:
+            parser.parse_overrides([override])
+        except OverrideParseException as err:
+            raise ConfigError(unreadable(err)) from None
 
 
 class UserConfFirst(SearchPathPlugin):
@@ -193,6 +219,7 @@ def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
 def composed(overrides: Sequence[str], check: bool = True) -> Composed:
     """:func:`compose_config`, with the config group files Hydra chose."""
     refuse_hydra_settings(overrides)
+    check_syntax(overrides)
     overrides, ranges = new_ranges(renamed(overrides))
     if "ppo=zoo" in overrides and "env=gym" not in overrides:
         # Otherwise Hydra's words: "Key 'normalize' not in 'LegEnvConfig'".

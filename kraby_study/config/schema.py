@@ -355,6 +355,11 @@ class RayConfig:
     runtime_env: dict[str, Any] | None = None
     """Ray's runtime_env for the trials (e.g. {working_dir: ...}); null: every node has the
     project installed at the same path."""
+    start_seconds: int = 300
+    """How long an actor placed on a node may take to start (its process importing torch and
+    the project) before it is taken as hung and its trial runs again. An actor waiting for a
+    CPU does not count; one starting is alive, not silent. Measured (bench_actor_start.py):
+    at most 4.8 s on a fresh interpreter, 14 s beside two training runs on 2 cores."""
 
 
 @dataclass
@@ -391,6 +396,9 @@ class KrabyConfig:
     """PostgreSQL: a running trial silent this long is failed and queued again."""
     db_retry_seconds: int = 60
     """How long a command keeps retrying a database it lost before it gives up."""
+    retry_failed: bool = False
+    """Queue the study's failed runs again (same key, seed and settings) before running:
+    ``--retry-failed`` on run, optuna and confirm. Complete runs are left alone."""
     seed: int = 0
     """Seed of the first training run; run n of a study uses seed + n (a confirm's seeds are
     confirm.seed's)."""

@@ -281,6 +281,8 @@ def validate_executor(cfg: DictConfig) -> None:
     if cfg.ray.cpus_per_trial is not None:
         _require(int(cfg.ray.cpus_per_trial) >= 1,
                  f"ray.cpus_per_trial must be at least 1, got {cfg.ray.cpus_per_trial}")
+    _require(int(cfg.ray.start_seconds) >= 1,
+             f"ray.start_seconds must be at least 1, got {cfg.ray.start_seconds}")
     if cfg.executor == "ray":
         _require(importlib.util.find_spec("ray") is not None,
                  "executor=ray needs Ray, which is not installed: pip install "

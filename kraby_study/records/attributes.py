@@ -240,7 +240,11 @@ class TrialAttrs(TrialMeasures):
     model_path: str | None = None
     """Where its final model (SB3 zip) is saved, if models are kept."""
     retry_of: int | None = None
-    """Number of the interrupted trial this attempt replaces."""
+    """Number of the trial this attempt replaces: an interrupted one, or a failed one queued
+    again on purpose (``retry_failed``)."""
+    retried_failure: str | None = None
+    """The failure of the earlier attempt, when a failed trial was queued again on purpose
+    (``retry_failed``); its provenance record names it too."""
     recheck_of: int | None = None
     """Number of the search trial this attempt rechecks on more seeds (``search.recheck``): it
     trains the seeds after the trial's own and holds the scores of both, so it replaces the
@@ -354,6 +358,14 @@ def provenance_key(facts: Mapping[str, str]) -> str:
 
 RAY_NODE = "ray_node"
 """The provenance field of a trial run on Ray: the Ray node id of the actor that ran it."""
+
+
+def retry_facts(attrs: TrialAttrs) -> dict[str, str]:
+    """The provenance fields of a failed trial queued again on purpose (``retry_failed``): the
+    number of the attempt it retries and that attempt's failure; none for any other."""
+    if attrs.retried_failure is None:
+        return {}
+    return {"retry_of": str(attrs.retry_of), "retried_failure": attrs.retried_failure}
 
 
 @dataclass(frozen=True)

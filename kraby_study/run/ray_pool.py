@@ -7,6 +7,13 @@ so the command's process stays the only writer of the store, and a SQLite file s
 cluster. An actor that dies (its process killed, its node lost) ends its trial with a ``died``
 event, and the runner runs the trial again. When the cluster itself stays out of reach for
 ``db_retry_seconds``, the command stops with one line; complete trials are stored already.
+
+An actor's start is judged by what the cluster says of it, not by a clock: Ray's actor table
+names the worker process an actor was given as soon as a node places it, so an actor with a
+process that has not answered yet is alive and importing (torch from a slow disk, or on a
+loaded node), and counts as an answer; only ``ray.start_seconds`` bounds that start (an actor
+hung in its imports is let go and its trial runs again). An actor with no process is waiting
+for a CPU, and an idle actor is let go for it.
 """
 
 from __future__ import annotations
@@ -16,10 +23,11 @@ import os
 import queue
 import re
 import socket
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
@@ -42,8 +50,6 @@ import ray  # noqa: E402 - after the settings above
 
 DRAIN_SECONDS = 1.0
 """How long an actor holds a drain call open waiting for a message."""
-PLACEMENT_SECONDS = 10.0
-"""An actor not started after this long is taken to wait for a CPU, not to be starting."""
 LOCAL_OBJECT_STORE = 200 * 1024 * 1024
 """Object store of a Ray instance the command starts itself: results are small."""
 
@@ -104,11 +110,56 @@ class _Slot:
     actor: Any
     ready: Any
     """The actor's ready() call; None once it answered."""
-    born: float = field(default_factory=time.monotonic)
+    placed: float | None = None
+    """When the cluster was first seen to have given the actor a process (monotonic)."""
     number: int | None = None
     spec: TrialSpec | None = None
     run: Any = None
     drain: Any = None
+
+
+class ActorTable:
+    """Which starting actors the cluster has given a worker process, from Ray's actor table.
+
+    The table is read in a thread of its own, one read at a time: a read waits as long as
+    the cluster's head is out of reach, and the command must still notice that silence. A
+    read is taken once it has ended; until then nothing new is known.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._reading = False
+        self._read: dict[str, bool] | None = None
+
+    def placed(self, actors: list[Any]) -> dict[str, bool] | None:
+        """Actor id -> whether it has a worker process, as the last read that ended found it
+        (None when no read ended since the last call); starts the next read."""
+        with self._lock:
+            read, self._read = self._read, None
+            if not self._reading and actors:
+                self._reading = True
+                ids = [a._actor_id.hex() for a in actors]
+                threading.Thread(target=self._take, args=(ids,), daemon=True).start()
+        return read
+
+    def _take(self, ids: list[str]) -> None:
+        found: dict[str, bool] = {}
+        try:
+            for actor_id in ids:
+                found[actor_id] = _has_process(actor_id)
+        finally:
+            with self._lock:
+                self._read, self._reading = found, False
+
+
+def _has_process(actor_id: str) -> bool:
+    """Whether Ray's actor table names a worker process for the actor (placed on a node and
+    starting, or started); False while it waits to be placed."""
+    try:
+        info = ray._private.state.actors(actor_id)
+    except Exception:  # noqa: BLE001 - a private table: no answer is no news
+        return False
+    return bool(info) and int(info.get("Pid") or 0) > 0 and info.get("State") != "DEAD"
 
 
 class RayPool:
@@ -119,12 +170,17 @@ class RayPool:
     so the cluster's remaining CPUs serve the trials still to run.
     """
 
-    def __init__(self, size: int, shards: int, cpus: int, patience: float) -> None:
+    def __init__(self, size: int, shards: int, cpus: int, patience: float,
+                 start_seconds: float) -> None:
         self.size = size
         self._actor = ray.remote(TrialActor).options(
             num_cpus=cpus, max_concurrency=3, max_restarts=0, max_task_retries=0)
         self._shards = shards
         self._patience = patience
+        self._start_seconds = start_seconds
+        self._table = ActorTable()
+        self._starting_seen = False
+        """Whether the latest read of the actor table found a busy actor starting."""
         self._slots: list[_Slot] = []
         self._silent_since: float | None = None
         self.lost = False
@@ -154,18 +210,20 @@ class RayPool:
         Raises:
             ClusterLost: No call has reached the cluster for ``patience`` seconds.
         """
+        out: list[Event] = []
+        # Idle now, after the runner's claims: no trial was left for them.
+        self._let_go_for_unplaced(self._starting(out))
         busy = [s for s in self._slots if s.number is not None]
         for slot in busy:
             if slot.drain is None:
                 slot.drain = slot.actor.drain.remote(DRAIN_SECONDS)
         calls = {ref: slot for slot in busy for ref in (slot.drain, slot.run) if ref is not None}
         if not calls:
-            return []
+            return out
         ready, _ = ray.wait(list(calls), num_returns=1, timeout=timeout)
         if ready:
             ready, _ = ray.wait(list(calls), num_returns=len(calls), timeout=0)
-        self._note_reach(bool(ready), busy)
-        out: list[Event] = []
+        self._note_reach(bool(ready) or self._starting_seen, busy)
         for ref in ready:
             slot = calls[ref]
             if slot not in self._slots or ref not in (slot.drain, slot.run):
@@ -184,7 +242,6 @@ class RayPool:
             else:
                 slot.drain = None
                 self._deliver(slot, got, out)
-        self._let_go_for_unplaced()
         return out
 
     def _deliver(self, slot: _Slot, messages: list[tuple[Any, ...]], out: list[Event]) -> None:
@@ -213,8 +270,9 @@ class RayPool:
     def _note_reach(self, answered: bool, busy: list[_Slot]) -> None:
         """Stop after ``patience`` seconds in which no trial's actor answered.
 
-        A living actor answers each drain within DRAIN_SECONDS, so silence from all of them
-        means the cluster is gone, or has no node left to place them on.
+        A living actor answers each drain within DRAIN_SECONDS, and one still starting has a
+        worker process in the cluster's actor table (read afresh for each call), so silence
+        from all of them means the cluster is gone, or has no node left to place them on.
         """
         if answered or not busy:
             self._silent_since = None
@@ -227,17 +285,34 @@ class RayPool:
                               "cluster is lost or has no CPU left for a trial; giving up "
                               "(complete trials are stored; rerun to resume)")
 
-    def _let_go_for_unplaced(self) -> None:
-        """Let idle actors go while a newer actor waits to be placed (a node was lost)."""
+    def _starting(self, out: list[Event]) -> list[_Slot]:
+        """The actors that have not answered ready() yet, each marked placed once the
+        cluster's actor table names a process for it. One placed for over ``start_seconds``
+        is taken as hung in its start: it is let go and its trial runs again."""
+        self._starting_seen = False
         starting = [s for s in self._slots if s.ready is not None]
         if not starting:
-            return
+            return []
         done, _ = ray.wait([s.ready for s in starting], num_returns=len(starting), timeout=0)
         for slot in starting:
             if slot.ready in done:
                 slot.ready = None
-        waiting = [s for s in starting if s.ready is not None
-                   and time.monotonic() - s.born > PLACEMENT_SECONDS]
+        starting = [s for s in starting if s.ready is not None]
+        placed = self._table.placed([s.actor for s in starting])
+        now = time.monotonic()
+        for slot in starting:
+            if placed is not None and placed.get(slot.actor._actor_id.hex()):
+                slot.placed = slot.placed or now
+                self._starting_seen |= slot.number is not None
+            if slot.placed is not None and now - slot.placed > self._start_seconds:
+                self._gone(slot, f"not started after {self._start_seconds:g} s on its node "
+                           "(ray.start_seconds)", out)
+        return [s for s in starting if s in self._slots]
+
+    def _let_go_for_unplaced(self, starting: list[_Slot]) -> None:
+        """Let idle actors go while newer ones wait to be placed (a node was lost and the
+        others are full): one idle actor for each actor with no process yet."""
+        waiting = [s for s in starting if s.placed is None]
         idle = [s for s in self._slots if s.number is None and s.ready is None]
         for slot in idle[:len(waiting)]:
             self._slots.remove(slot)
@@ -301,11 +376,13 @@ class RayExecutor:
         shards: Processes stepping each trial's legs.
         cpus: CPUs each trial reserves on its node.
         patience: Seconds the cluster may stay out of reach before the command stops.
+        start_seconds: Seconds an actor placed on a node may take to start.
     """
 
     shards: int
     cpus: int
     patience: float
+    start_seconds: float
 
     def workers(self, configured: int | None) -> int:
         """The configured number, or the cluster's CPUs / cpus per trial."""
@@ -315,7 +392,7 @@ class RayExecutor:
 
     def pool(self, size: int) -> RayPool:
         """``size`` trial actors, started when there is work for them."""
-        return RayPool(size, self.shards, self.cpus, self.patience)
+        return RayPool(size, self.shards, self.cpus, self.patience, self.start_seconds)
 
     def prestart(self, size: int) -> None:
         """Nothing: actors are placed when a trial needs one."""
@@ -370,6 +447,7 @@ def ray_executor(cfg: DictConfig) -> Iterator[RayExecutor]:
         if biggest < cpus:
             raise ConfigError(f"no Ray node has {cpus} CPU(s) for a trial (the largest has "
                               f"{biggest:g}); lower ray.cpus_per_trial")
-        yield RayExecutor(shards=shards, cpus=cpus, patience=float(cfg.db_retry_seconds))
+        yield RayExecutor(shards=shards, cpus=cpus, patience=float(cfg.db_retry_seconds),
+                          start_seconds=float(cfg.ray.start_seconds))
     finally:
         ray.shutdown()

@@ -46,7 +46,7 @@ from kraby_study.run.recheck import (
 )
 from kraby_study.run.runner import CommandRun, Retrying, run_trials
 from kraby_study.run.sampling import directions, distributions, make_pruner, make_sampler
-from kraby_study.run.source import StudySource, requeue_orphans
+from kraby_study.run.source import StudySource, requeue_orphans, retry_failed
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
 
@@ -388,6 +388,8 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
     if opening:  # resumed or joined: not the random trials an earlier command drew
         ledger.use_sampler(make_sampler(cfg, opening))
     requeue_orphans(ledger, stream)
+    if cfg.retry_failed:
+        retry_failed(ledger, stream)
     queued = warm_start(ledger, cfg, starts)
     if queued:
         print(f"search {ledger.name}: evaluating {', '.join(queued)} first", file=stream)

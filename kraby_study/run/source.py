@@ -69,3 +69,13 @@ def requeue_orphans(ledger: StudyLedger, stream: TextIO) -> None:
     if requeued:
         print(f"{requeued} trial(s) left running by a stopped command will run again",
               file=stream)
+
+
+def retry_failed(ledger: StudyLedger, stream: TextIO) -> int:
+    """Queue the study's failed runs again with their seeds and settings, and say so; returns
+    how many."""
+    numbers = ledger.retry_failed()
+    if numbers:
+        print(f"{len(numbers)} failed trial(s) of {ledger.name} queued again with the same seeds "
+              f"and settings: {', '.join(map(str, numbers))}", file=stream, flush=True)
+    return len(numbers)

@@ -14,20 +14,23 @@ from kraby_study.run.plan_source import PlanSource
 from kraby_study.run.progress import Progress
 from kraby_study.run.race_source import RaceSource, race_line
 from kraby_study.run.runner import CommandRun, Retrying, run_trials
-from kraby_study.run.source import requeue_orphans
+from kraby_study.run.source import requeue_orphans, retry_failed
 from kraby_study.store.store import Store
 
 
 def run_plan(store: Store, plan: StudyPlan, executor: Executor, workers: int, stream: TextIO,
              live: bool | None = None, heartbeat_seconds: float = 5.0,
-             retry_seconds: float = 60.0) -> tuple[CommandRun, Tally]:
+             retry_seconds: float = 60.0, failed_again: bool = False) -> tuple[CommandRun, Tally]:
     """Queue, run and record a plan's trials, ``workers`` at once on the executor; returns
-    this command's summary and the outcomes of the plan's runs."""
+    this command's summary and the outcomes of the plan's runs. ``failed_again``: the plan's
+    failed runs are queued again first (``retry_failed``)."""
     kind = str(plan.definition.get("kind"))
     ledger = store.define(plan.name, StudyAttrs(kind=kind, definition=plan.definition,
                                                 fingerprint=plan.fingerprint))
     ledger.update(plan.notes())
     requeue_orphans(ledger, stream)
+    if failed_again:
+        retry_failed(ledger, stream)
     source = RaceSource(ledger, plan) if plan.racing else PlanSource(ledger, plan)
     source.queue_missing()
     before = tally(source.counted(), ledger.attrs.planned if plan.racing else None)

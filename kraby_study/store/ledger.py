@@ -23,9 +23,10 @@ from kraby_study.records.attributes import (
     TrialAttrs,
     TrialResult,
     provenance_key,
+    retry_facts,
 )
-from kraby_study.records.stored import Failure, Outcome, failure
-from kraby_study.store.attempts import requeue_stale
+from kraby_study.records.stored import Failure, Outcome, counted, failure, outcome
+from kraby_study.store.attempts import queue_attempt, requeue_stale
 from kraby_study.store.backend import LOCK_BASE, Backend
 from kraby_study.store.tables import curve_points, read_curves
 
@@ -150,7 +151,9 @@ class StudyLedger:
 
     def note_provenance(self, number: int, facts: Mapping[str, str]) -> str:
         """Store what made a trial: the record once per study (``kraby_provenance:<key>``), its key
-        on the trial. Returns the key."""
+        on the trial; a failed trial queued again on purpose adds the attempt it retries and
+        that attempt's failure (:func:`retry_facts`). Returns the key."""
+        facts = {**facts, **retry_facts(TrialAttrs.of(self._storage.get_trial(self._id(number))))}
         key = provenance_key(facts)
         if key not in self._provenance_keys:
             self._study.set_user_attr(PROVENANCE_PREFIX + key, dict(facts))
@@ -213,6 +216,18 @@ class StudyLedger:
             return  # another process finished or gave it back first
         if failed:
             requeue_stale(self._study, self._storage.get_trial(trial_id))
+
+    def retry_failed(self) -> list[int]:
+        """Queue a new attempt of every counted run that failed (a divergence or an error),
+        with its key, seed and parameters, saying on it how the earlier attempt failed;
+        complete, pruned and pending runs are left alone, and so is a trial without a key (a
+        sampled configuration refused before it ran). Returns the failed trials' numbers."""
+        with self.plan_lock():
+            failed = [t for t in counted(self.trials()) if outcome(t) == Outcome.FAILED
+                      and t.user_attrs.get("key") is not None]
+            for trial in failed:
+                queue_attempt(self._study, trial, str(trial.user_attrs.get("failure")))
+        return [t.number for t in failed]
 
     def requeue_orphans(self) -> int:
         """Queue again the trials a stopped command left running; returns how many.

@@ -41,11 +41,12 @@ if TYPE_CHECKING:
     import pandas as pd
 
 ROW_ATTRS = ("key", "retry_of", "failure", "wall_time", "cpu_time", "env_steps", "scores",
-             "enqueued")
+             "enqueued", "provenance")
 """The trial attributes a row holds: what counting reads (key, retry_of, failure), the
 fastest_equivalent rule's training time (wall_time; cpu_time on a confirm study), the env steps a
 dry run's estimate divides by wall_time (env_steps), the seeds' scores a two-objective
-search's ties are decided on (scores), and which trial is its floor (enqueued)."""
+search's ties are decided on (scores), which trial is its floor (enqueued), and the key of
+what made it (provenance: the command ``list`` offers to retry failed runs with)."""
 SQLITE_PATIENCE = 60
 """Seconds a read waits while the writer holds the SQLite file (as the writer's own
 connection, :class:`kraby_study.store.backend.SqliteBackend`)."""
