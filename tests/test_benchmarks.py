@@ -65,6 +65,8 @@ SMOKE = [
                  id="bench_postgres"),
     pytest.param("bench_ray.py", ["--rounds", "1", "--steps", "1024"], "| ray |", marks=slow,
                  id="bench_ray"),
+    pytest.param("bench_actor_start.py", ["--actors", "1"], "started: median", marks=slow,
+                 id="bench_actor_start"),
     pytest.param("bench_ray_fault.py", ["--steps", "1024", "--seeds", "1", "--after", "2"],
                  "node lost at", marks=slow, id="bench_ray_fault"),
     pytest.param("bench_zoo_rerun.py", [str(ROOT / "docs/results/pendulum_beats_zoo.yml"),
