@@ -1,6 +1,6 @@
 """Reading a store for a report: each study's counted trials and their curves, as frames.
 
-The report only reads, through the store (:mod:`kraby_study.store`); the store refuses a missing,
+The report only reads, through the store ([`kraby_study.store`][]); the store refuses a missing,
 empty or foreign file before anything could create a database at a wrong path.
 """
 
@@ -31,7 +31,8 @@ class StudyData:
         ledger: The stored study.
         definition: The stored definition (sweeps, confirm studies and single runs), else
             empty.
-        trials: The trials that count (:func:`kraby_study.records.stored.counted`), in number order.
+        trials: The trials that count
+            ([`counted`][kraby_study.records.stored.counted]), in number order.
         curves: Learning-curve points of the counted trials, columns ``number, step,
             mean_reward, wall_time, episodes``.
         planned: Planned number of runs (or trials), if the store says.
@@ -43,8 +44,8 @@ class StudyData:
         source_seeds: A confirm study's source's seeds (the tuning seeds), None when it has
             no source or the source is not in the store.
         source_legs: Under offset seeding of that source, the seed each leg of its runs was
-            reset with (:func:`kraby_study.records.stored.offset_leg_seeds`); None otherwise (no
-            source, or a source seeded by streams).
+            reset with ([`offset_leg_seeds`][kraby_study.records.stored.offset_leg_seeds]); None
+            otherwise (no source, or a source seeded by streams).
     """
 
     name: str

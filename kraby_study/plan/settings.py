@@ -29,8 +29,8 @@ UNSAFE = re.compile(r"[^A-Za-z0-9._,=+-]+")
 def resolved_settings(cfg: DictConfig) -> dict[str, Any]:
     """The env and ppo settings of a config, with the batch size made explicit.
 
-    A ppo setting of :data:`kraby_study.plan.spec.OPTIONAL_PPO` at its default is left out:
-    settings stored before it existed meant that default, and so keep their fingerprints.
+    A ppo setting of [`OPTIONAL_PPO`][kraby_study.plan.spec.OPTIONAL_PPO] at its default is left
+    out: stored settings that do not name it mean that default, and keep their fingerprints.
     """
     ppo = {key: value for key, value in to_container(cfg.ppo).items()
            if key not in OPTIONAL_PPO or value != OPTIONAL_PPO[key]}

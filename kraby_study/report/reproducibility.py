@@ -3,8 +3,8 @@
 It follows the reporting checklist of Eimer et al. (ICML 2023) for hyperparameter studies in RL:
 the tuning seeds apart from the test seeds, what was compared (values or search space), the
 budget in env steps and CPU seconds, the hardware, and the package and code versions. Each
-trial stores what made it (:mod:`kraby_study.run.provenance`); where the trials of one study
-differ in a field that can move the numbers, a warning names the field and counts each value.
+trial stores what made it ([`kraby_study.run.provenance`][]); where the trials of one study differ
+in a field that can move the numbers, a warning names the field and counts each value.
 """
 
 from __future__ import annotations

@@ -5,8 +5,8 @@ per second and an ETA, e.g.::
 
     [3/8] clip_range=0.2 seed 1: complete, score -0.0123 (12 s) | 1,820 steps/s, ETA 1m05s
 
-On a terminal the lines are written with :meth:`tqdm.tqdm.write` above one live bar line;
-in a log or a pipe there is no bar and no escape code, only the lines, flushed one by one.
+On a terminal the lines are written with `tqdm.tqdm.write` above one live bar line; in a log or a
+pipe there is no bar and no escape code, only the lines, flushed one by one.
 """
 
 from __future__ import annotations
@@ -144,7 +144,8 @@ class Progress:
     def finish(self, label: str, result: TrialResult, cost: bool = False,
                why: str | None = None) -> None:
         """A trial ended: complete, failed or pruned; ``cost``: show its cost (a
-        two-objective search's trial); ``why``: why its source stopped it (:func:`describe`)."""
+        two-objective search's trial); ``why``: why its source stopped it
+        ([`describe`][kraby_study.run.progress.describe])."""
         so_far, _ = self.running.pop(label, (0, 0))
         trained = max(result.env_steps or 0, so_far)
         self.ended_steps += trained
