@@ -304,7 +304,7 @@ def validate_tensorboard(cfg: DictConfig) -> None:
              "'kraby-study[tensorboard]'")
 
 
-def writable(folder: Path, name: str) -> None:
+def check_writable(folder: Path, name: str) -> None:
     """Refuse a folder that cannot be made or written, in one line: the folders missing on
     the way are made for the check, a file is written and removed, and what was made is
     removed again."""

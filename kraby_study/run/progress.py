@@ -131,7 +131,7 @@ class Progress:
             self.lost_steps += self.running[label][0]
         self.running[label] = (0, steps)
         self.budgets.append(steps)
-        self._line(f"started  {label}")
+        self._print_line(f"started  {label}")
 
     def step(self, label: str, steps_done: int) -> None:
         """A running trial reported its env steps so far."""
@@ -159,13 +159,13 @@ class Progress:
             self.failed += 1
         if self.bar is not None:
             self.bar.update(1)
-        self._line(f"[{self.done}/{self.total}] {label}: {describe(result, cost, why)}")
+        self._print_line(f"[{self.done}/{self.total}] {label}: {describe(result, cost, why)}")
 
     def interrupt(self, label: str, reason: str) -> None:
         """A trial stopped without ending (its worker died, or Ctrl-C): not done."""
         so_far, _ = self.running.pop(label, (0, 0))
         self.lost_steps += so_far
-        self._line(f"{label}: {interrupted(reason)}")
+        self._print_line(f"{label}: {interrupted(reason)}")
 
     def close(self) -> None:
         """Leave the terminal clean: the bar is removed (the lines stay)."""
@@ -220,7 +220,7 @@ class Progress:
 
     # -- output -------------------------------------------------------------------------------
 
-    def _line(self, text: str) -> None:
+    def _print_line(self, text: str) -> None:
         line = f"{text} | {self.figures()}"
         if self.bar is None:
             print(line, file=self.stream, flush=True)
