@@ -14,7 +14,7 @@ from optuna.trial import FrozenTrial
 
 from kraby_study.errors import StoreError
 from kraby_study.records.attributes import StudyKind, TrialAttrs
-from kraby_study.records.definition import LEGACY_SEEDING, stored_seeding
+from kraby_study.records.definition import UNRECORDED_SEEDING, stored_seeding
 from kraby_study.records.stored import Tally, counted, offset_leg_seeds, tally, trial_seeds
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
@@ -114,6 +114,6 @@ def _source(store: Store, kind: StudyKind, definition: dict[str, Any]) -> dict[s
     per_trial = int(attrs.definition.get("seeds", 1)) if attrs.kind == StudyKind.SEARCH else 1
     trials = counted(ledger.trials())
     legs = ({leg for t in trials for leg in offset_leg_seeds(t, per_trial)}
-            if stored_seeding(attrs.definition) == LEGACY_SEEDING else None)
+            if stored_seeding(attrs.definition) == UNRECORDED_SEEDING else None)
     return {"source_seeds": sorted({seed for t in trials for seed in trial_seeds(t, per_trial)}),
             "source_legs": legs}

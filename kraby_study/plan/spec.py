@@ -12,9 +12,9 @@ from kraby_study.records.attributes import StudyAttrs
 from kraby_study.records.definition import (
     EVAL_EPISODES,
     EVAL_SET,
-    LEGACY_EVAL_SET,
-    LEGACY_SEEDING,
     SEEDING,
+    UNRECORDED_EVAL_SET,
+    UNRECORDED_SEEDING,
 )
 
 OPTIONAL_PPO: dict[str, Any] = {
@@ -206,7 +206,7 @@ def with_evaluation(definition: dict[str, Any], eval_set: str) -> dict[str, Any]
     """A definition as stored for ``eval_set``: run adds ``eval_set: run``; fixed adds
     nothing, so a study whose definition has no ``eval_set`` keeps its fingerprint and resumes on
     the set it began with."""
-    return {**definition, "eval_set": eval_set} if eval_set != LEGACY_EVAL_SET \
+    return {**definition, "eval_set": eval_set} if eval_set != UNRECORDED_EVAL_SET \
         else dict(definition)
 
 
@@ -214,7 +214,7 @@ def with_seeding(definition: dict[str, Any], scheme: str) -> dict[str, Any]:
     """A definition as stored for ``scheme``: streams adds ``seeding: streams``; offset adds
     nothing, so every study defined before streams existed keeps its fingerprint and
     resumes, and an offset study defined today is that same study."""
-    return {**definition, "seeding": scheme} if scheme != LEGACY_SEEDING else dict(definition)
+    return {**definition, "seeding": scheme} if scheme != UNRECORDED_SEEDING else dict(definition)
 
 
 def fingerprint(definition: dict[str, Any]) -> str:
