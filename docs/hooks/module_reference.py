@@ -22,8 +22,9 @@ RENDERED = re.compile(r"^:::\s+(\S+)", re.MULTILINE)
 # A package's own entry renders its docstring only: the names it re-exports are rendered where
 # they are defined, once.
 PACKAGE_OPTIONS = "    options:\n      members: false\n"
-# Every public member, documented or not, so a cross-reference to any of them resolves.
-MODULE_OPTIONS = "    options:\n      show_if_no_docstring: true\n"
+# Every public member, documented or not, so a cross-reference to any of them resolves; no
+# private or special member (``__init__`` says nothing a dataclass's fields do not).
+MODULE_OPTIONS = ('    options:\n      show_if_no_docstring: true\n      filters: ["!^_"]\n')
 
 
 def module_name(path: Path) -> str:
