@@ -5,16 +5,15 @@ is on the front when no other complete trial is at least as good on both and bet
 Two choices are made from it:
 
 - [`front_choice`][kraby_study.decision.front.front_choice], the search's selection (``best``,
-``list``, the report): the front's
-  trials are compared on their seed scores ([`compare`][kraby_study.decision.comparison.compare]),
-  and the search's rule picks the cheapest of the best score and the trials it admits:
-  ``fastest_equivalent`` those shown within the margin of the best, ``final_score`` none. The family
-  is the front, not every trial: the best score is always on it, every trial off it is matched or
-  beaten on both objectives by one on it, and a family of 50 trials would leave the tests almost no
-  power at 3 seeds. With fewer than ``min_seeds`` (2) seeds a trial there is no test, and the rule
-  falls back to the best score.
-- [`spread`][kraby_study.decision.front.spread], what ``confirm`` retrains: up to K trials spread
-along the front.
+  ``list``, the report): the front's trials are compared on their seed scores
+  ([`compare`][kraby_study.decision.comparison.compare]), and the search's rule picks the cheapest
+  of the best score and the trials it admits: ``fastest_equivalent`` those shown within the margin
+  of the best, ``final_score`` none. The family is the front, not every trial: the best score is
+  always on it, every trial off it is matched or beaten on both objectives by one on it, and a
+  family of 50 trials would leave the tests almost no power at 3 seeds. With fewer than
+  ``min_seeds`` (2) seeds a trial there is no test, and the rule falls back to the best score.
+- [`spread`][kraby_study.decision.front.spread], what ``confirm`` retrains: up to K trials
+  spread along the front.
 """
 
 from __future__ import annotations

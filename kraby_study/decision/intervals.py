@@ -386,13 +386,12 @@ def iqm_interval(values: Sequence[float], level: float = LEVEL) -> tuple[float, 
     """Tukey-McLaughlin confidence interval of the interquartile mean over seeds.
 
     With g = floor(n / 4) values trimmed from each end (as
-    [`iqm`][kraby_study.decision.intervals.iqm]) and h = n - 2 g left, the interval is IQM +- t(0.5
-    + level / 2, h - 1) * s_w / ((1 - 2 * 0.25) sqrt(n)), s_w the sd (ddof 1) of the sample
-    winsorised at g (Tukey and McLaughlin 1963; Wilcox, *Introduction to Robust Estimation and
-    Hypothesis Testing*, 4th ed. 2017, sec. 4.4). With n < 4 nothing is trimmed and it is the
-    Student-t interval of the mean. The percentile bootstrap it replaces covered the IQM 0.74 of the
-    time at n = 3 and 0.90 at n = 5 (normal data); this one's coverage is measured in
-    ``benchmarks/bench_error_rates.py``.
+    [`iqm`][kraby_study.decision.intervals.iqm]) and h = n - 2 g left, the interval is
+    IQM +- t(0.5 + level / 2, h - 1) * s_w / ((1 - 2 * 0.25) sqrt(n)), s_w the sd (ddof 1) of the
+    sample winsorised at g (Tukey and McLaughlin 1963; Wilcox, *Introduction to Robust Estimation
+    and Hypothesis Testing*, 4th ed. 2017, sec. 4.4). With n < 4 nothing is trimmed and it is the
+    Student-t interval of the mean. Its coverage is measured in
+    ``benchmarks/bench_error_rates.py`` (docs/reference/statistics.md).
 
     Returns:
         (low, high); (NaN, NaN) with fewer than 2 values, (v, v) when every value is v.
