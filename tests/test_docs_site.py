@@ -98,3 +98,53 @@ def test_configuration_page_lists_every_schema_group(monkeypatch: pytest.MonkeyP
     monkeypatch.setattr(schema, "Unlisted", Unlisted, raising=False)
     with pytest.raises(ValueError, match="add Unlisted to SECTIONS"):
         hook.render(schema)
+
+
+def load_hook(name: str):
+    """A hook of docs/hooks/ as a module."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, ROOT / f"docs/hooks/{name}.py")
+    assert spec is not None and spec.loader is not None
+    hook = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hook)
+    return hook
+
+
+def nav_pages(nav: object) -> list[str]:
+    """Every page path the navigation lists, however deep."""
+    if isinstance(nav, str):
+        return [nav]
+    if isinstance(nav, dict):
+        return [page for value in nav.values() for page in nav_pages(value)]
+    if isinstance(nav, list):
+        return [page for item in nav for page in nav_pages(item)]
+    return []
+
+
+def test_every_module_is_rendered_and_listed() -> None:
+    """Each module of kraby_study is rendered by a ``:::`` block, on a hand-written page or on its
+    package's generated page, and the navigation lists every generated page."""
+    hook = load_hook("module_reference")
+    docs = ROOT / "docs"
+    pages = hook.pages(docs)
+    rendered = set(hook.rendered_elsewhere(docs))
+    for content in pages.values():
+        rendered |= set(hook.RENDERED.findall(content))
+    modules = {hook.module_name(path) for path in (ROOT / "kraby_study").rglob("*.py")}
+    assert modules and not modules - rendered, sorted(modules - rendered)
+    settings = yaml.load((ROOT / "mkdocs.yml").read_text(), Loader=yaml.BaseLoader)
+    assert set(pages) <= set(nav_pages(settings["nav"])), sorted(
+        set(pages) - set(nav_pages(settings["nav"])))
+    assert "docs/hooks/module_reference.py" in settings["hooks"]
+
+
+def test_docstrings_hold_no_sphinx_roles() -> None:
+    """A Sphinx role (``:func:`x` ``) renders as plain text on the site: cross-references are
+    written for mkdocstrings (``[`x`][kraby_study.module.x]``), which the strict build checks."""
+    role = re.compile(r":(?:class|func|mod|data|attr|meth|exc|obj):`")
+    found = [f"{path.relative_to(ROOT)}:{number}"
+             for path in sorted((ROOT / "kraby_study").rglob("*.py"))
+             for number, line in enumerate(path.read_text().splitlines(), 1)
+             if role.search(line)]
+    assert not found, found

@@ -38,7 +38,7 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
     of a sweep (values by IQM final score, as the answers rank them), with the seeds its
     trials used. Of a
     two-objective search, up to ``top`` trials of its front spread along it
-    (:func:`kraby_study.decision.front.spread`: the best score, the cheapest, the rest in cost
+    ([`spread`][kraby_study.decision.front.spread]: the best score, the cheapest, the rest in cost
     order).
 
     Raises:
@@ -117,7 +117,7 @@ def _front_arms(name: str, done: list[Any], top: int, floor: str | None) -> list
 
 def _search_arms(name: str, done: list[Any]) -> list[Arm]:
     """Complete search trials, best first (of equal scores the one on more seeds, then the
-    cheaper: :func:`ranking`), one per distinct configuration."""
+    cheaper: [`ranking`][kraby_study.records.values.ranking]), one per distinct configuration."""
     arms: list[Arm] = []
     seen: set[Any] = set()
     for trial in sorted(done, key=ranking):

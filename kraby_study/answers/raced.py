@@ -1,4 +1,4 @@
-"""Where a raced study stands, replayed from its stored runs (:mod:`kraby_study.decision.race`)."""
+"""Where a raced study stands, replayed from its stored runs ([`kraby_study.decision.race`][])."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from kraby_study.records.values import value_key
 def replay(rules: RaceRules, values: int, latest: Mapping[str, StoredTrial]
            ) -> tuple[Race[int], dict[int, dict[int, float]]]:
     """The race of ``values`` values (by index) replayed on the latest attempt of each run, and
-    the ended runs it read (:func:`ended_runs`)."""
+    the ended runs it read ([`ended_runs`][kraby_study.records.stored.ended_runs])."""
     runs = ended_runs(latest, list(rules.round_seeds))
     return race(list(range(values)), runs, rules), runs
 
@@ -22,7 +22,7 @@ def replay(rules: RaceRules, values: int, latest: Mapping[str, StoredTrial]
 def race_runs(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
               values: Sequence[Any]) -> RaceRuns | None:
     """A stored study's race as its ended runs, each planned value placed in ``values``
-    (matched by :func:`kraby_study.records.values.value_key`, not by position; a value not in
+    (matched by [`value_key`][kraby_study.records.values.value_key], not by position; a value not in
     ``values`` is left out); None for a study that did not race."""
     rules = RaceRules.of(dict(definition))
     if rules is None:
@@ -37,7 +37,8 @@ def race_runs(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
 def race_of(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
             values: Sequence[Any]) -> StudyRace | None:
     """The race of a stored study with its dropped values mapped onto ``values``
-    (:func:`race_runs`, replayed); None for a study that did not race."""
+    ([`race_runs`][kraby_study.answers.raced.race_runs], replayed); None for a study that did not
+    race."""
     runs = race_runs(definition, trials, values)
     return runs.replayed() if runs is not None else None
 

@@ -1,16 +1,15 @@
 """What a stored study fixes for the command that resumes it: the settings the command left
-open (null) are taken from the study's stored definition, so a study stored before a default
-changed resumes exactly as it began; a new study gets today's default.
+open (null) are taken from the study's stored definition, so a study resumes exactly as it began
+whatever today's defaults are; a new study gets today's default.
 
-- ``seeding``: the stored scheme (offset for a study stored before streams existed), else
-  streams.
+- ``seeding``: the stored scheme (offset for a definition without one), else streams.
 - ``confirm.seed`` (a confirm study): the first of its stored seeds, else 1000.
 - ``confirm.select`` (a confirm study): its stored selection rule, else the command's default.
-- ``search.eval_set``: the stored evaluation set (fixed for a study stored before runs drew
-  their own episodes), else run.
+- ``search.eval_set``: the stored evaluation set (fixed for a definition without one), else
+  run.
 - ``search.eval_episodes``: the stored number, else 200.
 - ``search.enqueue``: a stored search's own list, else left null for the command to fill
-  with its ppo config (:func:`kraby_study.cli.cmd_optuna`).
+  with its ppo config ([`cmd_optuna`][kraby_study.cli.cmd_optuna]).
 
 A setting the command gives stays as given: if it differs from the stored study, the store
 refuses it as a changed definition, naming the setting.
@@ -79,5 +78,6 @@ def resumed(cfg: DictConfig, name: str) -> DictConfig:
 
 
 def resumed_stage(campaign: Campaign, stage: Stage, lookup: Lookup) -> DictConfig:
-    """A campaign stage's config (:func:`stage_config`), settled for its stored study."""
+    """A campaign stage's config ([`stage_config`][kraby_study.plan.campaign.stage_config]), settled
+    for its stored study."""
     return resumed(stage_config(campaign, stage, lookup), stage.name)

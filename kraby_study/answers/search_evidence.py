@@ -234,7 +234,7 @@ def answer_of(choice: FrontChoice[int] | None, key: int) -> str:
 
 def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:
     """The best complete trials, best first as the pick ranks them (of equal scores the one
-    on more seeds, then the cheaper: :func:`kraby_study.records.values.ranking`), with a rank
+    on more seeds, then the cheaper: [`ranking`][kraby_study.records.values.ranking]), with a rank
     column."""
     done = search.trials[search.trials["outcome"] == Outcome.COMPLETE]
     by_number = {t.number: t for t in search.data.trials}

@@ -1,5 +1,5 @@
 """A stored two-objective search's front and its selection: what ``list``, ``best``,
-``confirm`` and the report read of it (:mod:`kraby_study.decision.front` holds the rules)."""
+``confirm`` and the report read of it ([`kraby_study.decision.front`][] holds the rules)."""
 
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ def front_rule(stored: str | None, options: CompareOptions | None = None) -> Sel
     """The rule a search's front is selected by: ``compare.select`` when given, else the rule
     the search stored (a two-objective search stores fastest_equivalent), else
     fastest_equivalent; a retired stored name is answered by today's rule
-    (:meth:`SelectRule.of`).
+    ([`SelectRule.of`][kraby_study.records.attributes.SelectRule.of]).
 
     Raises:
         ConfigError: ``compare.select`` names a rule a front cannot take (auc: a search
@@ -79,10 +79,10 @@ def search_front(trials: Sequence[StoredTrial], floor: str | None = None,
 
     Args:
         trials: The search's counted trials.
-        floor: Its floor (:func:`kraby_study.records.stored_floor`): once the floor's trial is
-            complete, trials scoring below it are left out of the front (and so of the
-            selection and of ``confirm``); they stay among ``points``.
-        rule: The front's rule (:func:`front_rule`).
+        floor: Its floor ([`stored_floor`][kraby_study.records.definition.stored_floor]): once
+            the floor's trial is complete, trials scoring below it are left out of the front (and
+            so of the selection and of ``confirm``); they stay among ``points``.
+        rule: The front's rule ([`front_rule`][kraby_study.answers.search_front.front_rule]).
         options: The comparison's margin and seeds; None: the defaults.
     """
     points = [Point(known_number(t), float(score(t)), float(cost(t)))  # type: ignore[arg-type]

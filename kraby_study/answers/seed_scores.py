@@ -1,7 +1,8 @@
 """The seed scores of a stored sweep, read once from its trials: each value's final scores, AUCs
-and training times (:class:`Samples`), the numbers every decision reads, and the study's one
-comparison of them (:func:`sweep_comparison`): the only place a sweep, confirm or single-run
-study is compared, whoever reads its answers (the report, ``best``, ``list``,
+and training times ([`Samples`][kraby_study.answers.seed_scores.Samples]), the numbers every
+decision reads, and the study's one comparison of them
+([`sweep_comparison`][kraby_study.answers.seed_scores.sweep_comparison]): the only place a sweep,
+confirm or single-run study is compared, whoever reads its answers (the report, ``best``, ``list``,
 ``${winner:...}``, campaigns)."""
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ def samples(trials: Sequence[StoredTrial], curves: pd.DataFrame | None, name: st
     """The samples of a sweep's counted trials; ``curves`` holds their curve points (columns
     number, step, mean_reward), None when no AUC is needed. A trial whose value is not in
     ``values`` is left out. ``time_attr``: the trial attribute read as its training time
-    (:func:`time_measure`)."""
+    ([`time_measure`][kraby_study.answers.seed_scores.time_measure])."""
     index = {value_key(v): i for i, v in enumerate(values)}
     runs = []
     for trial in trials:
@@ -80,6 +81,6 @@ def sweep_comparison(final: Mapping[int, Sequence[float]], dropped: Collection[i
     """A swept or single-run study's one comparison of its values' final scores (by index),
     the values a race dropped as worse (``dropped``) left out, under the command's margin,
     alpha and seeds; ``tests`` False: the best and the family only, for a rule that reads no
-    test (:attr:`kraby_study.decision.selection.Rule.tests`)."""
+    test ([`tests`][kraby_study.decision.selection.Rule.tests])."""
     return compare({i: v for i, v in final.items() if i not in dropped}, options.margin,
                    alpha=options.alpha, min_seeds=options.min_seeds, tests=tests)

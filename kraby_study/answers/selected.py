@@ -2,10 +2,10 @@
 
 "Best" is the statistics' word: the highest interquartile mean (IQM) of the final scores (a
 sweep's value; below 4 seeds the IQM is the mean) or the highest score (a search's trial).
-"Selected" is what a study's rule picks (:mod:`kraby_study.decision.selection`): under
-``final_score`` the best value, under
-``fastest_equivalent`` the fastest value shown equivalent to it. Every function takes the command's
-:class:`kraby_study.decision.comparison.CompareOptions` (margin, ``report.min_seeds`` and
+"Selected" is what a study's rule picks ([`kraby_study.decision.selection`][]): under
+``final_score`` the best value, under ``fastest_equivalent`` the fastest value shown equivalent to
+it. Every function takes the command's
+[`CompareOptions`][kraby_study.decision.comparison.CompareOptions] (margin, ``report.min_seeds`` and
 ``compare.select``, a rule read instead of the stored one); the defaults without one.
 """
 
@@ -121,8 +121,9 @@ def selection_of(ledger: StudyLedger, options: CompareOptions | None = None
 def front_selection(name: str, definition: dict[str, Any], trials: Sequence[StoredTrial],
                     select: str | None = None,
                     options: CompareOptions | None = None) -> Selection | None:
-    """A two-objective search's selection by its rule (:func:`front_rule` of its stored
-    ``select``; :func:`kraby_study.decision.front.front_choice`), with the front (above the search's
+    """A two-objective search's selection by its rule
+    ([`front_rule`][kraby_study.answers.search_front.front_rule] of its stored ``select``;
+    [`front_choice`][kraby_study.decision.front.front_choice]), with the front (above the search's
     floor, if it has one)."""
     found = search_front(trials, stored_floor(definition), front_rule(select, options), options)
     if found.choice is None:
@@ -141,8 +142,9 @@ def front_selection(name: str, definition: dict[str, Any], trials: Sequence[Stor
 
 def selected_short(attrs: StudyAttrs, trials: Sequence[StoredTrial], maximize: bool,
                    curves: Curves, options: CompareOptions | None = None) -> str:
-    """What a study selects so far, as ``list`` shows it (:attr:`Selection.short`), from its
-    counted trials; ``-`` when it selects nothing yet."""
+    """What a study selects so far, as ``list`` shows it
+    ([`Selection.short`][kraby_study.answers.selected.Selection.short]), from its counted trials;
+    ``-`` when it selects nothing yet."""
     if StudyKind.of(attrs.kind).swept:
         chosen = selected_value(attrs, trials, curves, options)
         return sweep_short(attrs, chosen) if chosen is not None else "-"
@@ -182,9 +184,9 @@ class SweepSelection:
 
 def sweep_selection(ledger: StudyLedger, options: CompareOptions | None = None
                     ) -> SweepSelection | None:
-    """What a swept study's stored rule (:mod:`kraby_study.decision.selection`) selects among its
-    complete runs (of a raced study, among the values its race did not drop); None when none
-    is complete."""
+    """What a swept study's stored rule ([`kraby_study.decision.selection`][]) selects among its
+    complete runs (of a raced study, among the values its race did not drop); None when none is
+    complete."""
     return selected_value(ledger.attrs, counted(ledger.trials()), ledger.curves, options)
 
 
@@ -198,8 +200,8 @@ def study_rule(stored: str | None, options: CompareOptions | None = None) -> Sel
 
 def selected_value(attrs: StudyAttrs, trials: Sequence[StoredTrial], curves: Curves,
                    options: CompareOptions | None = None) -> SweepSelection | None:
-    """What a swept study's rule (:func:`study_rule`) selects among its counted trials; None
-    when no value can be selected yet."""
+    """What a swept study's rule ([`study_rule`][kraby_study.answers.selected.study_rule]) selects
+    among its counted trials; None when no value can be selected yet."""
     options = options or CompareOptions()
     rule = study_rule(attrs.select, options)
     name, values = swept_values(str(attrs.kind), attrs.definition, trials)

@@ -1,9 +1,9 @@
 """Where a stored study stands: what ``list`` and the commands' closing lines print.
 
-``list`` reads every study as light rows (:mod:`kraby_study.store.rows`), without Optuna; a
-command that holds a study's ledger reads it through Optuna. Both count and select with the
-same rules (:func:`kraby_study.records.stored.counted`, :func:`kraby_study.records.stored.tally`,
-:func:`kraby_study.answers.selected.selected_short`).
+``list`` reads every study as light rows ([`kraby_study.store.rows`][]), without Optuna; a command
+that holds a study's ledger reads it through Optuna. Both count and select with the same rules
+([`counted`][kraby_study.records.stored.counted], [`tally`][kraby_study.records.stored.tally],
+[`selected_short`][kraby_study.answers.selected.selected_short]).
 """
 
 from __future__ import annotations

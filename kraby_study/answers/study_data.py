@@ -1,6 +1,6 @@
 """Reading a store for a report: each study's counted trials and their curves, as frames.
 
-The report only reads, through the store (:mod:`kraby_study.store`); the store refuses a missing,
+The report only reads, through the store ([`kraby_study.store`][]); the store refuses a missing,
 empty or foreign file before anything could create a database at a wrong path.
 """
 
@@ -14,7 +14,7 @@ from optuna.trial import FrozenTrial
 
 from kraby_study.errors import StoreError
 from kraby_study.records.attributes import StudyKind, TrialAttrs
-from kraby_study.records.definition import LEGACY_SEEDING, stored_seeding
+from kraby_study.records.definition import UNRECORDED_SEEDING, stored_seeding
 from kraby_study.records.stored import Tally, counted, offset_leg_seeds, tally, trial_seeds
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
@@ -31,7 +31,8 @@ class StudyData:
         ledger: The stored study.
         definition: The stored definition (sweeps, confirm studies and single runs), else
             empty.
-        trials: The trials that count (:func:`kraby_study.records.stored.counted`), in number order.
+        trials: The trials that count
+            ([`counted`][kraby_study.records.stored.counted]), in number order.
         curves: Learning-curve points of the counted trials, columns ``number, step,
             mean_reward, wall_time, episodes``.
         planned: Planned number of runs (or trials), if the store says.
@@ -43,8 +44,8 @@ class StudyData:
         source_seeds: A confirm study's source's seeds (the tuning seeds), None when it has
             no source or the source is not in the store.
         source_legs: Under offset seeding of that source, the seed each leg of its runs was
-            reset with (:func:`kraby_study.records.stored.offset_leg_seeds`); None otherwise (no
-            source, or a source seeded by streams).
+            reset with ([`offset_leg_seeds`][kraby_study.records.stored.offset_leg_seeds]); None
+            otherwise (no source, or a source seeded by streams).
     """
 
     name: str
@@ -113,6 +114,6 @@ def _source(store: Store, kind: StudyKind, definition: dict[str, Any]) -> dict[s
     per_trial = int(attrs.definition.get("seeds", 1)) if attrs.kind == StudyKind.SEARCH else 1
     trials = counted(ledger.trials())
     legs = ({leg for t in trials for leg in offset_leg_seeds(t, per_trial)}
-            if stored_seeding(attrs.definition) == LEGACY_SEEDING else None)
+            if stored_seeding(attrs.definition) == UNRECORDED_SEEDING else None)
     return {"source_seeds": sorted({seed for t in trials for seed in trial_seeds(t, per_trial)}),
             "source_legs": legs}

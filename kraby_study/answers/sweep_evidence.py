@@ -1,19 +1,19 @@
 """A sweep (or a single-run or confirm study) read once from the store into its evidence and
 its answers: one row per run, the seed scores every decision reads, the race's state, and the
-summary, verdict and selection :mod:`kraby_study.decision.summary` decides from them. The
-report draws what :func:`build_sweep` hands it.
+summary, verdict and selection [`kraby_study.decision.summary`][] decides from them. The report
+draws what [`build_sweep`][kraby_study.answers.sweep_evidence.build_sweep] hands it.
 
 Figures and metrics draw from the complete runs only; failed runs are counted and listed, runs
 still to come are counted as pending, and nothing is dropped without a trace. A confirm study
 is a sweep whose values are the labels of the configurations it retrains (in the order given).
 
 Every decision (the summary's answers, the verdict, the ``selected`` column) reads one
-:class:`kraby_study.decision.comparison.Comparison`, made once per study by
-:func:`kraby_study.answers.seed_scores.sweep_comparison` from the seed scores of the runs'
-table (:func:`kraby_study.decision.summary.seed_scores`): the numbers ``best``,
+[`Comparison`][kraby_study.decision.comparison.Comparison], made once per study by
+[`sweep_comparison`][kraby_study.answers.seed_scores.sweep_comparison] from the seed scores of the
+runs' table ([`seed_scores`][kraby_study.decision.summary.seed_scores]): the numbers ``best``,
 ``${winner:...}`` and campaigns read from the trials
-(:func:`kraby_study.answers.seed_scores.samples`) and compare there too. The report reads the
-decision as typed rows (:class:`kraby_study.decision.summary.ValueSummary`)."""
+([`samples`][kraby_study.answers.seed_scores.samples]) and compare there too. The report reads the
+decision as typed rows ([`ValueSummary`][kraby_study.decision.summary.ValueSummary])."""
 
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ TRIAL_COLUMNS = ["number", "key", "seed", "value_index", "value", "outcome", "fi
                  *(m.name for m in RUN_MEASURES), "wall_time", "cpu_time", "env_steps",
                  "failure", "model_path"]
 """The run table's columns: what a run is, its final score, its per-run measures
-(:data:`kraby_study.records.attributes.RUN_MEASURES`) and what it cost."""
+([`RUN_MEASURES`][kraby_study.records.attributes.RUN_MEASURES]) and what it cost."""
 
 
 @dataclass
@@ -66,19 +66,20 @@ class Sweep:
         curves: Curve points of the complete runs, with their ``value_index`` and ``seed``.
         bands: Per value and step: n, mean, sd, low, high of the reward; mean wall time.
         rows: What the evidence says of each value, typed
-            (:class:`kraby_study.decision.summary.ValueSummary`), in value order.
+            ([`ValueSummary`][kraby_study.decision.summary.ValueSummary]), in value order.
         seeds: One row per complete run (columns ``SEED_COLUMNS``): its final score, its
             first curve point's reward, its AUC, when it first reached the threshold and its
             curve's last point (env steps and seconds).
         threshold: The reward a curve must reach (NaN when there is no curve to set it).
         threshold_default: True when the threshold is the default (see
-            :func:`kraby_study.decision.summary.study_threshold`), False when the report's options
-            set it.
+            [`study_threshold`][kraby_study.decision.summary.study_threshold]), False when the
+            report's options set it.
         untrained: The untrained policy's reward: the mean first-bin reward of every complete
             seed of the study (NaN without curves).
         bootstrap: The report option ``report.bootstrap``: resamples of the bootstrap-t
-            interval of a mean (:func:`kraby_study.decision.intervals.mean_interval`).
-        verdict: The study's verdict (:func:`kraby_study.decision.verdict.verdict`).
+            interval of a mean ([`mean_interval`][kraby_study.decision.intervals.mean_interval]).
+        verdict: The study's verdict
+            ([`verdict`][kraby_study.decision.verdict.verdict]).
         race: A raced study's race, its dropped values by index in ``values``; None for a
             study that did not race.
     """
@@ -108,14 +109,15 @@ class Sweep:
     """The study's one comparison: the summary's answers, the verdict and the selection."""
     reach: pd.DataFrame = field(default_factory=pd.DataFrame)
     """Per value, the mean env steps and seconds to the threshold over the seeds that reached
-    it, with their intervals (:func:`kraby_study.decision.summary.reach_means`)."""
+    it, with their intervals ([`reach_means`][kraby_study.decision.summary.reach_means])."""
     failure_line: float = math.nan
-    """The final score below which a seed failed (:mod:`kraby_study.decision.failed_seeds`); NaN
-    when not defined."""
+    """The final score below which a seed failed ([`kraby_study.decision.failed_seeds`][]); NaN when
+    not defined."""
 
     @property
     def summary(self) -> pd.DataFrame:
-        """The rows as one table (summary.csv's columns; :func:`summary_frame`)."""
+        """The rows as one table (summary.csv's columns;
+        [`summary_frame`][kraby_study.decision.summary.summary_frame])."""
         return summary_frame(self.rows)
 
     @property
@@ -138,7 +140,8 @@ class Sweep:
     @property
     def time_attr(self) -> str:
         """The trial column the summary's training time describes: the one
-        fastest_equivalent compares (:func:`kraby_study.answers.seed_scores.time_measure`)."""
+        fastest_equivalent compares
+        ([`time_measure`][kraby_study.answers.seed_scores.time_measure])."""
         return time_measure(self.kind)
 
     @property
@@ -277,8 +280,9 @@ def sweep_evidence(data: StudyData) -> SweepEvidence:
 
 def build_sweep(data: StudyData, options: Any = None) -> Sweep:
     """The evidence and answers of a sweep or confirm study, or of a single-run study (one
-    value, several seeds), as the report draws them: read once (:func:`sweep_evidence`),
-    decided once (:func:`kraby_study.decision.summary.decide_sweep`).
+    value, several seeds), as the report draws them: read once
+    ([`sweep_evidence`][kraby_study.answers.sweep_evidence.sweep_evidence]), decided once
+    ([`decide_sweep`][kraby_study.decision.summary.decide_sweep]).
 
     Args:
         data: The stored study.

@@ -1,6 +1,6 @@
 """Where ``${winner:STUDY}`` values come from: the selected values of finished studies in the
-command's store (:func:`kraby_study.answers.selected.sweep_selection`), with a record of each
-one taken.
+command's store ([`sweep_selection`][kraby_study.answers.selected.sweep_selection]), with a record
+of each one taken.
 
 A standalone study names stored studies directly; a campaign stage names earlier stages by their
 study, stored as ``<campaign>-<study>``.
@@ -8,7 +8,7 @@ study, stored as ``<campaign>-<study>``.
 A selection that later work was built on is a stored fact, not recomputed: when a stored stage
 of the campaign recorded the value it took from an earlier stage (its ``inputs``), that value
 and the rule that chose it are taken again, whatever today's rules would select
-(:func:`recorded_inputs`).
+([`recorded_inputs`][kraby_study.answers.winners.recorded_inputs]).
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ def carried(selected: SweepSelection, parameter: str, definition: dict[str, Any]
 
 @dataclass
 class StoreWinners:
-    """A :class:`kraby_study.config.winner.Lookup` reading the command's store.
+    """A [`Lookup`][kraby_study.config.winner.Lookup] reading the command's store.
 
     Attributes:
         names: For a campaign stage: study -> stored name of the earlier stages it may name;

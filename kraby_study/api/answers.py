@@ -252,14 +252,16 @@ def _answers(found: Comparison[Any], scores: Mapping[Any, Sequence[float]],
         values.append(ValueAnswer(
             value=label, seeds=len(clean), iqm=float(iqm(clean)) if len(clean) else math.nan,
             answer=answer.value if answer is not None else "too few seeds",
-            p_worse=_p(found.p_worse.get(key)), p_equivalent=_p(found.p_equivalent.get(key))))
+            p_worse=_p_or_none(found.p_worse.get(key)),
+            p_equivalent=_p_or_none(found.p_equivalent.get(key))))
     warnings = [t for t in (found.unanswered_text(), found.resolution_text()) if t]
     return Answers(values=values, best=None if found.best is None else labels[found.best],
                    margin=found.fraction, margin_units=found.margin, alpha=found.alpha,
                    min_seeds=found.min_seeds, method=method, warnings=warnings, **study)
 
 
-def _p(value: float | None) -> float | None:
+def _p_or_none(value: float | None) -> float | None:
+    """A p-value as the answers hold it: None where it was not tested (NaN)."""
     return None if value is None or math.isnan(value) else float(value)
 
 

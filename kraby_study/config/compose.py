@@ -72,8 +72,9 @@ def unreadable(err: OverrideParseException) -> str:
 
 
 def check_syntax(overrides: Sequence[str]) -> None:
-    """Refuse an override Hydra's grammar cannot parse, in one line (:func:`unreadable`)
-    instead of Hydra's message and the parser's empty one after it."""
+    """Refuse an override Hydra's grammar cannot parse, in one line
+    ([`unreadable`][kraby_study.config.compose.unreadable]) instead of Hydra's message and the
+    parser's empty one after it."""
     parser = OverridesParser.create()
     for override in overrides:
         try:
@@ -210,14 +211,15 @@ def compose_config(overrides: Sequence[str], check: bool = True) -> DictConfig:
     """Compose conf/config.yaml with overrides; raise ConfigError with a one-line message.
 
     With ``check`` the config is resolved (``${winner:...}`` through the lookup the caller
-    installed, :func:`kraby_study.config.winner.winners_from`) and validated; without, it keeps
-    its interpolations.
+    installed, [`winners_from`][kraby_study.config.winner.winners_from]) and validated; without, it
+    keeps its interpolations.
     """
     return composed(overrides, check).cfg
 
 
 def composed(overrides: Sequence[str], check: bool = True) -> Composed:
-    """:func:`compose_config`, with the config group files Hydra chose."""
+    """[`compose_config`][kraby_study.config.compose.compose_config], with the config group files
+    Hydra chose."""
     refuse_hydra_settings(overrides)
     check_syntax(overrides)
     overrides, ranges = new_ranges(renamed(overrides))

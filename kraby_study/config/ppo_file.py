@@ -16,7 +16,8 @@ def write_ppo_config(settings: dict[str, Any], env_keys: list[str], description:
                      path: Path) -> None:
     """A ppo config file (global package) holding the ppo settings, the env settings named in
     ``env_keys`` (those a study varied: they travel with the ppo settings) and any of
-    :data:`CARRIED_ENV_KEYS` the settings hold (a Gymnasium env's normalisation)."""
+    [`CARRIED_ENV_KEYS`][kraby_study.config.ppo_file.CARRIED_ENV_KEYS] the settings hold (a
+    Gymnasium env's normalisation)."""
     env = settings.get("env", {})
     keys = [*env_keys, *(key for key in CARRIED_ENV_KEYS if key in env and key not in env_keys)]
     body: dict[str, Any] = {}

@@ -100,21 +100,21 @@ def validate_budget(budget: DictConfig) -> None:
 
 RUN_LENGTH = ("ppo.n_envs", "env.max_episode_steps")
 """The settings beside budget.steps that decide whether a run can be scored
-(:func:`validate_run_length`)."""
+([`validate_run_length`][kraby_study.config.validate.validate_run_length])."""
 
 
 def steps_per_env(steps: int, n_envs: int) -> int:
     """The steps each env of a run takes: SB3 steps all ``n_envs`` at once, and a run stops at
-    the first step at or past its budget of ``steps`` (:class:`~kraby_study.run.callback.
-    EpisodeRecorder`)."""
+    the first step at or past its budget of ``steps``
+    ([`EpisodeRecorder`][kraby_study.run.callback.EpisodeRecorder])."""
     return -(-int(steps) // int(n_envs))
 
 
 def scores_a_full_episode(steps: int, n_envs: int, limit: int) -> bool:
     """Whether a run of ``steps`` on ``n_envs`` envs can score an episode of ``limit`` steps:
     one of each env's episodes of exactly that length, back to back from its first step,
-    ends in the last :data:`FINAL_FRACTION` of the run, as
-    :func:`kraby_study.run.curve.final_score` counts them (at the same env step)."""
+    ends in the last [`FINAL_FRACTION`][kraby_study.records.definition.FINAL_FRACTION] of the run,
+    as [`final_score`][kraby_study.run.curve.final_score] counts them (at the same env step)."""
     per_env = steps_per_env(steps, n_envs)
     last_end = (per_env // limit) * limit * n_envs
     return last_end > per_env * n_envs * (1.0 - FINAL_FRACTION)
@@ -140,7 +140,8 @@ def validate_run_length(env: Any, ppo: Any, steps: int, objective: str = REWARDS
         env: The run's env settings.
         ppo: Its PPO settings (n_envs, and n_steps and batch_size for another n_envs).
         steps: Its budget in env steps.
-        objective: How it is scored (:data:`kraby_study.records.definition.REWARDS`).
+        objective: How it is scored
+            ([`REWARDS`][kraby_study.records.definition.REWARDS]).
         where: What the message names first (a study's value, a confirm's configuration).
         fixed_steps: The steps are not the command's budget.steps (a confirm retrains at the
             confirmed study's): only another n_envs is offered.
@@ -258,7 +259,7 @@ def validate(cfg: DictConfig) -> None:
 def validate_racing(racing: DictConfig, seeds: int | None = None,
                     where: str = "budget.seeds") -> None:
     """A race's settings hold together: alpha in (0, 0.5], min_seeds at least
-    :data:`~kraby_study.decision.robust.ANSWER_FROM` (no answer below) and, when racing with
+    [`ANSWER_FROM`][kraby_study.records.values.ANSWER_FROM] (no answer below) and, when racing with
     ``seeds`` the most seeds a value gets (named ``where``), at most that."""
     alpha = float(racing.alpha)
     _require(0 < alpha <= 0.5, f"racing.alpha must be in (0, 0.5], got {racing.alpha}")
@@ -303,7 +304,7 @@ def validate_tensorboard(cfg: DictConfig) -> None:
              "'kraby-study[tensorboard]'")
 
 
-def writable(folder: Path, name: str) -> None:
+def check_writable(folder: Path, name: str) -> None:
     """Refuse a folder that cannot be made or written, in one line: the folders missing on
     the way are made for the check, a file is written and removed, and what was made is
     removed again."""

@@ -1,7 +1,8 @@
 """``${winner:STUDY}``: a setting taken from an earlier study's selected value.
 
-The resolver only parses and routes: the value comes from a :class:`Lookup` the command installs
-for the time it composes (:func:`winners_from`), which reads the store. Without one, a
+The resolver only parses and routes: the value comes from a
+[`Lookup`][kraby_study.config.winner.Lookup] the command installs for the time it composes
+([`winners_from`][kraby_study.config.winner.winners_from]), which reads the store. Without one, a
 ``${winner:...}`` fails with one line. Composition resolves every interpolation at once, so the
 config a command plans from holds plain values.
 """

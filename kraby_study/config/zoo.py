@@ -3,10 +3,11 @@
 rl-zoo3's ``hyperparams/ppo.yml`` (package ``rl-zoo3``, extra ``kraby-study[zoo]``) is read as
 YAML from the installed package's files; rl_zoo3 itself is never imported, and its strings
 (``lin_0.001``, ``policy_kwargs: "dict(...)"``, ``normalize: "{...}"``) are parsed, never
-evaluated: :func:`translate` is the one translation into this project's schema, and
-:func:`to_entry` the one translation back (``best --format zoo``), both reading the same tables
-of keys. Keys an entry leaves out keep the defaults rl-zoo3 leaves in force (SB3's PPO
-defaults, one env). An entry that uses what the schema cannot express is refused, naming it.
+evaluated: [`translate`][kraby_study.config.zoo.translate] is the one translation into this
+project's schema, and [`to_entry`][kraby_study.config.zoo.to_entry] the one translation back (``best
+--format zoo``), both reading the same tables of keys. Keys an entry leaves out keep the defaults
+rl-zoo3 leaves in force (SB3's PPO defaults, one env). An entry that uses what the schema cannot
+express is refused, naming it.
 
 The resolver ``${zoo:KEY}`` (conf/ppo/zoo.yaml, conf/budget/zoo.yaml) reads ``env.id`` from
 the config being composed.
@@ -167,17 +168,19 @@ def translate(env_id: str, entry: dict[str, Any], version: str = "unknown") -> Z
 
 
 def to_entry(settings: ZooSettings) -> dict[str, Any]:
-    """The inverse of :func:`translate`: settings as one ppo.yml entry, in rl-zoo3's own keys.
+    """The inverse of [`translate`][kraby_study.config.zoo.translate]: settings as one ppo.yml
+    entry, in rl-zoo3's own keys.
 
     Every number is written, ``batch_size`` explicitly (null: the whole rollout, n_steps x
     n_envs); a linear schedule as ``lin_<number>``; ``policy_kwargs`` as rl-zoo3 writes it,
     ``"dict(...)"`` of what differs from SB3's defaults (left out when nothing does);
-    ``normalize`` when it is on, ``true`` or :data:`NORM_REWARD_OFF`. ``translate(env_id,
-    to_entry(s))`` gives ``s``'s settings back.
+    ``normalize`` when it is on, ``true`` or
+    [`NORM_REWARD_OFF`][kraby_study.config.zoo.NORM_REWARD_OFF]. ``translate(env_id, to_entry(s))``
+    gives ``s``'s settings back.
 
     Raises:
         ConfigError: A setting is missing, a schedule is neither constant nor linear, or the
-            activation is not one :data:`ACTIVATIONS` names.
+            activation is not one [`ACTIVATIONS`][kraby_study.config.zoo.ACTIVATIONS] names.
     """
     ppo = settings.ppo
     missing = sorted(set(SB3_DEFAULTS) - set(ppo))
@@ -221,7 +224,7 @@ def to_entry(settings: ZooSettings) -> dict[str, Any]:
 
 def study_settings(settings: dict[str, Any], steps: int, what: str) -> ZooSettings:
     """A study's stored settings (env and complete ppo, as ``best`` reads them) and budget
-    steps, for :func:`to_entry`.
+    steps, for [`to_entry`][kraby_study.config.zoo.to_entry].
 
     Raises:
         ConfigError: ``what`` (the study, in words) trained what an rl-zoo3 hyperparameter
@@ -250,8 +253,9 @@ def train_command(env_id: str, path: Path, packages: list[str] | None = None) ->
 
 def write_hyperparams(settings: ZooSettings, description: str, path: Path,
                       packages: list[str] | None = None) -> dict[str, Any]:
-    """An rl-zoo3 hyperparameter file, ``{env id: entry}``, for :func:`train_command` (with
-    ``--gym-packages`` for an id the ``packages`` register); the entry written."""
+    """An rl-zoo3 hyperparameter file, ``{env id: entry}``, for
+    [`train_command`][kraby_study.config.zoo.train_command] (with ``--gym-packages`` for an id the
+    ``packages`` register); the entry written."""
     entry = to_entry(settings)
     text = (f"# Written by kraby-study best --format zoo: {description}.\n"
             f"# Train: {train_command(settings.env_id, path, packages)}\n"

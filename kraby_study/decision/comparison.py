@@ -1,5 +1,6 @@
 """One comparison with the best for every verdict: the table's answers, the selection rules,
-campaigns, ``best``, ``${winner:...}``, races and the front all read its :class:`Comparison`.
+campaigns, ``best``, ``${winner:...}``, races and the front all read its
+[`Comparison`][kraby_study.decision.comparison.Comparison].
 
 Each value of the family (the values with ``min_seeds`` complete seeds) gets one of four
 answers about its **interquartile mean** (IQM, the 25 % trimmed mean of its seeds' final
@@ -10,13 +11,14 @@ scores), for a margin delta >= 0 in score units, the smallest difference that ma
 - **worse**: shown worse than the highest true IQM by more than delta.
 - **equivalent**: shown within delta of the highest true IQM of the others.
 - **undecided**: neither; every value with fewer than
-  :data:`~kraby_study.decision.robust.ANSWER_FROM` seeds, where no answer holds its error rate.
+  [`ANSWER_FROM`][kraby_study.records.values.ANSWER_FROM] seeds, where no answer holds its error
+  rate.
 
 The IQM and not the mean: when a setting's seeds sometimes fail, no test of a mean holds its
 level at a few seeds (a sample that drew no failure shows none). The IQM moves little with
 failures a value has at most a quarter of the time, and the failures are counted apart
-(:mod:`kraby_study.decision.failed_seeds`). The tests of each IQM contrast are in
-:mod:`kraby_study.decision.robust`.
+([`kraby_study.decision.failed_seeds`][]). The tests of each IQM contrast are in
+[`kraby_study.decision.robust`][].
 
 **Worse: a closed step-down** (Marcus, Peritz and Gabriel 1976) of the hypotheses
 H_g: "value g is within delta of the highest true IQM" (at delta = 0: "g is *a* best"). The
@@ -40,12 +42,13 @@ best from the data costs no further multiplicity. At delta = 0 no value is equiv
 Each kind of wrong answer has probability at most alpha; a wrong answer of either kind at most
 2 alpha (Bonferroni). Both are measured in ``benchmarks/bench_error_rates.py``, on normal,
 heavy-tailed, skewed and failing-seed scores, with spreads 1:4 among them: from
-:data:`~kraby_study.decision.robust.ANSWER_FROM` seeds every cell is within alpha and its
+[`ANSWER_FROM`][kraby_study.records.values.ANSWER_FROM] seeds every cell is within alpha and its
 Monte-Carlo error.
 
 The margin is a fraction f of the reference's |IQM| (reported in score units as f x |IQM of the
 best|), so "j above g by more than the margin" is the contrast (1 - f sign(T_j)) T_j - T_g > 0,
-and every test against the margin is a test of that contrast (:func:`margin_weights`).
+and every test against the margin is a test of that contrast
+([`margin_weights`][kraby_study.decision.comparison.margin_weights]).
 
 Values with fewer than ``min_seeds`` complete seeds are left out of the family: they are
 never best, equivalent, undecided or worse.
@@ -74,7 +77,9 @@ MARGIN = 0.2
 """Default ``compare.margin``: the margin as a fraction of the best value's |IQM|
 (docs/reference/statistics.md justifies it against this project's data)."""
 POWER = 0.8
-"""The power at which :attr:`Comparison.resolvable` is the smallest margin the seeds resolve."""
+"""The power at which
+[`Comparison.resolvable`][kraby_study.decision.comparison.Comparison.resolvable] is the smallest
+margin the seeds resolve."""
 EQUIVALENCE = ("multiple comparisons with the best with a margin (Edwards and Hsu 1983), "
                "Bonferroni form (Nelson and Matejcik 1995)")
 
@@ -125,7 +130,7 @@ def holm(pvalues: Sequence[float]) -> list[float]:
 
 def margin_weights(means: np.ndarray, fraction: float) -> np.ndarray:
     """The weights w_j = 1 - fraction x sign(mean_j) of
-    :func:`~kraby_study.decision.robust.iqm_pairs` for a margin that is ``fraction`` of the
+    [`iqm_pairs`][kraby_study.decision.robust.iqm_pairs] for a margin that is ``fraction`` of the
     reference's |location| (its IQM in the answers): "mu_g within f |mu_j| of mu_j" is
     mu_g - w_j mu_j >= 0 (the sign read from the sample; the leg's scores are all negative, so
     w = 1 + f there)."""
@@ -139,7 +144,8 @@ def margin_units(fraction: float, best_mean: float) -> float:
 
 @dataclass(frozen=True)
 class Comparison(Generic[K]):
-    """The result of :func:`compare` on the current samples: every verdict reads it."""
+    """The result of [`compare`][kraby_study.decision.comparison.compare] on the current samples:
+    every verdict reads it."""
 
     best: K | None
     """The value with the highest IQM among those with enough seeds; None if none has."""
@@ -157,7 +163,7 @@ class Comparison(Generic[K]):
     """Every value of the family's answer, in the given order."""
     p_worse: dict[K, float] = field(default_factory=dict)
     """Holm-adjusted p of "within the margin of the highest IQM" (NaN for the best; 1 where no
-    pair of the value is tested, below :data:`~kraby_study.decision.robust.ANSWER_FROM`
+    pair of the value is tested, below [`ANSWER_FROM`][kraby_study.records.values.ANSWER_FROM]
     seeds)."""
     p_equivalent: dict[K, float] = field(default_factory=dict)
     """Bonferroni p of "more than the margin below the highest IQM of the others": (k - 1)
@@ -165,14 +171,14 @@ class Comparison(Generic[K]):
     tested)."""
     resolvable: dict[K, float] = field(default_factory=dict)
     """Per value other than the best, about the smallest margin at which a value truly equal to
-    the best is shown equivalent with probability :data:`POWER`:
+    the best is shown equivalent with probability [`POWER`][kraby_study.decision.comparison.POWER]:
     (t(1 - alpha / (k - 1)) + t(POWER)) x Yuen's standard error of its IQM contrast with the
     best, with Yuen's degrees of freedom (absent where untested)."""
     family: list[K] = field(default_factory=list)
     """The values with enough seeds, in the given order."""
     unanswered: list[K] = field(default_factory=list)
     """Values of the family other than the best that no test reaches: fewer than
-    :data:`~kraby_study.decision.robust.ANSWER_FROM` seeds, on their side or the best's.
+    [`ANSWER_FROM`][kraby_study.records.values.ANSWER_FROM] seeds, on their side or the best's.
     Undecided by rule, whatever their scores; in the given order."""
 
     @property
@@ -187,8 +193,9 @@ class Comparison(Generic[K]):
 
     @property
     def resolution(self) -> float:
-        """The seeds' resolution of the study: the median of :attr:`resolvable` over the values
-        other than the best (NaN with none)."""
+        """The seeds' resolution of the study: the median of
+        [`resolvable`][kraby_study.decision.comparison.Comparison.resolvable] over the values other
+        than the best (NaN with none)."""
         finite = [v for v in self.resolvable.values() if math.isfinite(v)]
         return float(statistics.median(finite)) if finite else math.nan
 
@@ -234,7 +241,8 @@ class CompareOptions:
     """``compare.margin``: the margin as a fraction of the best's |IQM| (0: none)."""
     alpha: float = ALPHA
     min_seeds: int = MIN_SEEDS
-    """``report.min_seeds``, clamped to at least 2 by :func:`evidence` alone."""
+    """``report.min_seeds``, clamped to at least 2 by
+    [`evidence`][kraby_study.decision.comparison.evidence] alone."""
     select: str | None = None
     """``compare.select``: a selection rule applied instead of the stored one; None: the
     study's own."""
@@ -261,8 +269,9 @@ def seeds_needed(min_seeds: int) -> int:
 
 def evidence(scores: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS
              ) -> tuple[int, dict[K, np.ndarray], dict[K, int]]:
-    """The seeds a value needs (:func:`seeds_needed`), the values that have them (the family,
-    NaN dropped), and the others that have some: their count of seeds."""
+    """The seeds a value needs ([`seeds_needed`][kraby_study.decision.comparison.seeds_needed]), the
+    values that have them (the family, NaN dropped), and the others that have some: their count of
+    seeds."""
     need = seeds_needed(min_seeds)
     clean = {g: _clean(v) for g, v in scores.items()}
     family = {g: x for g, x in clean.items() if len(x) >= need}
@@ -280,7 +289,8 @@ def best_by_iqm(samples: Mapping[K, np.ndarray]) -> K | None:
 def best_with_evidence(scores: Mapping[K, Sequence[float]], min_seeds: int = MIN_SEEDS
                        ) -> K | None:
     """The value with the highest IQM among those with ``min_seeds`` complete seeds (the
-    best of :func:`compare`, without its tests); None if none has them."""
+    best of [`compare`][kraby_study.decision.comparison.compare], without its tests); None if none
+    has them."""
     _, family, _ = evidence(scores, min_seeds)
     return best_by_iqm(family)
 
@@ -314,7 +324,7 @@ def compare(scores: Mapping[K, Sequence[float]], margin: float, *, alpha: float 
             and the rules that need none stay clear of scipy.stats).
 
     Returns:
-        The :class:`Comparison`.
+        The [`Comparison`][kraby_study.decision.comparison.Comparison].
     """
     need, family, left_out = evidence(scores, min_seeds)
     best = best_by_iqm(family)

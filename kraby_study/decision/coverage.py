@@ -28,9 +28,9 @@ def coverage_table() -> pd.DataFrame:
 
 
 LOW = 0.93
-"""From :data:`FEW_SEEDS` seeds on, a measured coverage below this is printed beside the
-intervals drawn from that many seeds (strongly skewed data: lognormal sigma 1, a failing
-seed)."""
+"""From [`FEW_SEEDS`][kraby_study.decision.coverage.FEW_SEEDS] seeds on, a measured coverage below
+this is printed beside the intervals drawn from that many seeds (strongly skewed data: lognormal
+sigma 1, a failing seed)."""
 
 
 def _cells(at_n: pd.DataFrame) -> str:
@@ -44,9 +44,10 @@ def _cells(at_n: pd.DataFrame) -> str:
 
 def coverage_note(ns: Iterable[int]) -> str | None:
     """One sentence giving the measured coverage, per interval and distribution, of the
-    intervals drawn from each of ``ns`` seeds: every measured row below :data:`FEW_SEEDS`, and
-    from it on the rows below :data:`LOW`; None when there is none (or nothing was measured
-    at those n)."""
+    intervals drawn from each of ``ns`` seeds: every measured row below
+    [`FEW_SEEDS`][kraby_study.decision.coverage.FEW_SEEDS], and from it on the rows below
+    [`LOW`][kraby_study.decision.coverage.LOW]; None when there is none (or nothing was measured at
+    those n)."""
     counts = sorted({int(n) for n in ns if int(n) >= 2})
     table = coverage_table()
     few = table[table["n"].isin([n for n in counts if n < FEW_SEEDS])]

@@ -14,7 +14,7 @@ A failed *run* (an error, a divergence to NaN) is another thing: it has no score
 counted in the ``failed`` column of the summary; failed seeds are complete runs.
 
 The share of failed seeds of a value is a binomial rate over its complete seeds; its interval
-is Clopper and Pearson's exact interval (1934), :meth:`scipy.stats.binomtest`'s
+is Clopper and Pearson's exact interval (1934), `scipy.stats.binomtest`'s
 ``proportion_ci(method="exact")``, whose coverage is at least the level for every rate and n.
 """
 

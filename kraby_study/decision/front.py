@@ -4,15 +4,16 @@ A two-objective search maximises a score and minimises a cost (CPU seconds per s
 is on the front when no other complete trial is at least as good on both and better on one.
 Two choices are made from it:
 
-- :func:`front_choice`, the search's selection (``best``, ``list``, the report): the front's
-  trials are compared on their seed scores (:func:`kraby_study.decision.comparison.compare`), and
-  the search's rule picks the cheapest of the best score and the trials it admits:
-  ``fastest_equivalent`` those shown within the margin of the best, ``final_score`` none. The
-  family is the front, not every trial: the best score
-  is always on it, every trial off it is matched or beaten on both objectives by one on it,
-  and a family of 50 trials would leave the tests almost no power at 3 seeds. With fewer than
+- [`front_choice`][kraby_study.decision.front.front_choice], the search's selection (``best``,
+  ``list``, the report): the front's trials are compared on their seed scores
+  ([`compare`][kraby_study.decision.comparison.compare]), and the search's rule picks the cheapest
+  of the best score and the trials it admits: ``fastest_equivalent`` those shown within the margin
+  of the best, ``final_score`` none. The family is the front, not every trial: the best score is
+  always on it, every trial off it is matched or beaten on both objectives by one on it, and a
+  family of 50 trials would leave the tests almost no power at 3 seeds. With fewer than
   ``min_seeds`` (2) seeds a trial there is no test, and the rule falls back to the best score.
-- :func:`spread`, what ``confirm`` retrains: up to K trials spread along the front.
+- [`spread`][kraby_study.decision.front.spread], what ``confirm`` retrains: up to K trials
+  spread along the front.
 """
 
 from __future__ import annotations
@@ -58,8 +59,9 @@ def pareto_front(points: Sequence[Point[K]]) -> list[Point[K]]:
 
 
 def spread(front: Sequence[Point[K]], count: int) -> list[Point[K]]:
-    """Up to ``count`` points spread along a front (as :func:`pareto_front` orders it,
-    cheapest first): the best score first, then the cheapest, then the rest in cost order.
+    """Up to ``count`` points spread along a front (as
+    [`pareto_front`][kraby_study.decision.front.pareto_front] orders it, cheapest first): the best
+    score first, then the cheapest, then the rest in cost order.
 
     With n points on the front and count < n, the points taken are those at the evenly spaced
     places round(i (n - 1) / (count - 1)), i = 0 .. count - 1, of the cost order: both ends
@@ -116,7 +118,7 @@ def front_choice(front: Sequence[Point[K]], seed_scores: Mapping[K, Sequence[flo
     an empty front.
 
     Args:
-        front: The front (:func:`pareto_front`).
+        front: The front ([`pareto_front`][kraby_study.decision.front.pareto_front]).
         seed_scores: Each trial's seed scores, by key; a trial with fewer than ``min_seeds``
             is in no test.
         rule: fastest_equivalent or final_score.

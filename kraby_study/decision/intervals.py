@@ -1,11 +1,12 @@
 """The interval of a mean over seeds behind every band and error bar of a report.
 
 From 5 seeds on, the 95 % equal-tailed studentised bootstrap (bootstrap-t) interval
-(:func:`bootstrap_t_interval`; Efron 1982, Hall 1988), seeded so that a report is reproducible.
-With 2 to 4 seeds, the 95 % Hall skewness-corrected t interval (:func:`hall_interval`; Hall
-1992). The learning-curve bands, hundreds of intervals a value, are Hall's intervals at every n
-(:func:`describe`). The interquartile mean (IQM) has the Tukey-McLaughlin trimmed-t interval.
-See docs/reference/statistics.md for why each was chosen."""
+([`bootstrap_t_interval`][kraby_study.decision.intervals.bootstrap_t_interval]; Efron 1982, Hall
+1988), seeded so that a report is reproducible. With 2 to 4 seeds, the 95 % Hall skewness-corrected
+t interval ([`hall_interval`][kraby_study.decision.intervals.hall_interval]; Hall 1992). The
+learning-curve bands, hundreds of intervals a value, are Hall's intervals at every n
+([`describe`][kraby_study.decision.intervals.describe]). The interquartile mean (IQM) has the
+Tukey-McLaughlin trimmed-t interval. See docs/reference/statistics.md for why each was chosen."""
 
 from __future__ import annotations
 
@@ -31,11 +32,13 @@ BAND_NAME = ("95 % Hall skewness-corrected t interval of the mean over seeds (Ha
 
 BOOTSTRAP_REPETITIONS = 2000
 """Default of the report option ``report.bootstrap``: the resamples of the bootstrap-t interval of
-a mean (:func:`bootstrap_t_interval`). Its coverage is measured at this number."""
+a mean ([`bootstrap_t_interval`][kraby_study.decision.intervals.bootstrap_t_interval]). Its coverage
+is measured at this number."""
 
 
 def interval_name(resamples: int = BOOTSTRAP_REPETITIONS, level: float = LEVEL) -> str:
-    """The caption of :func:`mean_interval` at a number of resamples and a level."""
+    """The caption of [`mean_interval`][kraby_study.decision.intervals.mean_interval] at a number of
+    resamples and a level."""
     return (f"{level * 100:g} % interval of the mean over seeds: from {MIN_BOOTSTRAP_SEEDS} "
             "seeds on, the equal-tailed studentised bootstrap (bootstrap-t) interval "
             f"({resamples:,} resamples seeded by the values; Efron 1982, Hall 1988); with 2 to "
@@ -49,7 +52,7 @@ SHORT_INTERVAL_NAME = (f"95 % interval of the mean (bootstrap-t from {MIN_BOOTST
 
 
 def iqm_interval_name(level: float = LEVEL) -> str:
-    """The caption of :func:`iqm_interval` at a level."""
+    """The caption of [`iqm_interval`][kraby_study.decision.intervals.iqm_interval] at a level."""
     return (f"{level * 100:g} % Tukey-McLaughlin trimmed-t interval of the interquartile mean "
             "over seeds (winsorised sd; the plain t-interval below 4 seeds)")
 
@@ -64,7 +67,8 @@ def t_interval(mean: np.ndarray | pd.Series | float, sd: np.ndarray | pd.Series 
                level: float = LEVEL) -> tuple[np.ndarray, np.ndarray]:
     """Student-t confidence interval of a mean, elementwise; NaN where n < 2.
 
-    The report's intervals of a mean use :func:`hall_interval`, which is this one when the
+    The report's intervals of a mean use
+    [`hall_interval`][kraby_study.decision.intervals.hall_interval], which is this one when the
     skewness is 0; the IQM's interval uses this one below 4 seeds.
 
     Args:
@@ -108,14 +112,15 @@ def hall_interval(mean: np.ndarray | pd.Series | float, sd: np.ndarray | pd.Seri
     g^-1(v) = ((1 + 3 b (v - b / 2))^(1/3) - 1) / b with the real cube root, computed here as
     3 (v - b / 2) / (c^2 + c + 1), c = (1 + 3 b (v - b / 2))^(1/3) (the same number, and
     v - b / 2 at b = 0 without dividing by b). With gamma = 0 it is the Student-t interval
-    (:func:`t_interval`), which it also falls back to where gamma is NaN (s = 0).
+    ([`t_interval`][kraby_study.decision.intervals.t_interval]), which it also falls back to where
+    gamma is NaN (s = 0).
 
     Args:
         mean: Sample means.
         sd: Sample standard deviations (ddof 1).
         n: Sample sizes.
         skewness: Sample skewnesses, the biased moment estimator m3 / m2^1.5
-            (:func:`sample_skewness`).
+            ([`sample_skewness`][kraby_study.decision.intervals.sample_skewness]).
         level: Confidence level.
 
     Returns:
@@ -156,7 +161,8 @@ def sample_skewness(values: Sequence[float]) -> float:
 
 def _grouped_skewness(samples: pd.DataFrame, group: str | list[str], column: str
                       ) -> pd.Series:
-    """:func:`sample_skewness` of ``column`` per ``group``, vectorised (NaN values skipped)."""
+    """[`sample_skewness`][kraby_study.decision.intervals.sample_skewness] of ``column`` per
+    ``group``, vectorised (NaN values skipped)."""
     dev = samples[column].astype(float) - samples.groupby(group, sort=True)[column].transform(
         "mean")
     moments = samples.assign(_m2=dev ** 2, _m3=dev ** 3).groupby(group, sort=True)[
@@ -169,11 +175,13 @@ def describe(samples: pd.DataFrame, group: str | list[str], column: str,
     """Count, mean, sd, skewness and interval of the mean of ``column`` per ``group``; NaN
     values are skipped.
 
-    With ``bootstrap`` (resamples), the interval is :func:`mean_interval`'s: the bootstrap-t
-    interval for groups of :data:`MIN_BOOTSTRAP_SEEDS` values or more, Hall's below (the
-    summary's final score and training time). Without it, Hall's interval
-    (:func:`hall_interval`) for every group, vectorised: the learning-curve bands, hundreds of
-    groups a value, where a bootstrap per group would cost seconds.
+    With ``bootstrap`` (resamples), the interval is
+    [`mean_interval`][kraby_study.decision.intervals.mean_interval]'s: the bootstrap-t interval for
+    groups of [`MIN_BOOTSTRAP_SEEDS`][kraby_study.decision.intervals.MIN_BOOTSTRAP_SEEDS] values or
+    more, Hall's below (the summary's final score and training time). Without it, Hall's interval
+    ([`hall_interval`][kraby_study.decision.intervals.hall_interval]) for every group, vectorised:
+    the learning-curve bands, hundreds of groups a value, where a bootstrap per group would cost
+    seconds.
 
     Returns:
         A frame indexed by group with columns n, mean, sd, skewness, low, high.
@@ -202,9 +210,11 @@ def _array(values: Sequence[float]) -> np.ndarray:
 
 def mean_interval(values: Sequence[float], level: float = LEVEL,
                   resamples: int = BOOTSTRAP_REPETITIONS) -> tuple[float, float, float]:
-    """Mean of a sample with its interval: the bootstrap-t interval (:func:`bootstrap_t_interval`)
-    from :data:`MIN_BOOTSTRAP_SEEDS` values on, Hall's skewness-corrected t interval
-    (:func:`hall_interval`) with 2 to 4 values.
+    """Mean of a sample with its interval: the bootstrap-t interval
+    ([`bootstrap_t_interval`][kraby_study.decision.intervals.bootstrap_t_interval]) from
+    [`MIN_BOOTSTRAP_SEEDS`][kraby_study.decision.intervals.MIN_BOOTSTRAP_SEEDS] values on, Hall's
+    skewness-corrected t interval ([`hall_interval`][kraby_study.decision.intervals.hall_interval])
+    with 2 to 4 values.
 
     Below 5 values the bootstrap-t has too few distinct resamples (with 3 values, a ninth of
     them have no spread and an infinite t); Hall's interval stays finite there and its
@@ -224,8 +234,9 @@ def mean_interval(values: Sequence[float], level: float = LEVEL,
 def mean_intervals(samples: np.ndarray, level: float = LEVEL,
                    resamples: int = BOOTSTRAP_REPETITIONS
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`mean_interval` of every row of a (k, n) array without NaN, n >= 1, vectorised
-    (``benchmarks/bench_error_rates.py`` measures its coverage through this).
+    """[`mean_interval`][kraby_study.decision.intervals.mean_interval] of every row of a (k, n)
+    array without NaN, n >= 1, vectorised (``benchmarks/bench_error_rates.py`` measures its coverage
+    through this).
 
     Returns:
         Means, lows and highs, as float arrays.
@@ -285,8 +296,8 @@ def bootstrap_t_interval(values: Sequence[float], level: float = LEVEL,
     ``scipy.stats.bootstrap`` offers the percentile, basic and BCa intervals, not this one.
 
     Reproducible: the sample is sorted, and the resamples are drawn from a generator seeded
-    with ``seed`` and the sorted values (:func:`_resample_plan`), so the interval is a function
-    of the sample, whatever its order. One plan for every sample would not do: its own
+    with ``seed`` and the sorted values (`_resample_plan`), so the interval is a function of the
+    sample, whatever its order. One plan for every sample would not do: its own
     Monte-Carlo error in the tails would bias every interval at that n alike (measured: a
     coverage 0.005 to 0.010 low at some n with 2,000 resamples). Half the resamples are the
     antithetic mirrors of the other half (index i of the sorted sample for n - 1 - i; Hall,
@@ -295,9 +306,9 @@ def bootstrap_t_interval(values: Sequence[float], level: float = LEVEL,
 
     A resample without spread (every value the same) has T* = +-inf (0 on the mean). With 5
     distinct values that is 0.16 % of resamples, far inside the tails; where ties make it more
-    than (1 - level) / 2 on a side, that bound is infinite (:func:`mean_interval` then gives
-    Hall's interval). Below 5 values the interval is erratic (infinite with 3 values) and the
-    report does not use it.
+    than (1 - level) / 2 on a side, that bound is infinite
+    ([`mean_interval`][kraby_study.decision.intervals.mean_interval] then gives Hall's interval).
+    Below 5 values the interval is erratic (infinite with 3 values) and the report does not use it.
 
     Args:
         values: The sample.
@@ -318,8 +329,9 @@ def bootstrap_t_interval(values: Sequence[float], level: float = LEVEL,
 def bootstrap_t_intervals(samples: np.ndarray, level: float = LEVEL,
                           resamples: int = BOOTSTRAP_REPETITIONS,
                           seed: int = BOOTSTRAP_SEED) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`bootstrap_t_interval` of every row of a (k, n) array without NaN, n >= 2: each
-    row its own resamples (:func:`_resample_plan`), the arithmetic vectorised over rows.
+    """[`bootstrap_t_interval`][kraby_study.decision.intervals.bootstrap_t_interval] of every row of
+    a (k, n) array without NaN, n >= 2: each row its own resamples (`_resample_plan`), the
+    arithmetic vectorised over rows.
 
     Returns:
         Lows and highs, as float arrays.
@@ -373,13 +385,13 @@ def iqm(values: Sequence[float]) -> float:
 def iqm_interval(values: Sequence[float], level: float = LEVEL) -> tuple[float, float]:
     """Tukey-McLaughlin confidence interval of the interquartile mean over seeds.
 
-    With g = floor(n / 4) values trimmed from each end (as :func:`iqm`) and h = n - 2 g left,
-    the interval is IQM +- t(0.5 + level / 2, h - 1) * s_w / ((1 - 2 * 0.25) sqrt(n)), s_w the
-    sd (ddof 1) of the sample winsorised at g (Tukey and McLaughlin 1963; Wilcox,
-    *Introduction to Robust Estimation and Hypothesis Testing*, 4th ed. 2017, sec. 4.4). With
-    n < 4 nothing is trimmed and it is the Student-t interval of the mean. The percentile
-    bootstrap it replaces covered the IQM 0.74 of the time at n = 3 and 0.90 at n = 5 (normal
-    data); this one's coverage is measured in ``benchmarks/bench_error_rates.py``.
+    With g = floor(n / 4) values trimmed from each end (as
+    [`iqm`][kraby_study.decision.intervals.iqm]) and h = n - 2 g left, the interval is
+    IQM +- t(0.5 + level / 2, h - 1) * s_w / ((1 - 2 * 0.25) sqrt(n)), s_w the sd (ddof 1) of the
+    sample winsorised at g (Tukey and McLaughlin 1963; Wilcox, *Introduction to Robust Estimation
+    and Hypothesis Testing*, 4th ed. 2017, sec. 4.4). With n < 4 nothing is trimmed and it is the
+    Student-t interval of the mean. Its coverage is measured in
+    ``benchmarks/bench_error_rates.py`` (docs/reference/statistics.md).
 
     Returns:
         (low, high); (NaN, NaN) with fewer than 2 values, (v, v) when every value is v.

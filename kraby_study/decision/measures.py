@@ -23,7 +23,8 @@ AUC_NAME = ("sample efficiency (AUC): the mean of a seed's binned mean episode r
 
 
 def p_improvement_name(level: float = LEVEL) -> str:
-    """The caption of :func:`p_improvement` and its interval at a level."""
+    """The caption of [`p_improvement`][kraby_study.decision.measures.p_improvement] and its
+    interval at a level."""
     return ("probability of improvement P(best > this value) over all pairs of seeds, ties"
             f" counted half, with its {level * 100:g} % Newcombe score-type interval"
             " (Newcombe 2006, method 5)")
@@ -48,7 +49,7 @@ SeedScores = dict[int, list[float]]
 
 def curve_rewards(curves: pd.DataFrame) -> dict[int, np.ndarray]:
     """Each run's binned mean episode rewards in step order, by trial number (columns number,
-    step, mean_reward): what :func:`auc` reads."""
+    step, mean_reward): what [`auc`][kraby_study.decision.measures.auc] reads."""
     ordered = curves.sort_values(["number", "step"], kind="stable")
     return {int(n): g["mean_reward"].to_numpy(dtype=float)
             for n, g in ordered.groupby("number", sort=False)}
@@ -58,8 +59,8 @@ def seed_samples(runs: Iterable[tuple[int, int, float, float]],
                  rewards: Mapping[int, np.ndarray]) -> tuple[SeedScores, SeedScores, SeedScores]:
     """The seed scores every decision reads, from the complete runs (value index, trial
     number, final score, training time; NaN: no time stored) in run order, with their curves'
-    rewards (:func:`curve_rewards`): per value with a run, in value order, the final scores,
-    the AUCs of the runs with a curve and the training times."""
+    rewards ([`curve_rewards`][kraby_study.decision.measures.curve_rewards]): per value with a run,
+    in value order, the final scores, the AUCs of the runs with a curve and the training times."""
     final: SeedScores = {}
     aucs: SeedScores = {}
     seconds: SeedScores = {}
@@ -139,12 +140,14 @@ def _newcombe_upper(estimate: float, m: int, n: int, z: float) -> float:
 
 def p_improvement_interval(x: Sequence[float], y: Sequence[float],
                            level: float = LEVEL) -> tuple[float, float]:
-    """Newcombe's score-type confidence interval of :func:`p_improvement` (Newcombe, "Confidence
-    intervals for an effect size measure based on the Mann-Whitney statistic. Part 2:
-    asymptotic methods and evaluation", Statistics in Medicine 25(4), 2006, method 5).
+    """Newcombe's score-type confidence interval of
+    [`p_improvement`][kraby_study.decision.measures.p_improvement] (Newcombe, "Confidence intervals
+    for an effect size measure based on the Mann-Whitney statistic. Part 2: asymptotic methods and
+    evaluation", Statistics in Medicine 25(4), 2006, method 5).
 
-    With theta_hat = :func:`p_improvement` of m values against n, the bounds are the two
-    solutions in [0, 1] of |theta_hat - theta| = z sqrt(V(theta)), z = Phi^-1(0.5 + level / 2),
+    With theta_hat = [`p_improvement`][kraby_study.decision.measures.p_improvement] of m values
+    against n, the bounds are the two solutions in [0, 1] of |theta_hat - theta| = z sqrt(V(theta)),
+    z = Phi^-1(0.5 + level / 2),
 
         V(theta) = theta (1 - theta) / (m n)
                    * [1 + (N* - 1) (1 - theta) / (2 - theta) + (N* - 1) theta / (1 + theta)],
@@ -183,11 +186,13 @@ def iqr(values: Sequence[float]) -> float:
 
 @functools.lru_cache(maxsize=256)
 def expected_normal_iqr(n: int) -> float:
-    """Expected sample IQR (:func:`iqr`, linear quartiles) of n standard normal values.
+    """Expected sample IQR ([`iqr`][kraby_study.decision.measures.iqr], linear quartiles) of n
+    standard normal values.
 
     The quartiles interpolate between order statistics, so their expectation is the same mix of
     the expected normal order statistics, each integrated numerically. 0.564 at n = 2 (true IQR
-    1.349): a sample's IQR shrinks with n, which is why :func:`iqr_unbiased` divides by this.
+    1.349): a sample's IQR shrinks with n, which is why
+    [`iqr_unbiased`][kraby_study.decision.measures.iqr_unbiased] divides by this.
     """
     if n < 2:
         return math.nan
@@ -216,7 +221,8 @@ NORMAL_IQR = NormalDist().inv_cdf(0.75) - NormalDist().inv_cdf(0.25)
 
 def iqr_unbiased(values: Sequence[float]) -> float:
     """The sample IQR rescaled so that its expectation, for normal data, is the true IQR at
-    every n: IQR * 1.349 / E[IQR of n standard normals] (:func:`expected_normal_iqr`).
+    every n: IQR * 1.349 / E[IQR of n standard normals]
+    ([`expected_normal_iqr`][kraby_study.decision.measures.expected_normal_iqr]).
 
     The raw sample IQR averages 0.42, 0.63 and 0.87 of the truth at n = 2, 3, 10, so the value
     that lost seeds looked the most repeatable; rescaled, the comparison across unequal n is

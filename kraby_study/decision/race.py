@@ -2,13 +2,12 @@
 
 Round r gives every value still in the race its r-th seed. From round ``min_seeds`` on, after
 each round the values' first r seeds are compared by the report's procedure
-(:func:`kraby_study.decision.comparison.compare` at the race's margin): a value shown worse than the
-look's best by more than the margin is dropped, and a value other than the look's best shown
-equivalent to it (within the margin) is settled. Either way it gets no more seeds. The race
-ends when one value is left racing, or every value left has ``seeds`` seeds. A settled value
-stays a candidate: the selection compares every value the race did not drop, on all its
-seeds, by the study's rule. At margin 0 no value is settled: the race stops only values shown
-worse.
+([`compare`][kraby_study.decision.comparison.compare] at the race's margin): a value shown worse
+than the look's best by more than the margin is dropped, and a value other than the look's best
+shown equivalent to it (within the margin) is settled. Either way it gets no more seeds. The race
+ends when one value is left racing, or every value left has ``seeds`` seeds. A settled value stays a
+candidate: the selection compares every value the race did not drop, on all its seeds, by the
+study's rule. At margin 0 no value is settled: the race stops only values shown worse.
 
 The guarantee aimed at is Kim and Nelson's (2001) indifference zone: with probability at least
 1 - alpha the race's selection is within the margin of the highest true mean. A look's false
@@ -112,7 +111,7 @@ def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: Race
         rules: The race's settings.
 
     Returns:
-        The :class:`Race` after every round whose seeds have all ended.
+        The [`Race`][kraby_study.decision.race.Race] after every round whose seeds have all ended.
     """
     dropped: dict[K, Drop] = {}
     settled: dict[K, Drop] = {}

@@ -1,15 +1,15 @@
 """Tests of interquartile-mean contrasts, from which the four answers are decided.
 
-The four answers (:mod:`kraby_study.decision.comparison`) are claims about each value's
-interquartile mean (IQM: the 25 % trimmed mean of its seeds' final scores, as rliable reports
-it), not its mean. No test of a mean holds its level at a few seeds when a value's seeds
-sometimes fail and the spreads differ (docs/reference/statistics.md, "Answers that hold when seeds
-fail"): a sample that drew no failure carries no sign of it, and a mean moves with every
-failure, however rare. The IQM moves little with the failures a value has at most a quarter
-of the time; those are counted apart (:mod:`kraby_study.decision.failed_seeds`).
+The four answers ([`kraby_study.decision.comparison`][]) are claims about each value's interquartile
+mean (IQM: the 25 % trimmed mean of its seeds' final scores, as rliable reports it), not its mean.
+No test of a mean holds its level at a few seeds when a value's seeds sometimes fail and the spreads
+differ (docs/reference/statistics.md, "Answers that hold when seeds fail"): a sample that drew no
+failure carries no sign of it, and a mean moves with every failure, however rare. The IQM moves
+little with the failures a value has at most a quarter
+of the time; those are counted apart ([`kraby_study.decision.failed_seeds`][]).
 
 Every contrast is C = w_j T_j - T_g of two values' IQMs T (w_j from the margin,
-:func:`kraby_study.decision.comparison.margin_weights`). Two tests of it:
+[`margin_weights`][kraby_study.decision.comparison.margin_weights]). Two tests of it:
 
 - the **percentile bootstrap** (Wilcox 2017, sec. 5.4; Keselman, Othman, Wilcox and Fradette
   2004): each value's seeds resampled apart (paired: the common seeds resampled together),
@@ -21,13 +21,14 @@ Every contrast is C = w_j T_j - T_g of two values' IQMs T (w_j from the margin,
   with Welch's degrees of freedom on the h = n - 2 floor(n / 4) values each side keeps (paired:
   h - 1).
 
-The answers read the larger of the two p: a claim needs both tests. Below :data:`ANSWER_FROM`
-seeds a side no pair is tested, and no value is answered worse or equivalent. Each test alone
-failed somewhere on the grid of ``benchmarks/bench_error_rates.py`` and
-``benchmarks/bench_skewed_spreads.py``: Yuen's where a right-skewed best spreads four times as
-much as the value tested (a false "equivalent" about 0.09 at 2 values x 10 seeds), the
-bootstrap below 8 seeds (0.08 to 0.09 at 5 and 6 seeds) and at the small levels of a large
-family (a family-wise error of 0.066 at 8 values x 10 seeds, normal scores, all equal).
+The answers read the larger of the two p: a claim needs both tests. Below
+[`ANSWER_FROM`][kraby_study.records.values.ANSWER_FROM] seeds a side no pair is tested, and no value
+is answered worse or equivalent. Each test alone failed somewhere on the grid of
+``benchmarks/bench_error_rates.py`` and ``benchmarks/bench_skewed_spreads.py``: Yuen's where a
+right-skewed best spreads four times as much as the value tested (a false "equivalent" about 0.09 at
+2 values x 10 seeds), the bootstrap below 8 seeds (0.08 to 0.09 at 5 and 6 seeds) and at the small
+levels of a large family (a family-wise error of 0.066 at 8 values x 10 seeds, normal scores, all
+equal).
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ TRIM = 0.25
 """The share of seeds cut from each end: the interquartile mean."""
 RESAMPLES = 1999
 """Fewest bootstrap resamples; more when the family is so large that Holm's smallest level
-needs a finer p (:func:`resamples_for`)."""
+needs a finer p ([`resamples_for`][kraby_study.decision.robust.resamples_for])."""
 MAX_RESAMPLES = 49_999
 SEED = 20261201
 """Seed of the resamples, with each sample's values."""
@@ -54,7 +55,7 @@ CONSTANT_RTOL = 1e-9
 """A sample whose range is at most this times the scale of the scores compared (their largest
 absolute value) has no spread, and a contrast within it of 0 is none: float noise such as 0.7
 against 0.7 + 1e-15 is not a difference (the answers' tests and the Welch tests of
-:mod:`kraby_study.decision.comparison` alike)."""
+[`kraby_study.decision.comparison`][] alike)."""
 NAME = (f"the percentile bootstrap of the IQM contrast and Yuen's trimmed-mean test, both "
         f"rejecting; no answer below {ANSWER_FROM} seeds")
 
@@ -71,8 +72,9 @@ def iqm(x: np.ndarray) -> np.ndarray:
 
 def resamples_for(values: int, alpha: float) -> int:
     """Resamples enough for the smallest level the answers' procedure tests at, alpha / (k (k -
-    1)) for k values, to be reached by a certain difference: at least :data:`RESAMPLES`, at
-    most :data:`MAX_RESAMPLES`."""
+    1)) for k values, to be reached by a certain difference: at least
+    [`RESAMPLES`][kraby_study.decision.robust.RESAMPLES], at most
+    [`MAX_RESAMPLES`][kraby_study.decision.robust.MAX_RESAMPLES]."""
     need = 2 * values * max(values - 1, 1) / alpha
     return int(min(MAX_RESAMPLES, max(RESAMPLES, math.ceil(need))))
 
@@ -106,10 +108,10 @@ class IqmTests:
     """The tests of every ordered pair's contrast: entry [j, g] is about w_j T_j - T_g.
 
     ``greater`` and ``less`` are the p of "> 0" and "< 0" the answers read (NaN where the pair
-    is not tested: fewer than :data:`ANSWER_FROM` seeds); ``se`` and ``df`` are Yuen's standard
-    error and degrees of freedom of the contrast (what :attr:`Comparison.resolvable
-    <kraby_study.decision.comparison.Comparison.resolvable>` reads), NaN where untested. The
-    diagonal is meaningless."""
+    is not tested: fewer than [`ANSWER_FROM`][kraby_study.records.values.ANSWER_FROM] seeds); ``se``
+    and ``df`` are Yuen's standard error and degrees of freedom of the contrast (what
+    [`Comparison.resolvable`][kraby_study.decision.comparison.Comparison.resolvable] reads), NaN
+    where untested. The diagonal is meaningless."""
 
     greater: np.ndarray
     less: np.ndarray
@@ -145,12 +147,13 @@ def _decide(c: float, scale: float, boot: tuple[float, float], yuen: tuple[float
 
 def iqm_pairs(samples: Sequence[np.ndarray], weights: np.ndarray | None = None,
               alpha: float = 0.05, paired: bool = False) -> IqmTests:
-    """:class:`IqmTests` of every ordered pair of samples.
+    """[`IqmTests`][kraby_study.decision.robust.IqmTests] of every ordered pair of samples.
 
     Args:
         samples: Final scores by value (NaN dropped unless ``paired``).
         weights: w_j of each value (None: 1, the plain difference of IQMs).
-        alpha: The answers' error rate, which sets the resamples (:func:`resamples_for`).
+        alpha: The answers' error rate, which sets the resamples
+            ([`resamples_for`][kraby_study.decision.robust.resamples_for]).
         paired: The samples are aligned by seed (NaN where that run has no score) and each pair
             is tested on the seeds both have.
     """

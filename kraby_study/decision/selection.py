@@ -1,27 +1,27 @@
 """Which value of a finished sweep is selected: the rules a campaign carries forward.
 
 "Best" is the highest IQM final score only (the interquartile mean; the mean below 4 seeds);
-"selected" is what a rule picks. Every rule is a named :class:`Rule` that reads one
-:class:`kraby_study.decision.comparison.Comparison` (the report's answers, the same object its
-table column shows) and the values' mean AUC and training time:
+"selected" is what a rule picks. Every rule is a named [`Rule`][kraby_study.decision.selection.Rule]
+that reads one [`Comparison`][kraby_study.decision.comparison.Comparison] (the report's answers, the
+same object its table column shows) and the values' mean AUC and training time:
 
 - ``final_score``: the best value.
 - ``auc``: the highest mean AUC over the seeds with a curve (the most sample-efficient).
 - ``fastest_equivalent``: among the best and the values shown equivalent to it (within the
-  margin, :func:`kraby_study.decision.comparison.compare`), the lowest mean training time: a slower
-  value is not worth its time when a faster one is shown as good within the margin, and a
+  margin, [`compare`][kraby_study.decision.comparison.compare]), the lowest mean training time: a
+  slower value is not worth its time when a faster one is shown as good within the margin, and a
   value needs evidence to be selected, so spread cannot buy a place.
 
 A study stored with the retired rule name ``fastest_tied`` selects by ``fastest_equivalent``
-(:meth:`kraby_study.records.attributes.SelectRule.of`).
+([`of`][kraby_study.records.attributes.SelectRule.of]).
 
 Every rule considers only the comparison's family: values with at least ``min_seeds``
 complete seeds (``report.min_seeds``, default 2), so one lucky seed is never selected. Ties
 inside a rule go to the first value in order; NaN never wins.
 
-In a raced study (:mod:`kraby_study.decision.race`) every rule considers only the values the race
-did not drop as worse: they are left out of the comparison, and the others are compared by the
-same procedure on all their seeds.
+In a raced study ([`kraby_study.decision.race`][]) every rule considers only the values the race did
+not drop as worse: they are left out of the comparison, and the others are compared by the same
+procedure on all their seeds.
 """
 
 from __future__ import annotations

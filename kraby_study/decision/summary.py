@@ -1,15 +1,16 @@
 """A sweep's per-value summary from its runs' table, its seed scores and its one comparison,
-as typed rows (:class:`ValueSummary`, one per value) the report renders and writes as
-summary.csv: counts, the final score's mean and interval (bootstrap-t from 5 seeds, Hall's
-skewness-corrected t below), the IQM and its trimmed-t interval (Tukey and McLaughlin 1963),
-spread, the answers at the margin, the learning curves' metrics (sample efficiency, time to a
-threshold), failed seeds (Clopper-Pearson rate interval), the per-run measures
-(:data:`kraby_study.records.attributes.RUN_MEASURES`), the selected value, and the verdict.
+as typed rows ([`ValueSummary`][kraby_study.decision.summary.ValueSummary], one per value) the
+report renders and writes as summary.csv: counts, the final score's mean and interval (bootstrap-t
+from 5 seeds, Hall's skewness-corrected t below), the IQM and its trimmed-t interval (Tukey and
+McLaughlin 1963), spread, the answers at the margin, the learning curves' metrics (sample
+efficiency, time to a threshold), failed seeds (Clopper-Pearson rate interval), the per-run measures
+([`RUN_MEASURES`][kraby_study.records.attributes.RUN_MEASURES]), the selected value, and the
+verdict.
 
-In a raced study (:mod:`kraby_study.decision.race`) the values the race dropped are never best,
-equivalent, selected or any answer of the verdict: they are shown as worse, with the round and
-the adjusted p of the look that dropped them, and the others (those still racing and those it
-settled as equivalent) are compared on all their seeds."""
+In a raced study ([`kraby_study.decision.race`][]) the values the race dropped are never best,
+equivalent, selected or any answer of the verdict: they are shown as worse, with the round and the
+adjusted p of the look that dropped them, and the others (those still racing and those it settled as
+equivalent) are compared on all their seeds."""
 
 from __future__ import annotations
 
@@ -58,7 +59,7 @@ SEED_COLUMNS = ["value_index", "seed", "number", "final_score", "first_reward", 
 
 def curve_bands(curves: pd.DataFrame) -> pd.DataFrame:
     """Mean reward and its Hall skewness-corrected t interval over seeds, at every n
-    (:func:`kraby_study.decision.intervals.describe` without a bootstrap), per value and step
+    ([`describe`][kraby_study.decision.intervals.describe] without a bootstrap), per value and step
     (vectorised): hundreds of intervals a value, where a bootstrap each would cost seconds."""
     if curves.empty:
         return pd.DataFrame(columns=["value_index", "step", "n", "mean", "sd", "low", "high",
@@ -115,25 +116,26 @@ def summarise(trials: pd.DataFrame, labels: list[str], comparison: Comparison[in
     """One row per value: run counts; the round after which a race dropped it
     (``dropped_at``, empty for a survivor and in a study that did not race); the complete
     seeds' final score (mean, sd, interval of the mean,
-    :func:`kraby_study.decision.intervals.mean_interval` with ``bootstrap`` resamples; IQM with its
-    trimmed-t interval; IQR raw and rescaled to be comparable across n) and training time (the trial
-    column ``time_attr``, :func:`kraby_study.answers.seed_scores.time_measure`); the
-    probability that the best value beats this one, with its Newcombe score-type interval; the
-    ``answer`` of
-    the comparison, written out (best, equivalent, worse, undecided; ``left out`` for a value with
-    too few seeds, empty for one without any), with ``p_worse`` and ``p_equivalent`` (empty
-    where no test of the value against the best is run), the margin in
-    score units (``margin``, the same on every row) and the smallest margin its seeds resolve
+    [`mean_interval`][kraby_study.decision.intervals.mean_interval] with ``bootstrap`` resamples;
+    IQM with its trimmed-t interval; IQR raw and rescaled to be comparable across n) and training
+    time (the trial column ``time_attr``,
+    [`time_measure`][kraby_study.answers.seed_scores.time_measure]); the probability that the best
+    value beats this one, with its Newcombe score-type interval; the ``answer`` of the comparison,
+    written out (best, equivalent, worse, undecided; ``left out`` for a value with too few seeds,
+    empty for one without any), with ``p_worse`` and ``p_equivalent`` (empty where no test of the
+    value against the best is run), the margin in score units (``margin``, the same on every row)
+    and the smallest margin its seeds resolve
     (``margin_resolvable``); and a note naming why a value with fewer than ``min_seeds``
     complete seeds is left out, or which look of the race dropped or settled it. The curve
-    metrics are added by :func:`add_curve_metrics`.
+    metrics are added by [`add_curve_metrics`][kraby_study.decision.summary.add_curve_metrics].
 
     ``comparison`` is the study's one comparison, made in the answers layer
-    (:func:`kraby_study.answers.seed_scores.sweep_comparison`). ``dropped`` (by value index) are
-    the values a race dropped as worse, at per-look level ``look_alpha``: they are left out of
-    the comparison (never best or equivalent, answer worse); ``settled``, those it settled as
+    ([`sweep_comparison`][kraby_study.answers.seed_scores.sweep_comparison]). ``dropped`` (by value
+    index) are the values a race dropped as worse, at per-look level ``look_alpha``: they are left
+    out of the comparison (never best or equivalent, answer worse); ``settled``, those it settled as
     equivalent, which stay in it. ``final``: each value's complete seeds' final scores from
-    the pass every decision reads (:func:`seed_scores`); None: read from ``trials``.
+    the pass every decision reads ([`seed_scores`][kraby_study.decision.summary.seed_scores]); None:
+    read from ``trials``.
     """
     dropped = dict(dropped or {})
     settled = dict(settled or {})
@@ -232,9 +234,9 @@ def study_threshold(curves: pd.DataFrame, summary: pd.DataFrame,
 
     Returns:
         (threshold, whether it is the default, the untrained reward). The default is
-        :func:`kraby_study.decision.measures.default_threshold` of the untrained reward (the mean
-        over every complete seed of its first curve point's reward) and the best value's mean final
-        score; NaN when either is missing.
+        [`default_threshold`][kraby_study.decision.measures.default_threshold] of the untrained
+        reward (the mean over every complete seed of its first curve point's reward) and the best
+        value's mean final score; NaN when either is missing.
     """
     ordered = first_points(curves)
     first = ordered.drop_duplicates("number")["mean_reward"].to_numpy(dtype=float)
@@ -249,7 +251,7 @@ def study_threshold(curves: pd.DataFrame, summary: pd.DataFrame,
 
 def seed_metrics(trials: pd.DataFrame, curves: pd.DataFrame, threshold: float) -> pd.DataFrame:
     """One row per complete run: its final score, its curve's first reward, its AUC
-    (:func:`kraby_study.decision.measures.auc` of the curve in step order), the env steps and
+    ([`auc`][kraby_study.decision.measures.auc] of the curve in step order), the env steps and
     seconds at which the curve first reached ``threshold`` (NaN if never, or without a curve) and
     the env steps and seconds of its curve's last point (where a seed that never reached it is
     censored)."""
@@ -277,9 +279,9 @@ def seed_metrics(trials: pd.DataFrame, curves: pd.DataFrame, threshold: float) -
 def add_curve_metrics(summary: pd.DataFrame, seeds: pd.DataFrame,
                       bootstrap: int = BOOTSTRAP_REPETITIONS) -> pd.DataFrame:
     """The summary with the curve metrics of each value's complete seeds: AUC (mean and
-    interval over the seeds with a curve, :func:`kraby_study.decision.intervals.mean_interval` with
-    ``bootstrap`` resamples), env steps and seconds to the threshold and how
-    many seeds reached it.
+    interval over the seeds with a curve,
+    [`mean_interval`][kraby_study.decision.intervals.mean_interval] with ``bootstrap`` resamples),
+    env steps and seconds to the threshold and how many seeds reached it.
 
     Steps and seconds to the threshold are restricted means over the seeds with a curve: a seed
     that never reached the threshold counts at its curve's last point, so the mean is a lower
@@ -316,11 +318,11 @@ def add_run_measures(summary: pd.DataFrame, trials: pd.DataFrame,
                      bootstrap: int = BOOTSTRAP_REPETITIONS, evaluated: bool = False
                      ) -> pd.DataFrame:
     """``summary`` with each per-run measure's per-value columns
-    (:data:`kraby_study.records.attributes.RUN_MEASURES`) over the value's complete seeds that
-    measured it: ``describe``, the mean, sd and interval of the mean
-    (:func:`kraby_study.decision.intervals.describe`, as the final score's); ``rms``, the root
-    mean square. The measures of runs scored by evaluation only when ``evaluated``; NaN where
-    no seed measured it. No decision reads them."""
+    ([`RUN_MEASURES`][kraby_study.records.attributes.RUN_MEASURES]) over the value's complete seeds
+    that measured it: ``describe``, the mean, sd and interval of the mean
+    ([`describe`][kraby_study.decision.intervals.describe], as the final score's); ``rms``, the root
+    mean square. The measures of runs scored by evaluation only when ``evaluated``; NaN where no
+    seed measured it. No decision reads them."""
     complete = trials[trials["outcome"] == Outcome.COMPLETE]
     out = summary
     for measure in RUN_MEASURES:
@@ -343,10 +345,10 @@ def add_run_measures(summary: pd.DataFrame, trials: pd.DataFrame,
 
 def add_failed_seeds(summary: pd.DataFrame, seeds: pd.DataFrame, untrained: float
                      ) -> tuple[pd.DataFrame, float]:
-    """``summary`` with each value's failed seeds (:mod:`kraby_study.decision.failed_seeds`):
-    ``failed_seeds`` (count), ``failed_seeds_low`` and ``failed_seeds_high`` (the exact
-    interval of the rate); and the failure line (NaN when it is not defined: no best, no
-    curve, or a best that learned nothing)."""
+    """``summary`` with each value's failed seeds ([`kraby_study.decision.failed_seeds`][]):
+    ``failed_seeds`` (count), ``failed_seeds_low`` and ``failed_seeds_high`` (the exact interval of
+    the rate); and the failure line (NaN when it is not defined: no best, no curve, or a best that
+    learned nothing)."""
     line = failure_line(untrained, best_mean(summary))
     groups = dict(iter(seeds.groupby("value_index", sort=True)))
     found = [failed_seeds(groups[i]["final_score"].tolist() if i in groups else [], line)
@@ -358,10 +360,10 @@ def add_failed_seeds(summary: pd.DataFrame, seeds: pd.DataFrame, untrained: floa
 
 
 def study_verdict(summary: pd.DataFrame, comparison: Comparison[int]) -> Verdict:
-    """The verdict of :func:`kraby_study.decision.verdict.verdict` from the study's one
+    """The verdict of [`verdict`][kraby_study.decision.verdict.verdict] from the study's one
     ``comparison`` (whose family leaves out the values a race dropped) and the summary rows. The
-    fastest is by the restricted mean seconds (a seed that never reached the threshold counts at
-    its run's end); the rescaled IQR (``final_iqr_unbiased``) decides the most repeatable."""
+    fastest is by the restricted mean seconds (a seed that never reached the threshold counts at its
+    run's end); the rescaled IQR (``final_iqr_unbiased``) decides the most repeatable."""
     return verdict(comparison, auc_means=summary["auc_mean"].to_dict(),
                    seconds=summary["seconds_to_threshold"].to_dict(),
                    iqrs=summary["final_iqr_unbiased"].to_dict())
@@ -373,7 +375,7 @@ REACH_COLUMNS = ("steps_to_threshold", "seconds_to_threshold")
 def reach_means(seeds: pd.DataFrame, values: int, bootstrap: int) -> pd.DataFrame:
     """Per value (index 0 to ``values`` - 1): the mean env steps and seconds to the threshold
     over the seeds that reached it, each with its interval
-    (:func:`kraby_study.decision.intervals.mean_interval`), columns ``<measure>_mean``,
+    ([`mean_interval`][kraby_study.decision.intervals.mean_interval]), columns ``<measure>_mean``,
     ``_low`` and ``_high``: the marks of the time-to-threshold figure (the summary's columns are
     restricted means over every seed instead)."""
     rows = []
@@ -451,7 +453,8 @@ class ValueSummary:
     failed_seeds_high: float
     """Its failed seeds (NaN when not counted) and the exact interval of the rate."""
     measures: dict[str, float]
-    """The per-run measures' per-value columns (:data:`RUN_MEASURES`), by column name."""
+    """The per-run measures' per-value columns
+    ([`RUN_MEASURES`][kraby_study.records.attributes.RUN_MEASURES]), by column name."""
     selected: bool
     """The study's rule selects it."""
 
@@ -505,7 +508,7 @@ class SweepAnswers:
     race: StudyRace | None
     reach: pd.DataFrame
     """Per value, the mean time to the threshold over the seeds that reached it
-    (:func:`reach_means`)."""
+    ([`reach_means`][kraby_study.decision.summary.reach_means])."""
 
 
 @dataclass(frozen=True)
@@ -521,9 +524,9 @@ class SeedScores:
 
 def seed_scores(trials: pd.DataFrame, curves: pd.DataFrame, known: int, time_attr: str,
                 swept: bool = True) -> SeedScores:
-    """The :class:`SeedScores` of the values among the first ``known`` (training time: the
-    column ``time_attr``); a single-run study (``swept`` False) has one value, every complete
-    run's score."""
+    """The [`SeedScores`][kraby_study.decision.summary.SeedScores] of the values among the first
+    ``known`` (training time: the column ``time_attr``); a single-run study (``swept`` False) has
+    one value, every complete run's score."""
     done = trials[(trials["outcome"] == Outcome.COMPLETE) & trials["final_score"].notna()
                   & (trials["value_index"] < known)]
     runs = done[["value_index", "number", "final_score", time_attr]].itertuples(index=False)
@@ -547,7 +550,8 @@ def decide_sweep(trials: pd.DataFrame, curves: pd.DataFrame, labels: list[str],
         labels: How each value is written.
         comparison: The study's one comparison of ``samples.final`` (the values a race
             dropped left out), made in the answers layer.
-        samples: The seed scores every decision reads (:func:`seed_scores`).
+        samples: The seed scores every decision reads
+            ([`seed_scores`][kraby_study.decision.summary.seed_scores]).
         bootstrap: Resamples of the bootstrap-t interval of a mean.
         threshold: The reward a curve must reach, None for the default.
         race: A raced study's race replayed (None: it did not race): its dropped values are

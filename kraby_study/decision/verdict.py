@@ -1,7 +1,7 @@
 """A sweep's verdict: the best value and every other value's answer, read from the study's one
-comparison (:func:`kraby_study.decision.comparison.compare`), with the most sample-efficient
-(highest mean AUC), the fastest to a threshold (lowest restricted mean time) and the most
-repeatable (lowest rescaled IQR) value among the comparison's family."""
+comparison ([`compare`][kraby_study.decision.comparison.compare]), with the most sample-efficient
+(highest mean AUC), the fastest to a threshold (lowest restricted mean time) and the most repeatable
+(lowest rescaled IQR) value among the comparison's family."""
 
 from __future__ import annotations
 
@@ -46,16 +46,17 @@ def verdict(comparison: Comparison[int], auc_means: Mapping[int, float],
     """The verdict of a sweep; NaN values never win, ties go to the first group in order.
 
     Args:
-        comparison: The study's one comparison (:func:`kraby_study.decision.comparison.compare`):
-            the best is read from it, and its family is the groups that may be any answer.
+        comparison: The study's one comparison
+            ([`compare`][kraby_study.decision.comparison.compare]): the best is read from it, and
+            its family is the groups that may be any answer.
         auc_means: Mean AUC by group.
         seconds: Restricted mean seconds to the threshold by group (a seed that never reached
             it at its run's end), NaN where no seed reached it.
         iqrs: Final-score IQR by group, comparable across n
-            (:func:`kraby_study.decision.measures.iqr_unbiased`).
+            ([`iqr_unbiased`][kraby_study.decision.measures.iqr_unbiased]).
 
     Returns:
-        The :class:`Verdict`.
+        The [`Verdict`][kraby_study.decision.verdict.Verdict].
     """
     enough = set(comparison.family)
 

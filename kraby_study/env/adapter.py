@@ -30,7 +30,8 @@ class EnvAdapter(Protocol):
     kind: str
     """The env group's option: leg or gym."""
     shown: str
-    """What the GIF of :meth:`frames` shows, as its caption says it."""
+    """What the GIF of [`frames`][kraby_study.env.adapter.EnvAdapter.frames] shows, as its caption
+    says it."""
     view: tuple[float, float, float]
     """How the GIF crops a rendered image: the fraction kept and its centre (x, y), as
     fractions of the width and height."""
@@ -54,7 +55,7 @@ class EnvAdapter(Protocol):
         the run with seed ``seed``, drawn from its evaluation stream (apart from its training
         streams and from every other seed's episodes); ``seed`` None: the one set every run
         shared before (``eval_set: fixed``). ``normalizer`` is the run's VecNormalize, if
-        any. Episodes are stepped side by side (:mod:`kraby_study.env.evaluation`)."""
+        any. Episodes are stepped side by side ([`kraby_study.env.evaluation`][])."""
         ...
 
     def frames(self, model: Any, env: Mapping[str, Any], size: tuple[int, int],
@@ -86,8 +87,9 @@ def normalizer_path(model_path: str | Path) -> Path:
 
 
 def saved_normalizer(model_path: str | Path) -> Any:
-    """The VecNormalize statistics saved beside a model (:func:`normalizer_path`), or None when
-    it was trained without them."""
+    """The VecNormalize statistics saved beside a model
+    ([`normalizer_path`][kraby_study.env.adapter.normalizer_path]), or None when it was trained
+    without them."""
     import pickle
 
     stats = normalizer_path(model_path)

@@ -36,8 +36,9 @@ class Evaluation:
 
     @property
     def error(self) -> float:
-        """The standard error of :attr:`mean` from the episodes alone (sd / sqrt(n)); NaN
-        below 2 episodes. It is the share of a run's score that the test set's sampling adds."""
+        """The standard error of [`mean`][kraby_study.env.evaluation.Evaluation.mean] from the
+        episodes alone (sd / sqrt(n)); NaN below 2 episodes. It is the share of a run's score that
+        the test set's sampling adds."""
         n = len(self.returns)
         return float(np.std(self.returns, ddof=1) / math.sqrt(n)) if n > 1 else math.nan
 

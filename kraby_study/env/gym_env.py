@@ -1,16 +1,16 @@
 """``env=gym``: any registered Gymnasium environment, by its id.
 
 A run's n_envs envs are SB3's ``DummyVecEnv`` of ``Monitor``-wrapped ``gymnasium.make(id)``,
-optionally under ``VecNormalize``. They are seeded like the leg's legs (:mod:`kraby_envs.
-seeding`), not by SB3's ``seed + i``: under ``streams`` env i takes child i of
-``numpy.random.SeedSequence(seed)`` and draws three 64-bit words from it
-(``generate_state(3, numpy.uint64)``): the seed of its first reset, of its action space and
-of its observation space. Gymnasium then seeds the env's own generator from the first word
-and keeps that stream across later resets. Under ``offset`` env i is seeded with ``seed + i``
-for all three, as SB3 does. A run's evaluation episodes are reset with seeds drawn from its
-own evaluation stream (:func:`kraby_envs.seeding.evaluation_stream`, a child of its seed's
-sequence apart from its sub-envs'), so no two runs of different seeds share a test episode;
-studies stored before took one set for every run (:data:`EVALUATION_ENTROPY`).
+optionally under ``VecNormalize``. They are seeded like the leg's legs (`kraby_envs.seeding`), not
+by SB3's ``seed + i``: under ``streams`` env i takes child i of ``numpy.random.SeedSequence(seed)``
+and draws three 64-bit words from it (``generate_state(3, numpy.uint64)``): the seed of its first
+reset, of its action space and of its observation space. Gymnasium then seeds the env's own
+generator from the first word and keeps that stream across later resets. Under ``offset`` env i is
+seeded with ``seed + i`` for all three, as SB3 does. A run's evaluation episodes are reset with
+seeds drawn from its own evaluation stream (`kraby_envs.seeding.evaluation_stream`, a child of its
+seed's sequence apart from its sub-envs'), so no two runs of different seeds share a test episode; a
+study with ``eval_set: fixed`` takes one set for every run
+([`EVALUATION_ENTROPY`][kraby_study.env.gym_env.EVALUATION_ENTROPY]).
 """
 
 from __future__ import annotations
@@ -31,10 +31,9 @@ from kraby_study.env.evaluation import Evaluation, lockstep_returns
 from kraby_study.errors import ConfigError, first_line
 
 EVALUATION_ENTROPY = 0x6B726162795F6576616C
-"""Entropy of the shared evaluation set of studies stored before each run drew its own
-(``eval_set: fixed``), and of the GIF's episodes: episode k resets with a word of child k. A
-training stream is a child of SeedSequence(run seed), whose entropy is the run's seed: no run
-seed below 2**80 gives this sequence."""
+"""Entropy of the shared evaluation set (``eval_set: fixed``), and of the GIF's episodes: episode k
+resets with a word of child k. A training stream is a child of SeedSequence(run seed), whose entropy
+is the run's seed: no run seed below 2**80 gives this sequence."""
 
 GIF_EPISODES = 2
 """Evaluation episodes the GIF draws."""
@@ -53,9 +52,9 @@ OBSERVATIONS = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiB
 
 def evaluation_seeds(episodes: int, seed: int | None = None) -> list[int]:
     """The reset seed of each evaluation episode of the run with seed ``seed``: a word of each
-    child of its evaluation stream (:func:`kraby_envs.seeding.evaluation_stream`); ``None``: the
-    set every run shared before (:data:`EVALUATION_ENTROPY`). The first k of n are those of
-    k."""
+    child of its evaluation stream (`kraby_envs.seeding.evaluation_stream`); ``None``: the set every
+    run shared before ([`EVALUATION_ENTROPY`][kraby_study.env.gym_env.EVALUATION_ENTROPY]). The
+    first k of n are those of k."""
     from kraby_envs.seeding import evaluation_stream
 
     stream = (np.random.SeedSequence(EVALUATION_ENTROPY) if seed is None
@@ -118,7 +117,7 @@ def _plain(value: Any) -> Any:
 
 class GymAdapter:
     """A Gymnasium environment, behind the seam (see
-    :class:`kraby_study.env.adapter.EnvAdapter`)."""
+    [`EnvAdapter`][kraby_study.env.adapter.EnvAdapter])."""
 
     kind = "gym"
     shown = (f"in its first {GIF_EPISODES} evaluation episodes (seeded resets, at most "

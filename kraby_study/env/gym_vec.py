@@ -1,7 +1,7 @@
 """The vectorised env of a Gymnasium id: SB3's DummyVecEnv, each sub-env on its own stream.
 
-Apart from :mod:`kraby_study.env.gym_env` because it needs stable-baselines3, which checking a
-config never loads.
+Apart from [`kraby_study.env.gym_env`][] because it needs stable-baselines3, which checking a config
+never loads.
 """
 
 from __future__ import annotations
@@ -36,11 +36,11 @@ def sub_env_seeds(seed: int, n_envs: int, scheme: str) -> list[SubEnvSeeds]:
 
 class StreamSeededVecEnv(DummyVecEnv):
     """A DummyVecEnv whose ``seed(s)`` gives sub-env i the seeds of stream i of ``s``
-    (:func:`sub_env_seeds`) instead of SB3's ``s + i``.
+    ([`sub_env_seeds`][kraby_study.env.gym_vec.sub_env_seeds]) instead of SB3's ``s + i``.
 
     Args:
         env_fns: One function per sub-env, each making it.
-        seeding: streams or offset (:mod:`kraby_envs.seeding`).
+        seeding: streams or offset (`kraby_envs.seeding`).
     """
 
     def __init__(self, env_fns: list[Callable[[], Any]], seeding: str) -> None:

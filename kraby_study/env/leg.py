@@ -3,9 +3,9 @@ imports it from.
 
 Its vectorised env is the batched world of ``n_envs`` legs (split into shards stepped in
 parallel); evaluation runs the deterministic policy from rest to targets drawn from the run's
-own evaluation stream (:func:`kraby_envs.rollout.evaluation_targets`; studies stored before:
-:func:`kraby_envs.rollout.fixed_targets`, one set for every run), and the GIF draws it reaching
-the first fixed targets.
+own evaluation stream (`kraby_envs.rollout.evaluation_targets`; a study with ``eval_set: fixed``:
+`kraby_envs.rollout.fixed_targets`, one set for every run), and the GIF draws it reaching the first
+fixed targets.
 """
 
 from __future__ import annotations
@@ -25,8 +25,7 @@ DEFAULTS: dict[str, Any] = {"observation": "default", "delta": 0.5, "time_step":
 one (a model drawn from settings stored by an older version)."""
 
 GIF_TARGETS = 3
-"""Episodes the GIF draws: the first fixed targets (the evaluation set of studies stored before
-runs drew their own)."""
+"""Episodes the GIF draws: the first fixed targets (the evaluation set ``eval_set: fixed``)."""
 GIF_STEPS = 32
 """Env steps per target in the GIF."""
 HOLD_MS = 700
@@ -43,7 +42,7 @@ def leg_kwargs(env: Mapping[str, Any]) -> dict[str, Any]:
 
 
 class LegAdapter:
-    """The leg, behind the seam (see :class:`kraby_study.env.adapter.EnvAdapter`)."""
+    """The leg, behind the seam (see [`EnvAdapter`][kraby_study.env.adapter.EnvAdapter])."""
 
     kind = "leg"
     shown = f"reaching {GIF_TARGETS} fixed targets"

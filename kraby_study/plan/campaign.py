@@ -161,9 +161,9 @@ def campaign_of(cfg: DictConfig, overrides: Sequence[str]) -> Campaign:
 
 def _check_run_length(campaign: Campaign, stage: Stage) -> None:
     """Before any stage runs, each stage's runs can be scored at its budget
-    (:func:`kraby_study.config.validate.validate_run_length`), for every value it sweeps of
-    n_envs or the time limit. A length setting an earlier stage selects is one of that stage's
-    values, each checked there; the stage is checked again when it is planned."""
+    ([`validate_run_length`][kraby_study.config.validate.validate_run_length]), for every value it
+    sweeps of n_envs or the time limit. A length setting an earlier stage selects is one of that
+    stage's values, each checked there; the stage is checked again when it is planned."""
     cfg = stage_file(campaign, stage)
     winners = {setting for setting, _ in references(cfg)}
     if any(path in winners for path in ("budget.steps", "env.id", *RUN_LENGTH)

@@ -1,7 +1,7 @@
 """What a command would run, counted before it runs (``--dry-run``): trials and env steps.
 
 Pure: no store, no training. How much of it the store already holds is read in
-:mod:`kraby_study.answers.preview`.
+[`kraby_study.answers.preview`][].
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from kraby_study.config.compose import compose_config
-from kraby_study.config.validate import resolved_batch_size, to_container, writable
+from kraby_study.config.validate import check_writable, resolved_batch_size, to_container
 from kraby_study.errors import ConfigError, first_line
 from kraby_study.plan.spec import OPTIONAL_PPO
 from kraby_study.store.url import sqlite_path
@@ -29,8 +29,8 @@ UNSAFE = re.compile(r"[^A-Za-z0-9._,=+-]+")
 def resolved_settings(cfg: DictConfig) -> dict[str, Any]:
     """The env and ppo settings of a config, with the batch size made explicit.
 
-    A ppo setting of :data:`kraby_study.plan.spec.OPTIONAL_PPO` at its default is left out:
-    settings stored before it existed meant that default, and so keep their fingerprints.
+    A ppo setting of [`OPTIONAL_PPO`][kraby_study.plan.spec.OPTIONAL_PPO] at its default is left
+    out: stored settings that do not name it mean that default, and keep their fingerprints.
     """
     ppo = {key: value for key, value in to_container(cfg.ppo).items()
            if key not in OPTIONAL_PPO or value != OPTIONAL_PPO[key]}
@@ -44,9 +44,9 @@ def validate_outputs(cfg: DictConfig) -> None:
     for) and models (unless save_models is false); refused in one line before any run starts,
     so that no run fails on them. Nothing is left behind."""
     if cfg.tensorboard_dir is not None:
-        writable(Path(str(cfg.tensorboard_dir)).expanduser(), "tensorboard_dir")
+        check_writable(Path(str(cfg.tensorboard_dir)).expanduser(), "tensorboard_dir")
     if cfg.save_models:
-        writable(models_dir(cfg), "models_dir")
+        check_writable(models_dir(cfg), "models_dir")
 
 
 def models_dir(cfg: DictConfig) -> Path:

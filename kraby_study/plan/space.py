@@ -1,7 +1,7 @@
 """A search's plan: the declared space, its checks, and how a trial's parameters set its config.
 
 Pure: no training, no database and no Optuna (the space as Optuna distributions, the sampler
-and the pruner are :mod:`kraby_study.run.sampling`'s). The trials are asked for through the store.
+and the pruner are [`kraby_study.run.sampling`][]'s). The trials are asked for through the store.
 """
 
 from __future__ import annotations
@@ -121,7 +121,8 @@ def trial_cap_text(cfg: DictConfig) -> str:
 
 def objectives(cfg: DictConfig) -> list[str]:
     """The search's objective names, its reward first, then any cost
-    (:func:`kraby_study.records.definition.check_objective`); ConfigError for a bad one."""
+    ([`check_objective`][kraby_study.records.definition.check_objective]); ConfigError for a bad
+    one."""
     objective = cfg.search.objective
     return check_objective(objective if isinstance(objective, str) else to_container(objective))
 
@@ -137,9 +138,9 @@ def pruner_name(cfg: DictConfig) -> str:
 
 def method_text(cfg: DictConfig) -> str:
     """How a search chooses and stops its trials, as a dry run names it: the sampler, its seed
-    and when its model takes over, the pruner (:func:`pruner_name`) and any cap on one
-    trial's CPU seconds, e.g. ``sampler tpe (search.seed 0; its model from trial 5 on),
-    pruner median``."""
+    and when its model takes over, the pruner ([`pruner_name`][kraby_study.plan.space.pruner_name])
+    and any cap on one trial's CPU seconds, e.g. ``sampler tpe (search.seed 0; its model from trial
+    5 on), pruner median``."""
     sampler = str(cfg.search.sampler)
     start = int(cfg.search.startup_trials)
     # The first trials are the enqueued ones, then random draws, until the model takes over.
@@ -295,7 +296,8 @@ def _validate_batches(cfg: DictConfig) -> None:
 
 def _validate_run_lengths(cfg: DictConfig) -> None:
     """Every trial the space allows can be scored by the search's reward: each n_envs and time
-    limit it may sample, at the budget (:func:`kraby_study.config.validate.validate_run_length`).
+    limit it may sample, at the budget
+    ([`validate_run_length`][kraby_study.config.validate.validate_run_length]).
     """
     env, ppo = to_container(cfg.env), to_container(cfg.ppo)
     paths = [str(param.path) for param in cfg.search.params.values()]
@@ -352,8 +354,8 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
     # rechecked later, and keeps the fingerprint it had before rechecks existed.
     search.pop("recheck", None)
     search.pop("recheck_seeds", None)
-    # Resolved as before the defaults existed: a one-objective search keeps the definition
-    # (and the fingerprint) it had when its pruner was median and its objective one name.
+    # Stored resolved (the pruner's name, the objective as one name), so a one-objective
+    # search's definition and fingerprint do not change with the defaults.
     search["pruner"] = pruner_name(cfg)
     search["objective"] = stored_objective(objectives(cfg))
     if search["pruner"] != "wilcoxon":

@@ -12,22 +12,23 @@ from kraby_study.records.attributes import StudyAttrs
 from kraby_study.records.definition import (
     EVAL_EPISODES,
     EVAL_SET,
-    LEGACY_EVAL_SET,
-    LEGACY_SEEDING,
     SEEDING,
+    UNRECORDED_EVAL_SET,
+    UNRECORDED_SEEDING,
 )
 
 OPTIONAL_PPO: dict[str, Any] = {
     "learning_rate_schedule": "constant", "clip_range_schedule": "constant",
     "ortho_init": True, "log_std_init": 0.0, "use_sde": False, "sde_sample_freq": -1,
 }
-"""PPO settings added after studies were first stored, with their defaults (those of
-``config.schema.PPOConfig``, which are SB3's): a run's settings hold one only when it differs,
-so every study stored before keeps its fingerprint. Read them with :func:`ppo_setting`."""
+"""PPO settings a run's settings hold only where they differ from their defaults (those of
+``config.schema.PPOConfig``, which are SB3's), so a study whose settings do not name them keeps its
+fingerprint. Read them with [`ppo_setting`][kraby_study.plan.spec.ppo_setting]."""
 
 
 def ppo_setting(ppo: dict[str, Any], name: str) -> Any:
-    """A run's ppo setting, its :data:`OPTIONAL_PPO` default when the settings leave it out."""
+    """A run's ppo setting, its [`OPTIONAL_PPO`][kraby_study.plan.spec.OPTIONAL_PPO] default when
+    the settings leave it out."""
     return ppo[name] if name in ppo else OPTIONAL_PPO[name]
 
 
@@ -59,8 +60,8 @@ class TrialSpec:
     seeds: int = 1
     """Training runs, with seeds seed, seed + 1, ...; the score is their mean (searches)."""
     seeding: str = SEEDING
-    """How a run's seed gives each leg its random stream (:mod:`kraby_envs.seeding`):
-    streams (independent children of the seed) or offset (seed + leg, before streams)."""
+    """How a run's seed gives each leg its random stream (`kraby_envs.seeding`): streams
+    (independent children of the seed) or offset (seed + leg, before streams)."""
     objective: str = "final_reward"
     """final_reward (mean reward over the last 10 % of training) or evaluation."""
     cost: str | None = None
@@ -70,9 +71,10 @@ class TrialSpec:
     """Evaluation episodes of the evaluation objective (the leg's targets, a gym env's seeded
     resets)."""
     eval_set: str = EVAL_SET
-    """Where the evaluation episodes come from (:data:`kraby_study.records.definition.EVAL_SETS`):
-    run, each seed's own (drawn from its evaluation stream), or fixed, one set shared by every
-    run (studies stored before)."""
+    """Where the evaluation episodes come from
+    ([`EVAL_SETS`][kraby_study.records.definition.EVAL_SETS]): run, each seed's own (drawn from its
+    evaluation stream), or fixed, one set shared by every run (a study whose definition has no
+    ``eval_set``)."""
     label: str = ""
     """How progress lines name the run, e.g. 'clip_range=0.2 seed 1'."""
     tensorboard_run: str | None = None
@@ -96,8 +98,8 @@ class RaceRules:
     """The seed of each round, first round first (``seed``, ``seed + 1``, ... in a sweep)."""
     min_seeds: int = 4
     """Seeds every value gets before the first look (a new race: at least
-    :data:`~kraby_study.decision.robust.ANSWER_FROM`; a stored one may hold 3, whose first look
-    answers nothing)."""
+    [`ANSWER_FROM`][kraby_study.records.values.ANSWER_FROM]; a stored one may hold 3, whose first
+    look answers nothing)."""
     alpha: float = 0.05
     """Family-wise error rate over every look of the race."""
     paired: bool = False
@@ -171,7 +173,7 @@ class StudyPlan:
     campaign: dict[str, Any] | None = None
     """A campaign stage's place in its campaign (``Campaign.record``)."""
     racing: RaceRules | None = None
-    """How its seeds race (:mod:`kraby_study.decision.race`); None: every value gets every seed."""
+    """How its seeds race ([`kraby_study.decision.race`][]); None: every value gets every seed."""
 
     def notes(self) -> StudyAttrs:
         """What is stored beside the definition: rule, inputs, campaign."""
@@ -202,9 +204,9 @@ def evaluation_of(cfg: Any) -> tuple[str, int]:
 
 def with_evaluation(definition: dict[str, Any], eval_set: str) -> dict[str, Any]:
     """A definition as stored for ``eval_set``: run adds ``eval_set: run``; fixed adds
-    nothing, so every study stored before runs drew their own episodes keeps its fingerprint
-    and resumes on the set it began with."""
-    return {**definition, "eval_set": eval_set} if eval_set != LEGACY_EVAL_SET \
+    nothing, so a study whose definition has no ``eval_set`` keeps its fingerprint and resumes on
+    the set it began with."""
+    return {**definition, "eval_set": eval_set} if eval_set != UNRECORDED_EVAL_SET \
         else dict(definition)
 
 
@@ -212,7 +214,7 @@ def with_seeding(definition: dict[str, Any], scheme: str) -> dict[str, Any]:
     """A definition as stored for ``scheme``: streams adds ``seeding: streams``; offset adds
     nothing, so every study defined before streams existed keeps its fingerprint and
     resumes, and an offset study defined today is that same study."""
-    return {**definition, "seeding": scheme} if scheme != LEGACY_SEEDING else dict(definition)
+    return {**definition, "seeding": scheme} if scheme != UNRECORDED_SEEDING else dict(definition)
 
 
 def fingerprint(definition: dict[str, Any]) -> str:

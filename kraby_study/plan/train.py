@@ -15,7 +15,7 @@ def train_plan(cfg: DictConfig) -> StudyPlan:
     """The plan of ``train``: one run at the configured settings and seed.
 
     Runs with the same settings, budget and seeding share one study named train-<hash>, one
-    trial per seed (``seeding=offset`` finds the runs stored before streams existed).
+    trial per seed (``seeding=offset`` finds the runs of a study seeded by offset).
     """
     validate_env(cfg.env, cfg.ppo)
     validate_ppo(cfg.ppo)

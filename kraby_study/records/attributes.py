@@ -65,8 +65,8 @@ class SelectRule(StrEnum):
     @classmethod
     def of(cls, stored: str | None) -> SelectRule:
         """The rule a study stored answered by today's rules: a retired name by the rule that
-        replaces it (:data:`RETIRED_RULES`); the default (final_score) for none or an unknown
-        one."""
+        replaces it ([`RETIRED_RULES`][kraby_study.records.attributes.RETIRED_RULES]); the default
+        (final_score) for none or an unknown one."""
         if stored in RETIRED_RULES:
             return RETIRED_RULES[stored]
         try:
@@ -160,14 +160,16 @@ class TrialMeasures:
 class RunMeasure:
     """A number each run of a sweep measures beside its final score, and how a value's runs
     are summarised: the run table, the per-value summary and summary.csv all follow this
-    declaration, so a new per-run measure is a :class:`TrialMeasures` field, an entry of
-    :data:`RUN_MEASURES` and the code in :mod:`kraby_study.run.trial` that measures it."""
+    declaration, so a new per-run measure is a
+    [`TrialMeasures`][kraby_study.records.attributes.TrialMeasures] field, an entry of
+    [`RUN_MEASURES`][kraby_study.records.attributes.RUN_MEASURES] and the code in
+    [`kraby_study.run.trial`][] that measures it."""
 
     name: str
     """Its column in the run table (trials.csv)."""
     attribute: str
-    """The :class:`TrialMeasures` field it is read from: a number, or a list with one entry
-    per seed (a sweep's run has one seed: the first is read)."""
+    """The [`TrialMeasures`][kraby_study.records.attributes.TrialMeasures] field it is read from: a
+    number, or a list with one entry per seed (a sweep's run has one seed: the first is read)."""
     summary: str
     """How a value's complete runs are summarised: ``describe`` (mean, sd and the interval of
     the mean, as the final score's: columns ``<column>_mean``, ``_sd``, ``_low``, ``_high``)

@@ -1,5 +1,5 @@
 """What a stored study's definition says of how it scores: its objectives, its seeding and its
-evaluation episodes, with the defaults of studies stored before each was recorded."""
+evaluation episodes, and what a definition that does not record one of them is read as."""
 
 from __future__ import annotations
 
@@ -70,9 +70,8 @@ def stored_objective(names: Sequence[str]) -> str | list[str]:
 SEEDING = "streams"
 """The seeding scheme of a new study: each leg of a run its own child stream of the run's seed
 (``numpy.random.SeedSequence(seed).spawn(n_envs)``)."""
-LEGACY_SEEDING = "offset"
-"""The scheme of every study stored before streams existed (leg i seeded with seed + i); its
-definition has no ``seeding`` key."""
+UNRECORDED_SEEDING = "offset"
+"""The scheme of a study whose definition has no ``seeding`` key: leg i seeded with seed + i."""
 SEEDING_TEXT = {
     "streams": "streams: env i of the run with seed s (a leg, on the leg) draws from child i "
                "of numpy.random.SeedSequence(s), so no two runs share an env's stream",
@@ -101,24 +100,24 @@ def seed_text(seeds: Iterable[int]) -> str:
 
 def stored_seeding(definition: Mapping[str, Any]) -> str:
     """A stored definition's seeding scheme: its ``seeding``, offset when it has none."""
-    return str(definition.get("seeding", LEGACY_SEEDING))
+    return str(definition.get("seeding", UNRECORDED_SEEDING))
 
 
 EVAL_SETS = ("run", "fixed")
 """Where a run's evaluation episodes come from: ``run``, its own, drawn from its seed's
 evaluation stream (a test set no run of another seed shares: a confirm's fresh seeds never
-see its search's episodes); ``fixed``, one set every run shared (studies stored before)."""
+see its search's episodes); ``fixed``, one set every run shares (a study whose definition has no
+``eval_set``)."""
 EVAL_SET = "run"
 """The evaluation set of a new study."""
-LEGACY_EVAL_SET = "fixed"
-"""The evaluation set of every study stored before runs drew their own: its definition has no
-``eval_set``."""
+UNRECORDED_EVAL_SET = "fixed"
+"""The evaluation set of a study whose definition has no ``eval_set``."""
 EVAL_EPISODES = 200
 """Evaluation episodes per run of a new study (docs/reference/statistics.md: their standard error
 against the margin on Pendulum-v1 and the leg)."""
-LEGACY_EVAL_EPISODES = 16
-"""Evaluation episodes of a study stored before ``eval_episodes`` was stored (searches always
-stored it)."""
+UNRECORDED_EVAL_EPISODES = 16
+"""Evaluation episodes of a study whose definition has no ``eval_episodes`` (a search's always has
+one)."""
 
 
 def _evaluation_part(definition: Mapping[str, Any]) -> Mapping[str, Any]:
@@ -130,7 +129,7 @@ def _evaluation_part(definition: Mapping[str, Any]) -> Mapping[str, Any]:
 
 def stored_eval_set(definition: Mapping[str, Any]) -> str:
     """A stored definition's evaluation set: its ``eval_set``, fixed when it has none."""
-    return str(_evaluation_part(definition).get("eval_set", LEGACY_EVAL_SET))
+    return str(_evaluation_part(definition).get("eval_set", UNRECORDED_EVAL_SET))
 
 
 def stored_enqueue(definition: Mapping[str, Any]) -> list[str] | None:

@@ -100,7 +100,8 @@ def add_policy(report: StudyReport, candidates: Candidates, url: str, rel: str) 
 
 def report_study(data: StudyData, folder: Path, rel: str, fmt: str, url: str,
                  policy: bool, options: Any = None) -> StudyReport:
-    """The files and index section of one study; ``options`` as in :func:`write_report`."""
+    """The files and index section of one study; ``options`` as in
+    [`write_report`][kraby_study.report.build.write_report]."""
     candidates: Candidates
     if data.kind.seeded:
         sweep = build_sweep(data, options)
@@ -252,8 +253,8 @@ def run_report(url: str, out: Path | str, study: str | None = None, fmt: str = "
     """``kraby-study report``: write the report and say where it is; returns the exit code.
 
     Raises:
-        ConfigError: As :func:`write_report`.
-        StoreError: As :func:`write_report`.
+        ConfigError: As [`write_report`][kraby_study.report.build.write_report].
+        StoreError: As [`write_report`][kraby_study.report.build.write_report].
     """
     index = write_report(url, out, study=study, fmt=fmt, policy=policy, options=options)
     if stream is not None:

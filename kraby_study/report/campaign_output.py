@@ -5,7 +5,7 @@ The selected values are the stage sweeps' own ``selected`` rows, so the campaign
 stage's summary agree, except where later stages were built on another value: a selection that
 later work ran on is a stored fact (each later stage records the value it took and the rule that
 chose it), so the table shows that value and rule, and says what today's rule selects when it
-differs (:func:`ran_on`).
+differs ([`ran_on`][kraby_study.report.campaign_output.ran_on]).
 """
 
 from __future__ import annotations
@@ -108,8 +108,9 @@ def ran_on(record: dict[str, Any], sweeps: dict[str, Sweep], name: str
 def campaign_table(record: dict[str, Any], sweeps: dict[str, Sweep]) -> pd.DataFrame:
     """One row per stage (columns ``COLUMNS``); ``selected`` is empty until a stage is
     finished, ``agree`` empty where there is no documented value to compare. A stage whose
-    later stages ran on a value another rule chose shows that value and rule (:func:`ran_on`),
-    and its notes say what today's rule selects."""
+    later stages ran on a value another rule chose shows that value and rule
+    ([`ran_on`][kraby_study.report.campaign_output.ran_on]), and its notes say what today's rule
+    selects."""
     rows = []
     for number, stage in enumerate(record["stages"], start=1):
         name = str(stage["name"])

@@ -176,8 +176,9 @@ CSV_DIGITS = 6
 
 
 def write_csvs(folder: Path, frames: Sequence[tuple[str, pd.DataFrame]]) -> list[Path]:
-    """Write named tables as CSV files in a folder, floats to :data:`CSV_DIGITS` significant
-    digits; returns their paths."""
+    """Write named tables as CSV files in a folder, floats to
+    [`CSV_DIGITS`][kraby_study.report.document.CSV_DIGITS] significant digits; returns their
+    paths."""
     paths = []
     for name, frame in frames:
         path = folder / name

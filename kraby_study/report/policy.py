@@ -2,9 +2,9 @@
 
 Rendered offscreen from the SB3 model file (and its VecNormalize statistics, if it was trained
 with them) and the environment settings the run was trained with, by the env's adapter
-(:mod:`kraby_study.env`): the leg reaching its first fixed targets, a Gymnasium env's first
-episodes of the fixed set (the same for every GIF, so that GIFs of two values show the same
-starts; a run's score comes from episodes of its own). Actions are deterministic, so a rerun
+([`kraby_study.env`][]): the leg reaching its first fixed targets, a Gymnasium env's first episodes
+of the fixed set (the same for every GIF, so that GIFs of two values show the same starts; a run's
+score comes from episodes of its own). Actions are deterministic, so a rerun
 draws the same GIF.
 """
 

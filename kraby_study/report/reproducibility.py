@@ -3,8 +3,8 @@
 It follows the reporting checklist of Eimer et al. (ICML 2023) for hyperparameter studies in RL:
 the tuning seeds apart from the test seeds, what was compared (values or search space), the
 budget in env steps and CPU seconds, the hardware, and the package and code versions. Each
-trial stores what made it (:mod:`kraby_study.run.provenance`); where the trials of one study
-differ in a field that can move the numbers, a warning names the field and counts each value.
+trial stores what made it ([`kraby_study.run.provenance`][]); where the trials of one study differ
+in a field that can move the numbers, a warning names the field and counts each value.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from typing import Any
 from kraby_study.answers.study_data import StudyData
 from kraby_study.records.attributes import RAY_NODE, Placement, StudyKind, TrialAttrs
 from kraby_study.records.definition import (
-    LEGACY_SEEDING,
     SEEDING_TEXT,
+    UNRECORDED_SEEDING,
     scored_by_evaluation,
     seed_text,
     stored_eval_set,
@@ -136,7 +136,7 @@ def _test_set(definition: dict[str, Any]) -> str:
 def _shared_streams(data: StudyData, trials: Sequence[StoredTrial], seeding: str) -> list[str]:
     """Whether test runs reset legs on the streams of tuning runs: only where both studies
     seed by offset (s + i), whose runs share streams with every run less than n_envs apart."""
-    if seeding != LEGACY_SEEDING or data.source_legs is None:
+    if seeding != UNRECORDED_SEEDING or data.source_legs is None:
         return ["Test and tuning runs share no env's stream (one of the two studies seeds by "
                 "streams)."]
     reusing = [t for t in trials if offset_leg_seeds(t) & data.source_legs]

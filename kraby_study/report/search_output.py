@@ -156,7 +156,7 @@ def front_cells(search: Search) -> Table:
     return Table(header, rows, marks=marks)
 
 
-def _front_files(search: Search, folder: Path, section: list[Block]) -> list[Path]:
+def _write_front_files(search: Search, folder: Path, section: list[Block]) -> list[Path]:
     """pareto.csv and summary.md of a two-objective search."""
     csv = write_csvs(folder, [("pareto.csv", front_table(search))])
     summary = folder / "summary.md"
@@ -218,7 +218,7 @@ def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyRepor
                                           *section[1:]]), encoding="utf-8")
     report.files += tables + [top_md]
     report.result = result_text(search)
-    front_files = (_front_files(search, folder, section)
+    front_files = (_write_front_files(search, folder, section)
                    if search.front is not None and search.front.front else [])
     report.files += front_files
     report.blocks = section + images + [

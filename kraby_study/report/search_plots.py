@@ -321,8 +321,8 @@ def pareto(search: Search, path: Path) -> Path:
 
 def _draw_front(ax: Axes, search: Search, done: pd.DataFrame, queued: pd.DataFrame,
                 labels: bool) -> None:
-    """One panel of :func:`pareto`: the complete trials (``done``), the front, the enqueued
-    ones among them (``queued``) and the selected trial."""
+    """One panel of [`pareto`][kraby_study.report.search_plots.pareto]: the complete trials
+    (``done``), the front, the enqueued ones among them (``queued``) and the selected trial."""
     assert search.front is not None
     on_front = {p.key for p in search.front.front}
     others = done[~done["trial"].isin(on_front)]

@@ -233,7 +233,8 @@ def methods(bootstrap: int, min_seeds: int = 2, raced: bool = False,
 def few_seeds_note(sweep: Sweep) -> str | None:
     """The measured coverage of the intervals drawn from fewer than 5 seeds in this sweep, and
     of those from more where skewed data were covered less than 93 % of the time
-    (:func:`kraby_study.decision.coverage.coverage_note`); None when neither is drawn here."""
+    ([`coverage_note`][kraby_study.decision.coverage.coverage_note]); None when neither is drawn
+    here."""
     return coverage_note(r.complete for r in sweep.rows if r.complete >= 2)
 
 
@@ -499,7 +500,7 @@ def _write_tables(sweep: Sweep, folder: Path) -> list[Path]:
 
 def evaluated_text(sweep: Sweep) -> str:
     """The per-run measures of runs scored by evaluation
-    (:data:`kraby_study.records.attributes.RUN_MEASURES`): what each is, where summary.csv
+    ([`RUN_MEASURES`][kraby_study.records.attributes.RUN_MEASURES]): what each is, where summary.csv
     holds it, and each root-mean-square measure by value."""
     measured = [m for m in RUN_MEASURES if m.evaluated]
     what = "; ".join(f"{', '.join(m.columns)}: {m.text}" for m in measured)

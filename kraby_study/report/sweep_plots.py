@@ -3,11 +3,11 @@ wall-clock time, training time, final score, sample efficiency and time to thres
 value, and the best value's probability of improvement over each other value.
 
 Lines are means over the complete seeds of a value. Error bars are the 95 % intervals of those
-means (:func:`kraby_study.decision.intervals.mean_interval`: the bootstrap-t interval from 5 seeds
-on, Hall's skewness-corrected t interval below), except the probability of improvement's, which are
-Newcombe score-type intervals. The learning-curve bands, hundreds of points a value, are Hall's
-intervals at every n (see :mod:`kraby_study.decision`). In a
-raced study, the curves of the values the race dropped are dashed.
+means ([`mean_interval`][kraby_study.decision.intervals.mean_interval]: the bootstrap-t interval
+from 5 seeds on, Hall's skewness-corrected t interval below), except the probability of
+improvement's, which are Newcombe score-type intervals. The learning-curve bands, hundreds of points
+a value, are Hall's intervals at every n (see [`kraby_study.decision`][]). In a raced study, the
+curves of the values the race dropped are dashed.
 """
 
 from __future__ import annotations

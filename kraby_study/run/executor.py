@@ -1,9 +1,9 @@
 """What runs the trials: worker processes on this machine, or a Ray cluster.
 
 An executor is chosen by ``executor=local|ray`` and lives for one command. It says how many
-trials run at once when ``workers`` is null, and gives the runner a :class:`Pool` of that many
-slots. Whatever runs the trials, their results come back to the command's process, which stays
-the only writer of the store.
+trials run at once when ``workers`` is null, and gives the runner a
+[`Pool`][kraby_study.run.pool.Pool] of that many slots. Whatever runs the trials, their results come
+back to the command's process, which stays the only writer of the store.
 """
 
 from __future__ import annotations
@@ -45,7 +45,8 @@ class LocalExecutor:
 
     shards: int | None = None
     spares: dict[int, list[WorkerSlot]] = field(default_factory=dict, compare=False)
-    """Workers started ahead (:meth:`prestart`), by the pool size they were started for."""
+    """Workers started ahead ([`prestart`][kraby_study.run.executor.LocalExecutor.prestart]), by the
+    pool size they were started for."""
 
     def workers(self, configured: int | None) -> int:
         """The configured number, or one per core."""

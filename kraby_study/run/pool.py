@@ -1,9 +1,9 @@
 """Worker processes that run trials and send their results back to the parent.
 
 Workers never open the database: the parent is the single writer (SQLite allows one). Each worker
-is a fresh interpreter running :mod:`kraby_study.run.worker`, fed one spec at a time through its own
-pipe, so a worker that dies (killed, out of memory) is seen at once as the end of its pipe and
-only its own trial needs running again.
+is a fresh interpreter running [`kraby_study.run.worker`][], fed one spec at a time through its own
+pipe, so a worker that dies (killed, out of memory) is seen at once as the end of its pipe and only
+its own trial needs running again.
 """
 
 from __future__ import annotations
@@ -32,10 +32,10 @@ class WorkerSlot:
 class Event:
     """Something a worker said or did: started, progress, checkpoint, result or died.
 
-    The payload is the machine's facts (started: :func:`kraby_study.run.provenance.
-    machine_facts`), (step, the trial's CPU seconds so far) (progress), (step, value)
-    (checkpoint), the TrialResult (result), or (spec, why) (died: why the worker is gone, e.g.
-    ``exit code -9``).
+    The payload is the machine's facts (started:
+    [`machine_facts`][kraby_study.run.provenance.machine_facts]), (step, the trial's CPU seconds so
+    far) (progress), (step, value) (checkpoint), the TrialResult (result), or (spec, why) (died: why
+    the worker is gone, e.g. ``exit code -9``).
     """
 
     kind: str

@@ -5,8 +5,8 @@ per second and an ETA, e.g.::
 
     [3/8] clip_range=0.2 seed 1: complete, score -0.0123 (12 s) | 1,820 steps/s, ETA 1m05s
 
-On a terminal the lines are written with :meth:`tqdm.tqdm.write` above one live bar line;
-in a log or a pipe there is no bar and no escape code, only the lines, flushed one by one.
+On a terminal the lines are written with `tqdm.tqdm.write` above one live bar line; in a log or a
+pipe there is no bar and no escape code, only the lines, flushed one by one.
 """
 
 from __future__ import annotations
@@ -131,7 +131,7 @@ class Progress:
             self.lost_steps += self.running[label][0]
         self.running[label] = (0, steps)
         self.budgets.append(steps)
-        self._line(f"started  {label}")
+        self._print_line(f"started  {label}")
 
     def step(self, label: str, steps_done: int) -> None:
         """A running trial reported its env steps so far."""
@@ -144,7 +144,8 @@ class Progress:
     def finish(self, label: str, result: TrialResult, cost: bool = False,
                why: str | None = None) -> None:
         """A trial ended: complete, failed or pruned; ``cost``: show its cost (a
-        two-objective search's trial); ``why``: why its source stopped it (:func:`describe`)."""
+        two-objective search's trial); ``why``: why its source stopped it
+        ([`describe`][kraby_study.run.progress.describe])."""
         so_far, _ = self.running.pop(label, (0, 0))
         trained = max(result.env_steps or 0, so_far)
         self.ended_steps += trained
@@ -158,13 +159,13 @@ class Progress:
             self.failed += 1
         if self.bar is not None:
             self.bar.update(1)
-        self._line(f"[{self.done}/{self.total}] {label}: {describe(result, cost, why)}")
+        self._print_line(f"[{self.done}/{self.total}] {label}: {describe(result, cost, why)}")
 
     def interrupt(self, label: str, reason: str) -> None:
         """A trial stopped without ending (its worker died, or Ctrl-C): not done."""
         so_far, _ = self.running.pop(label, (0, 0))
         self.lost_steps += so_far
-        self._line(f"{label}: {interrupted(reason)}")
+        self._print_line(f"{label}: {interrupted(reason)}")
 
     def close(self) -> None:
         """Leave the terminal clean: the bar is removed (the lines stay)."""
@@ -219,7 +220,7 @@ class Progress:
 
     # -- output -------------------------------------------------------------------------------
 
-    def _line(self, text: str) -> None:
+    def _print_line(self, text: str) -> None:
         line = f"{text} | {self.figures()}"
         if self.bar is None:
             print(line, file=self.stream, flush=True)

@@ -1,11 +1,12 @@
 """What made a trial: the machine that trained it and the command that ran it.
 
-Two halves, gathered where they are true. :func:`machine_facts` runs in the worker (a local
-worker process or a Ray actor), so a trial trained on another machine carries that machine's
-hostname, CPU and package versions. :func:`command_facts` runs in the command that writes the
-store: its command line (passwords hidden) and the git state of the folder it ran in. The store
-keeps each distinct record once per study (:meth:`kraby_study.store.ledger.StudyLedger.
-note_provenance`).
+Two halves, gathered where they are true.
+[`machine_facts`][kraby_study.run.provenance.machine_facts] runs in the worker (a local worker
+process or a Ray actor), so a trial trained on another machine carries that machine's hostname, CPU
+and package versions. [`command_facts`][kraby_study.run.provenance.command_facts] runs in the
+command that writes the store: its command line (passwords hidden) and the git state of the folder
+it ran in. The store keeps each distinct record once per study
+([`note_provenance`][kraby_study.store.ledger.StudyLedger.note_provenance]).
 """
 
 from __future__ import annotations
@@ -79,8 +80,9 @@ def machine_facts() -> dict[str, str]:
 
 
 def trial_facts(env: Mapping[str, object]) -> dict[str, str]:
-    """:func:`machine_facts`, and the env's own facts (:data:`ENV_FIELDS`) for a Gymnasium
-    env: what a worker stores when a trial starts."""
+    """[`machine_facts`][kraby_study.run.provenance.machine_facts], and the env's own facts
+    ([`ENV_FIELDS`][kraby_study.run.provenance.ENV_FIELDS]) for a Gymnasium env: what a worker
+    stores when a trial starts."""
     return {**machine_facts(), **_env_facts(json.dumps(dict(env), sort_keys=True, default=str))}
 
 

@@ -1,12 +1,12 @@
 """Run a raced plan: seeds in rounds, the values the race drops get no more.
 
 Nothing is queued up front. Each claim, under the study's plan lock, replays the race on the
-stored results (:func:`kraby_study.decision.race.race`) and queues the one run it wants next: the
+stored results ([`race`][kraby_study.decision.race.race]) and queues the one run it wants next: the
 lowest seed index any value still in the race lacks, the best-standing value first. So every value
 in the race gets its seed k before any value gets seed k + 1, and when a round's last runs are all
 taken, idle workers start the next round, best-standing values first (those least likely to be
-dropped). A value is judged on its first r seeds only; a seed it ran ahead of its round is kept
-and counted. After every recorded run the race is replayed and stored on the study
+dropped). A value is judged on its first r seeds only; a seed it ran ahead of its round is kept and
+counted. After every recorded run the race is replayed and stored on the study
 (``StudyAttrs.race``); a dropped value's queued retry is withdrawn (ended as pruned).
 """
 
@@ -47,7 +47,8 @@ class RaceSource(PlanSource):
         return replay(self.rules, len(self.plan.values), latest)
 
     def queue_missing(self) -> int:
-        """Store where the race stands; nothing is queued ahead (see :meth:`next_trial`)."""
+        """Store where the race stands; nothing is queued ahead (see
+        [`next_trial`][kraby_study.run.race_source.RaceSource.next_trial])."""
         with self.ledger.plan_lock():
             self._store_race()
         return 0
@@ -109,7 +110,8 @@ class RaceSource(PlanSource):
 
 
 def standing_means(runs: dict[int, dict[int, float]]) -> dict[int, float]:
-    """Mean final score of each value's complete runs (:func:`ended_runs`), by value index."""
+    """Mean final score of each value's complete runs
+    ([`ended_runs`][kraby_study.records.stored.ended_runs]), by value index."""
     scores = {v: [x for x in by_seed.values() if not math.isnan(x)] for v, by_seed in runs.items()}
     return {v: math.fsum(s) / len(s) for v, s in scores.items() if s}
 

@@ -1,12 +1,13 @@
 """Trials on a Ray cluster: ``executor=ray``.
 
 Each trial slot is a Ray actor reserving ``ray.cpus_per_trial`` CPUs on some node. The actor runs
-one trial at a time with the same code as a local worker (:func:`kraby_study.run.worker.attempt`)
-and keeps its messages (progress, checkpoints, the result) in an outbox that the command drains,
-so the command's process stays the only writer of the store, and a SQLite file serves a whole
-cluster. An actor that dies (its process killed, its node lost) ends its trial with a ``died``
-event, and the runner runs the trial again. When the cluster itself stays out of reach for
-``db_retry_seconds``, the command stops with one line; complete trials are stored already.
+one trial at a time with the same code as a local worker
+([`attempt`][kraby_study.run.worker.attempt]) and keeps its messages (progress, checkpoints, the
+result) in an outbox that the command drains, so the command's process stays the only writer of the
+store, and a SQLite file serves a whole cluster. An actor that dies (its process killed, its node
+lost) ends its trial with a ``died`` event, and the runner runs the trial again. When the cluster
+itself stays out of reach for ``db_retry_seconds``, the command stops with one line; complete trials
+are stored already.
 
 An actor's start is judged by what the cluster says of it, not by a clock: Ray's actor table
 names the worker process an actor was given as soon as a node places it, so an actor with a

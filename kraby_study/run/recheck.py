@@ -41,8 +41,8 @@ class Leader:
 
 def leaders(trials: Sequence[FrozenTrial], count: int) -> list[Leader]:
     """The ``count`` best configurations of a search, best first, in the order a search's
-    pick reads them (:func:`~kraby_study.records.values.ranking`: equal scores by seeds,
-    then cost, then number); a recheck that is queued or running stands where its trial
+    pick reads them ([`ranking`][kraby_study.records.values.ranking]: equal scores by seeds, then
+    cost, then number); a recheck that is queued or running stands where its trial
     does."""
     by_number = {t.number: t for t in trials}
     ranked: list[tuple[tuple[float, int, float, int], Leader]] = []
@@ -92,9 +92,9 @@ def cpu_per_step(trials: Sequence[FrozenTrial]) -> float | None:
 def to_spend(done: int, total: int, cpu: float, rate: float | None) -> float:
     """CPU seconds a running trial would still use to train its ``total`` env steps, having
     trained ``done`` of them in ``cpu`` seconds: at its own pace once it has trained
-    :data:`OWN_RATE_FROM` of them, before that at ``rate`` (the search's ended trials' pace;
-    its own when there is none). A pruner may stop it sooner, so this is what it could use,
-    not what it will."""
+    [`OWN_RATE_FROM`][kraby_study.run.recheck.OWN_RATE_FROM] of them, before that at ``rate`` (the
+    search's ended trials' pace; its own when there is none). A pruner may stop it sooner, so this
+    is what it could use, not what it will."""
     own = cpu / done if done > 0 else None
     pace = own if own is not None and (done >= OWN_RATE_FROM * total or rate is None) else rate
     return (pace or 0.0) * max(0, total - done)

@@ -1,6 +1,6 @@
 """A search's Optuna side: its space as distributions, its sampler and its pruner.
 
-The space itself is declared and checked in :mod:`kraby_study.plan.space`, which stays pure.
+The space itself is declared and checked in [`kraby_study.plan.space`][], which stays pure.
 """
 
 from __future__ import annotations
@@ -50,11 +50,12 @@ def sampler_seed(seed: int, opening: int) -> int:
 
 
 def make_sampler(cfg: DictConfig, opening: int = 0) -> optuna.samplers.BaseSampler:
-    """The seeded sampler of a search's ``opening``-th command (:func:`sampler_seed`). TPE
-    handles one objective or two (Optuna's multi-objective TPE); NSGA-II keeps Optuna's
-    default population. The GP sampler (Optuna's Gaussian-process sampler, which models
-    the score's noise) draws its first ``startup_trials`` *complete* trials at random, as
-    random search of the same seed draws them; it learns nothing from a pruned trial."""
+    """The seeded sampler of a search's ``opening``-th command
+    ([`sampler_seed`][kraby_study.run.sampling.sampler_seed]). TPE handles one objective or two
+    (Optuna's multi-objective TPE); NSGA-II keeps Optuna's default population. The GP sampler
+    (Optuna's Gaussian-process sampler, which models the score's noise) draws its first
+    ``startup_trials`` *complete* trials at random, as random search of the same seed draws them; it
+    learns nothing from a pruned trial."""
     seed = sampler_seed(int(cfg.search.seed), opening)
     if cfg.search.sampler == "random":
         return optuna.samplers.RandomSampler(seed=seed)

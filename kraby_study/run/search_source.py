@@ -79,8 +79,8 @@ def _rounded(value: Any) -> Any:
 
 
 @dataclass(frozen=True)
-class Use:
-    """What a trial this command runs has used so far, and of what."""
+class RunningTrial:
+    """A trial this command runs: the env steps and CPU seconds it has used so far, of how many."""
 
     total: int
     """Env steps it trains if nothing stops it (its steps times its seeds)."""
@@ -107,7 +107,7 @@ class SearchSource(StudySource):
         self.space = distributions(cfg)
         self.recheck, self.recheck_seeds = recheck_plan(cfg)
         self._rechecks: dict[int, Any] = {}  # recheck trial -> the trial it rechecks
-        self._running: dict[int, Use] = {}  # trial this command runs -> what it has used
+        self._running: dict[int, RunningTrial] = {}  # trial number -> its steps and CPU so far
         # Exploring ended for the rechecks: it does not start again, in this command nor in a
         # later one under the same budget.
         self._explored = (self.cpu_budget is not None and bool(self.recheck)
@@ -121,14 +121,14 @@ class SearchSource(StudySource):
 
     def _running_cpu(self) -> float:
         """CPU seconds the trials this command runs have used so far."""
-        return sum(use.cpu for use in self._running.values())
+        return sum(running.cpu for running in self._running.values())
 
     def _to_spend(self, trials: list[Any]) -> float:
         """CPU seconds the trials this command runs could still use, each trained to its
-        last env step (:func:`~kraby_study.run.recheck.to_spend`)."""
+        last env step ([`to_spend`][kraby_study.run.recheck.to_spend])."""
         rate = cpu_per_step(trials)
-        return sum(to_spend(use.done, use.total, use.cpu, rate)
-                   for use in self._running.values())
+        return sum(to_spend(running.done, running.total, running.cpu, rate)
+                   for running in self._running.values())
 
     def using(self, number: int, steps: int, cpu: float) -> None:
         """Note the env steps a running trial has trained and the CPU seconds it has used so
@@ -138,7 +138,8 @@ class SearchSource(StudySource):
 
     @property
     def explored(self) -> bool:
-        """Whether exploring has ended to pay for the rechecks (:meth:`exploring`)."""
+        """Whether exploring has ended to pay for the rechecks
+        ([`exploring`][kraby_study.run.search_source.SearchSource.exploring])."""
         return self._explored
 
     def over_budget(self) -> bool:
@@ -153,22 +154,22 @@ class SearchSource(StudySource):
         """Whether the search still asks its sampler for new trials: its total is not reached
         and, with rechecks under a CPU budget, the budget holds what is spent, what the
         running trials could still use (each to its last step) and the rechecks of today's
-        leaders, so a dear trial running beside the last ones does not take the rechecks'
-        share. Once exploring has ended for the
+        leaders, so a costly trial running beside the last ones does not take the rechecks' share.
+        Once exploring has ended for the
         rechecks it does not start again, in this command nor in a later one under the same
         budget: the rest of the budget is the rechecks' (a running recheck's CPU is not
         reserved once it starts, so room would seem to open while it runs, and a trial
         explored then could lead at the end on its search seeds alone). A trial that starts
-        dear, or one another machine runs, can still leave the last rechecks unpaid."""
+        costly, or one another machine runs, can still leave the last rechecks unpaid."""
         if len(counted(trials)) >= self.total:
             return False
         if self.cpu_budget is None or not self.recheck:
             return True
         if self._explored:
             return False
-        held = reserve(trials, self.recheck, self.recheck_seeds)
+        reserved = reserve(trials, self.recheck, self.recheck_seeds)
         self._explored = (spent_cpu(trials) + self._running_cpu() + self._to_spend(trials)
-                          + held >= self.cpu_budget)
+                          + reserved >= self.cpu_budget)
         return not self._explored
 
     def next_trial(self) -> tuple[int, TrialSpec] | None:
@@ -189,9 +190,10 @@ class SearchSource(StudySource):
                     leader = self._recheck_due(trials, over=over, waiting=waiting)
                     if leader is None:
                         return None
-                    held = TrialAttrs.of(leader)
+                    leader_attrs = TrialAttrs.of(leader)
                     self.ledger.queue(leader.params, TrialAttrs(
-                        key=held.key, recheck_of=leader.number, enqueued=held.enqueued))
+                        key=leader_attrs.key, recheck_of=leader.number,
+                        enqueued=leader_attrs.enqueued))
                 asked = time.process_time()
                 trial = self.ledger.ask(self.space)
                 # The sampler runs in this process: its CPU counts against the budget.
@@ -216,8 +218,8 @@ class SearchSource(StudySource):
             self.ledger.set_attrs(number, TrialAttrs(
                 key=spec.key, seed=spec.seed, settings=spec.settings, steps=spec.steps,
                 model_path=spec.model_path))
-            self._running[number] = Use(total=spec.steps * spec.seeds,
-                                        capped=of is None and "enqueued" not in trial.user_attrs)
+            capped = of is None and "enqueued" not in trial.user_attrs
+            self._running[number] = RunningTrial(total=spec.steps * spec.seeds, capped=capped)
             return number, spec
 
     def _recheck_due(self, trials: Sequence[FrozenTrial], *, over: bool,
@@ -263,7 +265,7 @@ class SearchSource(StudySource):
     def checkpoint(self, number: int, step: int, value: float) -> bool:
         """Report an intermediate value to the pruner; False stops the trial: the pruner
         stops it, or it is projected to use more than its share of the CPU budget
-        (:meth:`projected_past_cap`)."""
+        ([`projected_past_cap`][kraby_study.run.search_source.SearchSource.projected_past_cap])."""
         if not self.ledger.checkpoint(number, step, value):
             return False
         projected = self.projected_past_cap(number)
@@ -276,22 +278,22 @@ class SearchSource(StudySource):
     def stopped_why(self, number: int) -> str | None:
         """A trial stopped for its cost: ``projected to use 412 CPU s, past the cap of 300
         (search.trial_share)``; None for any other."""
-        use = self._running.get(number)
-        if use is None or use.cost_stop is None:
+        running = self._running.get(number)
+        if running is None or running.cost_stop is None:
             return None
-        return (f"projected to use {use.cost_stop:,.0f} CPU s, past the cap of "
+        return (f"projected to use {running.cost_stop:,.0f} CPU s, past the cap of "
                 f"{self.trial_cap:,.0f} (search.trial_share)")
 
     def projected_past_cap(self, number: int) -> float | None:
         """The CPU seconds a running trial would use to its last env step (what it has used
-        and :func:`~kraby_study.run.recheck.to_spend`), when that passes the search's cap on
+        and [`to_spend`][kraby_study.run.recheck.to_spend]), when that passes the search's cap on
         one trial (``search.trial_share`` of the budget); None when it does not, when there
         is no cap, or for a trial the cap spares (an enqueued configuration, a recheck)."""
-        use = self._running.get(number)
-        if self.trial_cap is None or use is None or not use.capped:
+        running = self._running.get(number)
+        if self.trial_cap is None or running is None or not running.capped:
             return None
-        projected = use.cpu + to_spend(use.done, use.total, use.cpu,
-                                       cpu_per_step(self.ledger.trials()))
+        projected = running.cpu + to_spend(running.done, running.total, running.cpu,
+                                           cpu_per_step(self.ledger.trials()))
         return projected if projected > self.trial_cap else None
 
     def requeue(self, number: int, spec: TrialSpec, reason: str) -> None:
@@ -303,7 +305,8 @@ class SearchSource(StudySource):
         """Store a finished trial. Under a floor a complete one first gets its constraint
         ``floor``: the floor's measured score minus its own (feasible at 0 or less; 0 while the
         floor is not measured). Optuna's samplers rank feasible trials first. A recheck is
-        stored with the seeds of the trial it rechecks (:func:`combined`)."""
+        stored with the seeds of the trial it rechecks
+        ([`combined`][kraby_study.run.recheck.combined])."""
         self._running.pop(number, None)  # its stored cpu_time counts from now on
         if number in self._rechecks:
             result = combined(self._rechecks[number], result)
@@ -338,7 +341,7 @@ def pruner_label(cfg: DictConfig) -> str:
 def take_opening(ledger: StudyLedger) -> int:
     """This command's place among the commands that started on the search (0: the first),
     counted under the plan lock, so two machines that join at once take different places. A
-    search stored before commands were counted takes its trial count, as its resumes did."""
+    search that stores no count of its commands takes its trial count."""
     with ledger.plan_lock():
         opening = ledger.attrs.openings
         if opening is None:
@@ -423,9 +426,9 @@ def record_budget_end(source: SearchSource, stream: TextIO) -> None:
     counted_trials = [t for t in source.counted() if t.state != TrialState.WAITING]
     ended = len(counted_trials)
     stopped = (source.over_budget() or source.explored) and ended < source.total
-    dear = sum(1 for t in counted_trials if "cost_stop" in t.user_attrs)
+    cost_stopped = sum(1 for t in counted_trials if "cost_stop" in t.user_attrs)
     capped = ("" if source.trial_cap is None else
-              f"; {dear} stopped past {source.trial_cap:,.0f} CPU s (search.trial_share)")
+              f"; {cost_stopped} stopped past {source.trial_cap:,.0f} CPU s (search.trial_share)")
     print(f"search {source.ledger.name}: {source.spent():,.0f} of its "
           f"{source.cpu_budget or 0:,.0f} CPU s used, {ended} of {source.total} trials"
           + (" (stopped by the CPU budget)" if stopped else "") + capped,
@@ -442,9 +445,9 @@ def _leaders_text(source: SearchSource) -> str:
         return "no complete trial to recheck"
     parts = []
     for lead in found:
-        held = TrialAttrs.of(lead.trial)
-        seeds = len(held.scores or [])
-        mark = "" if held.recheck_of is not None else ", not rechecked"
+        lead_attrs = TrialAttrs.of(lead.trial)
+        seeds = len(lead_attrs.scores or [])
+        mark = "" if lead_attrs.recheck_of is not None else ", not rechecked"
         parts.append(f"{lead.trial.user_attrs.get('key')} {lead.score:.4g} ({seeds} seeds{mark})")
     return "leaders by all their seeds: " + "; ".join(parts)
 

@@ -124,8 +124,8 @@ def tensorboard_folder(run: str, seed: int) -> Path:
 
 
 def make_env(spec: TrialSpec, seed: int, shards: int = 1) -> Any:
-    """The vectorised env of a spec (:mod:`kraby_study.env`): n_envs envs stepped in
-    ``shards`` processes where the env allows, each on its own stream of ``seed`` by the
+    """The vectorised env of a spec ([`kraby_study.env`][]): n_envs envs stepped in ``shards``
+    processes where the env allows, each on its own stream of ``seed`` by the
     spec's seeding scheme."""
     env = spec.settings["env"]
     return adapter_for(env).make_vec(env, int(spec.settings["ppo"]["n_envs"]), seed,

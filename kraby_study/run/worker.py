@@ -1,10 +1,10 @@
 """One worker process: runs the trials its pool sends and reports back.
 
-Started by :class:`kraby_study.run.pool.WorkerPool` as ``python -m kraby_study.run.worker FD
-SHARDS`` with one end of a pipe as FD. It imports only what a trial needs (torch,
-stable-baselines3, the environments), never the command line, the configuration tree or the
-database, and trains with one torch thread. SHARDS is the number of processes each trial's
-legs are stepped in (see :mod:`kraby_envs.sharded`); it changes speed, not results.
+Started by [`WorkerPool`][kraby_study.run.pool.WorkerPool] as ``python -m kraby_study.run.worker FD
+SHARDS`` with one end of a pipe as FD. It imports only what a trial needs (torch, stable-baselines3,
+the environments), never the command line, the configuration tree or the database, and trains with
+one torch thread. SHARDS is the number of processes each trial's
+legs are stepped in (see `kraby_envs.sharded`); it changes speed, not results.
 """
 
 from __future__ import annotations

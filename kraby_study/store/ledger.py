@@ -1,7 +1,7 @@
 """One study's ledger: queue, claim, ask, record, heartbeat, requeue, and the curves.
 
-With :mod:`kraby_study.store.store` the only code that touches the database. Outside the store
-a trial is named by its number in its study; Optuna's internal ids stay in here.
+With [`kraby_study.store.store`][] the only code that touches the database. Outside the store a
+trial is named by its number in its study; Optuna's internal ids stay in here.
 """
 
 from __future__ import annotations
@@ -152,7 +152,8 @@ class StudyLedger:
     def note_provenance(self, number: int, facts: Mapping[str, str]) -> str:
         """Store what made a trial: the record once per study (``kraby_provenance:<key>``), its key
         on the trial; a failed trial queued again on purpose adds the attempt it retries and
-        that attempt's failure (:func:`retry_facts`). Returns the key."""
+        that attempt's failure ([`retry_facts`][kraby_study.records.attributes.retry_facts]).
+        Returns the key."""
         facts = {**facts, **retry_facts(TrialAttrs.of(self._storage.get_trial(self._id(number))))}
         key = provenance_key(facts)
         if key not in self._provenance_keys:

@@ -4,16 +4,16 @@ tables: what ``list`` needs, in a few queries and without Optuna.
 Optuna's RDBStorage costs a third of a second to import (its models, alembic's version check),
 and it builds a FrozenTrial per trial with every parameter, attribute and intermediate value:
 about 12 s for 5,000 trials. A row holds only what counting a study's trials
-(:func:`kraby_study.records.stored.counted`, :func:`~kraby_study.records.stored.tally`) and its
-selection so far read (:mod:`kraby_study.answers.selected`): number, state, value, the attributes of
-:data:`ROW_ATTRS`, and a swept study's parameter (or its queued value). Rows satisfy
-:class:`kraby_study.records.stored.StoredTrial`, so the same rules run on them as on Optuna's
-trials.
+([`counted`][kraby_study.records.stored.counted], [`tally`][kraby_study.records.stored.tally]) and
+its selection so far read ([`kraby_study.answers.selected`][]): number, state, value, the attributes
+of [`ROW_ATTRS`][kraby_study.store.rows.ROW_ATTRS], and a swept study's parameter (or its queued
+value). Rows satisfy [`StoredTrial`][kraby_study.records.stored.StoredTrial], so the same rules run
+on them as on Optuna's trials.
 
 The columns are those of Optuna's models (``optuna/storages/_rdb/models.py``, the schema of
 Optuna 3 and later); values and parameters are decoded as Optuna decodes them. Reading writes
 nothing: a SQLite file is opened read-only, once the journal of a writer killed mid-transaction,
-if one is left, is rolled back (:func:`_rolled_back`).
+if one is left, is rolled back (`_rolled_back`).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ search's ties are decided on (scores), which trial is its floor (enqueued), and 
 what made it (provenance: the command ``list`` offers to retry failed runs with)."""
 SQLITE_PATIENCE = 60
 """Seconds a read waits while the writer holds the SQLite file (as the writer's own
-connection, :class:`kraby_study.store.backend.SqliteBackend`)."""
+connection, [`SqliteBackend`][kraby_study.store.backend.SqliteBackend])."""
 
 # Optuna's tables, as far as they are read here (never created from this metadata).
 _optuna = sa.MetaData()
@@ -92,7 +92,8 @@ class RowState(Enum):
 
 @dataclass(frozen=True)
 class TrialRow:
-    """One trial as ``list`` reads it (a :class:`kraby_study.records.stored.StoredTrial`)."""
+    """One trial as ``list`` reads it (a
+    [`StoredTrial`][kraby_study.records.stored.StoredTrial])."""
 
     number: int
     state: RowState
@@ -103,7 +104,7 @@ class TrialRow:
     params: dict[str, Any]
     """A swept study's parameter, when the trial has it; empty for other studies."""
     user_attrs: dict[str, Any]
-    """The attributes of :data:`ROW_ATTRS` it has."""
+    """The attributes of [`ROW_ATTRS`][kraby_study.store.rows.ROW_ATTRS] it has."""
     system_attrs: dict[str, Any]
     """``fixed_params`` of a swept study's trial without its parameter (queued, not run)."""
 
@@ -181,8 +182,9 @@ class StoreReader:
         return attrs[ids[name]] if name in ids else None
 
     def curves(self, name: str, numbers: Collection[int] | None = None) -> pd.DataFrame:
-        """Learning-curve points of a study read by :meth:`studies` (columns
-        ``CURVE_COLUMNS``), of the given trials or all, sorted by trial and step."""
+        """Learning-curve points of a study read by
+        [`studies`][kraby_study.store.rows.StoreReader.studies] (columns ``CURVE_COLUMNS``), of the
+        given trials or all, sorted by trial and step."""
         study_id, numbers_of = self._ids[name]
         with self._engine.connect() as connection:
             return read_curves(connection, study_id, numbers_of, numbers)
@@ -302,8 +304,8 @@ def _external(value: float, distribution: dict[str, Any]) -> Any:
 @contextmanager
 def read_only(url: str) -> Iterator[sa.Connection | None]:
     """A connection through the backend's read-only URL, which never creates or writes
-    anything (a killed writer's journal aside, :func:`_rolled_back`); None when there is
-    nothing to read (a SQLite file not there yet). Errors of the database are the caller's to
+    anything (a killed writer's journal aside, `_rolled_back`); None when there is nothing to read
+    (a SQLite file not there yet). Errors of the database are the caller's to
     name."""
     reading = _reading_url(url)
     if reading is None:
@@ -341,8 +343,8 @@ def _rolled_back(path: Path) -> None:
 
 
 def _reading_url(url: str) -> str | None:
-    """The backend's read-only URL (:func:`~kraby_study.store.url.reading_url`), a SQLite file's
-    journal rolled back first if a killed writer left one."""
+    """The backend's read-only URL ([`reading_url`][kraby_study.store.url.reading_url]), a SQLite
+    file's journal rolled back first if a killed writer left one."""
     path = sqlite_path(url)
     if path is not None and path.exists():
         _rolled_back(path)

@@ -1,10 +1,10 @@
 """A study store: Optuna's tables plus the learning curves, at a database URL.
 
-Together with :mod:`kraby_study.store.ledger` the only code that talks to the database.
-Optuna's RDB storage is the trial ledger of every study (sweeps, searches and single runs), so
-``optuna.load_study`` and optuna-dashboard read everything; learning curves live beside it in
-one table (:mod:`kraby_study.store.tables`). What differs between SQLite and PostgreSQL is in
-:mod:`kraby_study.store.backend`.
+Together with [`kraby_study.store.ledger`][] the only code that talks to the database. Optuna's RDB
+storage is the trial ledger of every study (sweeps, searches and single runs), so
+``optuna.load_study`` and optuna-dashboard read everything; learning curves live beside it in one
+table ([`kraby_study.store.tables`][]). What differs between SQLite and PostgreSQL is in
+[`kraby_study.store.backend`][].
 """
 
 from __future__ import annotations

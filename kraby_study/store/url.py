@@ -1,8 +1,8 @@
 """Database URLs: parsed, checked and shown without importing any database code.
 
 Config validation and planning use this module and stay pure; opening a store is
-:mod:`kraby_study.store.store`'s job. URLs are SQLAlchemy's, ``dialect[+driver]://...``: a
-SQLite file (``sqlite:///relative.db``, ``sqlite:////absolute.db``) or a PostgreSQL server
+[`kraby_study.store.store`][]'s job. URLs are SQLAlchemy's, ``dialect[+driver]://...``: a SQLite
+file (``sqlite:///relative.db``, ``sqlite:////absolute.db``) or a PostgreSQL server
 (``postgresql+psycopg://user:password@host:port/database``).
 """
 
