@@ -201,27 +201,54 @@ def is_two_objective(data: StudyData) -> bool:
     return data.kind == StudyKind.SEARCH and two_objectives(data.definition)
 
 
-def front_table(search: Search) -> pd.DataFrame:
-    """The front's trials, best score first: number, score, cost, the configuration it was
-    enqueued as, whether it is the best score, admitted by the rule beside it (``equivalent``: shown
-    equivalent under fastest_equivalent) or selected, its
-    answer against the best score, and its parameters (pareto.csv)."""
+@dataclass(frozen=True)
+class FrontTrial:
+    """One trial of a two-objective search's front, as the report shows it."""
+
+    trial: int
+    score: float
+    cost: float
+    """CPU seconds per seed."""
+    enqueued: Any
+    """The configuration it was enqueued as (e.g. a baseline's name); empty for a sampled one."""
+    best: bool
+    """It has the best score."""
+    equivalent: bool
+    """Shown equivalent to the best score (the rule ``fastest_equivalent`` admits it)."""
+    selected: bool
+    """The rule selects it."""
+    answer: str
+    """Its answer against the best score (empty when untested)."""
+    params: dict[str, Any]
+    """Its sampled settings, by parameter name."""
+
+
+def front_trials(search: Search) -> list[FrontTrial]:
+    """The front's trials, best score first."""
     assert search.front is not None
     choice = search.front.choice
     rows = search.trials.set_index("trial")
-    out = []
+    found = []
     for point in sorted(search.front.front, key=lambda p: -p.score):
         row = rows.loc[point.key]
-        out.append({
-            "trial": point.key, "score": point.score, "cost": point.cost,
-            "enqueued": row["enqueued"],
-            "best": choice is not None and point.key == choice.best.key,
-            "equivalent": choice is not None and point.key in choice.equivalent,
-            "selected": choice is not None and point.key == choice.chosen.key,
-            "answer": answer_of(choice, point.key),
-            **{name: row[name] for name in search.params}})
-    return pd.DataFrame(out, columns=["trial", "score", "cost", "enqueued", "best",
-                                      "equivalent", "selected", "answer", *search.params])
+        found.append(FrontTrial(
+            trial=point.key, score=point.score, cost=point.cost, enqueued=row["enqueued"],
+            best=choice is not None and point.key == choice.best.key,
+            equivalent=choice is not None and point.key in choice.equivalent,
+            selected=choice is not None and point.key == choice.chosen.key,
+            answer=answer_of(choice, point.key),
+            params={name: row[name] for name in search.params}))
+    return found
+
+
+def front_frame(trials: list[FrontTrial], params: list[str]) -> pd.DataFrame:
+    """pareto.csv: one row per front trial, one column per field and per parameter."""
+    return pd.DataFrame(
+        [{"trial": t.trial, "score": t.score, "cost": t.cost, "enqueued": t.enqueued,
+          "best": t.best, "equivalent": t.equivalent, "selected": t.selected,
+          "answer": t.answer, **t.params} for t in trials],
+        columns=["trial", "score", "cost", "enqueued", "best", "equivalent", "selected",
+                 "answer", *params])
 
 
 def answer_of(choice: FrontChoice[int] | None, key: int) -> str:

@@ -174,22 +174,33 @@ class Sweep:
         return self.comparison.best if self.comparison is not None else None
 
 
-def arms_frame(sweep: Sweep) -> pd.DataFrame:
-    """A confirm study's configurations: label, origin, the source's own score, and the
-    confirmed final score (mean and its interval, IQM, trimmed-t interval, n)."""
+@dataclass(frozen=True)
+class ConfirmArm:
+    """One configuration a confirm study retrained: where it came from, the score its source
+    study gave it on the tuning seeds, and what the fresh seeds say of it."""
+
+    label: str
+    origin: str
+    """The source trial or baseline it was taken from ("-" when the definition names none)."""
+    source_score: float
+    """Its score in the source study (NaN for a baseline, or when none is stored)."""
+    confirmed: ValueSummary
+    """Its row of the confirm study's summary: confirmed scores, intervals, n, answer."""
+
+
+def confirm_arms(sweep: Sweep) -> list[ConfirmArm]:
+    """A confirm study's configurations, in the order of its values."""
     arms = {str(arm.get("label")): arm for arm in sweep.data.definition.get("arms") or []
             if isinstance(arm, dict)}
-    rows = []
+    found = []
     for value_index, label in enumerate(sweep.labels):
         arm = arms.get(label, {})
         source = arm.get("source_score")
-        row = sweep.rows[value_index]
-        rows.append({"label": label, "origin": str(arm.get("origin") or "-"),
-                     "source_score": float(source) if source is not None else math.nan,
-                     "mean": row.final_mean, "low": row.final_low, "high": row.final_high,
-                     "iqm": row.iqm, "iqm_low": row.iqm_low, "iqm_high": row.iqm_high,
-                     "n": row.complete, "answer": row.answer})
-    return pd.DataFrame(rows)
+        found.append(ConfirmArm(
+            label=label, origin=str(arm.get("origin") or "-"),
+            source_score=float(source) if source is not None else math.nan,
+            confirmed=sweep.rows[value_index]))
+    return found
 
 
 def option(options: Any, name: str, default: Any) -> Any:

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kraby_study.answers.search_evidence import Search, front_table, top_trials
+from kraby_study.answers.search_evidence import Search, front_frame, front_trials, top_trials
 from kraby_study.records.attributes import StudyKind
 from kraby_study.records.stored import Outcome, known_number
 from kraby_study.records.values import score
@@ -141,24 +141,24 @@ def result_text(search: Search) -> str:
 
 def front_cells(search: Search) -> Table:
     """The front as formatted cells, best score first; the selected trial marked best."""
-    frame = front_table(search)
     header = ["trial", "score", "cost (CPU s/seed)", "enqueued", "answer", *search.params]
     rows, marks = [], []
-    for _, row in frame.iterrows():
-        test = "best score" if row["best"] else (row["answer"] or "-")
-        rows.append([str(row["trial"]) + (" (selected)" if row["selected"] else ""),
-                     _cell(row["score"]), f"{row['cost']:.3g}", str(row["enqueued"] or "-"),
+    for trial in front_trials(search):
+        test = "best score" if trial.best else (trial.answer or "-")
+        rows.append([str(trial.trial) + (" (selected)" if trial.selected else ""),
+                     _cell(trial.score), f"{trial.cost:.3g}", str(trial.enqueued or "-"),
                      test,
-                     *[format_param(row[p], search.distributions.get(p))
+                     *[format_param(trial.params[p], search.distributions.get(p))
                        for p in search.params]])
-        marks.append("best" if row["selected"] else "tie" if row["equivalent"] or row["best"]
+        marks.append("best" if trial.selected else "tie" if trial.equivalent or trial.best
                      else "")
     return Table(header, rows, marks=marks)
 
 
 def _write_front_files(search: Search, folder: Path, section: list[Block]) -> list[Path]:
     """pareto.csv and summary.md of a two-objective search."""
-    csv = write_csvs(folder, [("pareto.csv", front_table(search))])
+    csv = write_csvs(folder, [("pareto.csv", front_frame(front_trials(search),
+                                                         search.params))])
     summary = folder / "summary.md"
     # The verdict (section[1]) names the rule that selected; the description follows it.
     summary.write_text(blocks_to_markdown([

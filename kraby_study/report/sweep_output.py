@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kraby_study.answers.sweep_evidence import Sweep, arms_frame
+from kraby_study.answers.sweep_evidence import Sweep, confirm_arms
 from kraby_study.decision.comparison import ALPHA, ANSWER_FROM, answers_name
 from kraby_study.decision.coverage import coverage_note
 from kraby_study.decision.failed_seeds import definition_text
@@ -417,11 +417,13 @@ def other_measures(sweep: Sweep) -> list[str]:
 
 def arms_table(sweep: Sweep) -> Table:
     """A confirm study's configurations: origin, the source's score, the confirmed score."""
-    arms = arms_frame(sweep)
-    rows = [[str(r["label"]), str(r["origin"]), number(r["source_score"]),
-             number(r["mean"]), _interval(r["low"], r["high"]), number(r["iqm"]),
-             _bootstrap_interval(r["iqm_low"], r["iqm_high"]), str(r["n"])]
-            for _, r in arms.iterrows()]
+    rows = [[arm.label, arm.origin, number(arm.source_score),
+             number(arm.confirmed.final_mean),
+             _interval(arm.confirmed.final_low, arm.confirmed.final_high),
+             number(arm.confirmed.iqm),
+             _bootstrap_interval(arm.confirmed.iqm_low, arm.confirmed.iqm_high),
+             str(arm.confirmed.complete)]
+            for arm in confirm_arms(sweep)]
     return Table(["configuration", "origin", "source's score", "confirmed mean final score",
                   "95 % CI", "confirmed IQM", "95 % trimmed-t CI", "n"], rows,
                  marks=[row_mark(r.answer) for r in sweep.rows])
