@@ -254,8 +254,9 @@ class ReportConfig:
     """Reward a learning curve must reach for steps/seconds to threshold; null: 90 % of the way
     from the untrained policy's first-bin reward to the best value's final score."""
     min_seeds: int = 2
-    """Fewest complete seeds a value needs to be best, tied, most sample-efficient, fastest or
-    most repeatable (at least 2); values with fewer are listed as left out."""
+    """Fewest complete seeds a value needs to be answered (best, equivalent, worse, undecided),
+    most sample-efficient, fastest or most repeatable (at least 2); values with fewer are listed
+    as left out."""
 
 
 @dataclass
