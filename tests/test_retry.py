@@ -121,3 +121,27 @@ def test_a_bad_retry_value_is_one_line_and_stores_nothing(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "retry_failed" in err
     assert not (workdir / "studies").exists()
+
+
+def test_a_confirm_retries_its_failed_runs_on_the_same_fresh_seeds(
+        store_url: str, machine: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    confirm = ["confirm", "--baseline", "ppo=tuned", "--seeds", "2", "--workers", "1",
+               *NEEDS_FIX, f"storage={store_url}"]
+    assert run_cli(*confirm) == 1  # both fresh seeds fail on the broken machine
+    name = "confirm-ppo=tuned"
+    before = load(store_url, name).get_trials()
+    assert [t.state for t in before] == [TrialState.FAIL] * 2
+    assert sorted(t.user_attrs["seed"] for t in before) == [1000, 1001]
+    machine.write_text("")
+    capsys.readouterr()
+    assert run_cli(*confirm, "--retry-failed") == 0
+    assert f"2 failed trial(s) of {name} queued again" in capsys.readouterr().out
+    trials = load(store_url, name).get_trials()
+    assert len(trials) == 4
+    counted = latest_by_key(trials)
+    assert all(t.state == TrialState.COMPLETE for t in counted.values())
+    by_key = {t.user_attrs["key"]: t for t in before}
+    for key, trial in counted.items():
+        assert trial.user_attrs["retry_of"] == by_key[key].number
+        assert trial.user_attrs["seed"] == by_key[key].user_attrs["seed"]
+        assert trial.user_attrs["settings"] == by_key[key].user_attrs["settings"]
