@@ -129,8 +129,8 @@ def _test_set(definition: dict[str, Any]) -> str:
                 "seed's evaluation stream (a child of its SeedSequence apart from its training "
                 "streams): no test episode is one the source study scored a run on.")
     return (f"Warning: test set reused: every run was scored on the same {episodes} fixed "
-            "evaluation episodes as every run of its source (stored before runs drew their "
-            "own), so the settings were selected on the episodes they are tested on.")
+            "evaluation episodes as every run of its source (its eval_set is fixed), so the "
+            "settings were selected on the episodes they are tested on.")
 
 
 def _shared_streams(data: StudyData, trials: Sequence[StoredTrial], seeding: str) -> list[str]:
