@@ -378,14 +378,11 @@ def test_bad_racing_input_is_one_line_and_writes_nothing(
     assert not (workdir / "studies").exists()
 
 
-def test_racing_on_a_search_or_a_train_run_is_refused(
+def test_racing_on_a_train_run_is_refused(
         workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    # --racing itself is refused by the parser (tests/test_cli.py); its key=value form here.
-    assert run_cli("optuna", "racing.enabled=true", "--trials", "1", *TINY) == 2
-    err = capsys.readouterr().err
-    assert "--pruner wilcoxon" in err and len(err.strip().splitlines()) == 1
+    # A racing search's own refusals are in tests/test_racing_search.py.
     assert run_cli("train", "racing.enabled=true", *TINY) == 2
-    assert "racing is for run and confirm" in capsys.readouterr().err
+    assert "racing is for run, optuna and confirm" in capsys.readouterr().err
     assert run_cli("confirm", "--racing", "--baseline", "ppo=tuned", "--seeds", "3", *TINY) == 2
     assert "racing.min_seeds (4) must not exceed confirm.seeds (3)" in capsys.readouterr().err
     assert not (workdir / "studies").exists()
