@@ -207,10 +207,10 @@ def good_start(cfg: Any) -> list[tuple[str, dict[str, Any]]]:
 
 
 def run_fake(workdir: Path, workers: int, *extra: str, db: str = "r.db",
-             starts: bool = True) -> tuple[FakeExecutor, str, Any]:
+             starts: bool = True, url: str | None = None) -> tuple[FakeExecutor, str, Any]:
     cfg = racing_cfg(workdir, *extra)
     executor = FakeExecutor()
-    url = sqlite_url(workdir / db)
+    url = url or sqlite_url(workdir / db)
     out = io.StringIO()
     with opened(url) as store:
         run_racing_search(store, cfg, executor, workers, out, live=False,
@@ -241,6 +241,13 @@ def test_a_challenger_that_cannot_learn_leaves_early_and_the_incumbent_earns_its
         ran = [seed for key, seed in submitted if key.startswith(config.key + "-")]
         assert sorted(ran) == [0, 1, 2, 3]
     assert "every configuration is asked and decided" in out
+
+
+def test_a_racing_search_stores_and_replays_alike_on_each_backend(
+        workdir: Path, store_url: str) -> None:
+    _, _, found = run_fake(workdir, 2, "search.trials=3", url=store_url)
+    assert found.incumbent is not None and found.incumbent.seeds == 6
+    assert len(found.configurations) == 3 and not found.state.racing
 
 
 def test_a_search_run_again_runs_nothing_and_an_extended_one_asks_as_one_run_would(

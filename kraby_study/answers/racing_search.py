@@ -80,6 +80,11 @@ class RacedConfiguration:
         clean = np.asarray([s for s in self.scores.values() if not math.isnan(s)], dtype=float)
         return float(iqm(clean)) if len(clean) else math.nan
 
+    def evidence_text(self) -> str:
+        """``IQM 162.2 over 6 seeds (2 failed)``."""
+        failed = f" ({self.failed} failed)" if self.failed else ""
+        return f"IQM {self.iqm:.4g} over {self.seeds} seeds{failed}"
+
     def left_text(self) -> str:
         """How it left: ``incumbent``, ``worse at seed 4 (p 0.0021)``, ``replaced by c7 at
         seed 6``, ``equivalent at seed 5, not cheaper``, ``below the incumbent at seed 6 (IQM
@@ -125,13 +130,13 @@ class RacingSearch:
 
     def summary(self) -> str:
         """``12 configurations: incumbent c3 (IQM -154.2 over 8 seeds); 7 worse, 1 replaced,
-        2 below, 1 equivalent``."""
+        2 below, 1 equivalent``; failed seeds are counted in the seeds and named apart."""
         inc = self.incumbent
         counts = self.counts()
         parts = ", ".join(f"{n} {left.value}" for left, n in counts.items()
                           if n and left != Left.INCUMBENT)
-        head = (f"incumbent {inc.key} (IQM {inc.iqm:.4g} over {inc.seeds} seeds)"
-                if inc is not None else "no incumbent yet")
+        head = (f"incumbent {inc.key} ({inc.evidence_text()})" if inc is not None
+                else "no incumbent yet")
         return f"{len(self.configurations)} configurations: {head}" + (
             f"; {parts}" if parts else "")
 

@@ -133,7 +133,8 @@ def racing_selection(name: str, definition: dict[str, Any], found: RacingSearch 
     return Selection(short=racing_short(found),
                      description=f"configuration {inc.key} of racing search {name!r}, its "
                                  f"incumbent: IQM final score {inc.iqm:.4g} over {inc.seeds} "
-                                 f"seed(s) ({params})",
+                                 f"seed(s){f', {inc.failed} failed' if inc.failed else ''} "
+                                 f"({params})",
                      settings=inc.settings, env_keys=searched_env_keys(definition),
                      steps=definition.get("steps"))
 
@@ -144,7 +145,8 @@ def racing_short(found: RacingSearch | None) -> str:
     inc = found.incumbent if found is not None else None
     if inc is None or not math.isfinite(inc.iqm):
         return "-"
-    return f"{inc.key} (IQM {inc.iqm:.4g}, {inc.seeds} seeds)"
+    failed = f", {inc.failed} failed" if inc.failed else ""
+    return f"{inc.key} (IQM {inc.iqm:.4g}, {inc.seeds} seeds{failed})"
 
 
 def front_selection(name: str, definition: dict[str, Any], trials: Sequence[StoredTrial],

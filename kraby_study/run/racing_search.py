@@ -78,6 +78,7 @@ class RacingSource(StudySource):
         self._running: dict[int, float] = {}  # trial number -> CPU seconds so far
         self.progress: Progress | None = None
         """Where the race's moves are printed as they happen."""
+        self._moves: list[str] = []  # noted when a run is recorded, printed after its line
         self._standings = {c.number: c.standing for c in self.standing().configurations}
 
     def standing(self, trials: Sequence[FrozenTrial] | None = None) -> RacingSearch:
@@ -110,6 +111,7 @@ class RacingSource(StudySource):
         race, the run the race wants, or the first run of a new challenger; None when it wants
         none now (its budget used, its configurations all asked and decided, or waiting for
         runs in flight)."""
+        self.print_moves()
         while True:
             with self.ledger.plan_lock():
                 if self.over_budget():
@@ -173,19 +175,21 @@ class RacingSource(StudySource):
         if asked >= self.total or (asked and not found.state.challenge_open()):
             return None
         began = time.process_time()
-        if asked < len(self.starts):
-            name, params = self.starts[asked]
-        else:
-            name, params = None, self._ask(found, asked)
+        name, fixed = self.starts[asked] if asked < len(self.starts) else (None, {})
+        params = self._ask(found, asked, fixed)
         self.ledger.queue(params, TrialAttrs(key=racing_key(asked, base), seed=base,
                                              enqueued=name))
         return time.process_time() - began
 
-    def _ask(self, found: RacingSearch, asked: int) -> dict[str, Any]:
+    def _ask(self, found: RacingSearch, asked: int, fixed: dict[str, Any]) -> dict[str, Any]:
         """A new configuration from the sampler, which sees each configuration that has ended
-        a run at the IQM of its seeds so far."""
+        a run at the IQM of its seeds so far; ``fixed``: the values an enqueued configuration
+        sets (the sampler draws those its space does not hold), so every run of it trains the
+        same settings."""
         study = optuna.create_study(direction="maximize",
                                     sampler=racing_sampler(self.cfg, asked))
+        if fixed:
+            study.enqueue_trial(fixed)
         for config in found.configurations:
             if math.isfinite(config.iqm) and set(config.params) == set(self.space):
                 study.add_trial(optuna.trial.create_trial(
@@ -241,11 +245,17 @@ class RacingSource(StudySource):
                                                                      Left.INCUMBENT):
                 continue
             inc = found.incumbent
-            if self.progress is not None:
-                self.progress.note(f"race: {config.key} {config.left_text()}" + (
-                    f"; incumbent {inc.key}, IQM {inc.iqm:.4g} over {inc.seeds} seeds"
-                    if inc is not None else ""))
+            self._moves.append(f"race: {config.key} {config.left_text()}" + (
+                f"; incumbent {inc.key}, {inc.evidence_text()}" if inc is not None else ""))
         self._standings = {c.number: c.standing for c in found.configurations}
+
+    def print_moves(self) -> None:
+        """Print the moves noted since the last call (after the line of the run that made
+        them, which the runner prints once the run is recorded)."""
+        if self.progress is not None:
+            for line in self._moves:
+                self.progress.note(line)
+        self._moves = []
 
 
 def run_racing_search(store: Store, cfg: DictConfig, executor: Executor, workers: int,
@@ -284,6 +294,7 @@ def run_racing_search(store: Store, cfg: DictConfig, executor: Executor, workers
     source.progress = progress
     summary = run_trials(Retrying(source, float(cfg.db_retry_seconds), stream), max(1, workers),
                          progress, executor, heartbeat_seconds=float(cfg.heartbeat_interval))
+    source.print_moves()
     found = source.standing()
     ended = "the CPU budget is used" if source.over_budget() else (
         "every configuration is asked and decided" if not found.state.racing
