@@ -20,6 +20,7 @@ from conftest import (
     spawn_cli,
     sqlite_url,
 )
+from fake_pool import InstantExecutor
 from optuna.trial import TrialState
 
 import kraby_study as ks
@@ -31,7 +32,6 @@ from kraby_study.plan.space import apply_params
 from kraby_study.plan.spec import RaceRules, TrialSpec
 from kraby_study.records.attributes import TrialResult
 from kraby_study.records.stored import Outcome, counted, latest_by_key, parse_racing_key
-from kraby_study.run.pool import Event
 from kraby_study.run.racing_search import run_racing_search
 from kraby_study.store.store import opened
 
@@ -149,48 +149,9 @@ def fake_score(spec: TrialSpec) -> float:
     return base + ppo["gamma"] + NOISE[(spec.seed - 0) % len(NOISE)]
 
 
-class FakePool:
-    """Runs end at once with their fake score."""
-
-    def __init__(self, size: int) -> None:
-        self.size = size
-        self.playing: dict[int, TrialSpec] = {}
-        self.submitted: list[TrialSpec] = []
-
-    def idle(self) -> int:
-        return self.size - len(self.playing)
-
-    def submit(self, number: int, spec: TrialSpec) -> None:
-        self.playing[number] = spec
-        self.submitted.append(spec)
-
-    def running(self) -> dict[int, TrialSpec]:
-        return dict(self.playing)
-
-    def events(self, timeout: float) -> list[Event]:
-        out = [Event("result", number, TrialResult(
-            outcome=Outcome.COMPLETE, final_score=fake_score(spec), env_steps=spec.steps,
-            wall_time=1.0, cpu_time=1.0)) for number, spec in self.playing.items()]
-        self.playing.clear()
-        return out
-
-    def reply(self, event: Event, keep_going: bool) -> None:
-        raise AssertionError("a racing search never checkpoints")
-
-    def close(self, terminate: bool = False) -> None:
-        self.playing.clear()
-
-
-class FakeExecutor:
-    def __init__(self) -> None:
-        self.pools: list[FakePool] = []
-
-    def workers(self, configured: int | None) -> int:
-        return configured or 1
-
-    def pool(self, size: int) -> FakePool:
-        self.pools.append(FakePool(size))
-        return self.pools[-1]
+def fake_result(spec: TrialSpec) -> TrialResult:
+    return TrialResult(outcome=Outcome.COMPLETE, final_score=fake_score(spec),
+                       env_steps=spec.steps, wall_time=1.0, cpu_time=1.0)
 
 
 def racing_cfg(workdir: Path, *extra: str) -> Any:
@@ -207,9 +168,9 @@ def good_start(cfg: Any) -> list[tuple[str, dict[str, Any]]]:
 
 
 def run_fake(workdir: Path, workers: int, *extra: str, db: str = "r.db",
-             starts: bool = True, url: str | None = None) -> tuple[FakeExecutor, str, Any]:
+             starts: bool = True, url: str | None = None) -> tuple[InstantExecutor, str, Any]:
     cfg = racing_cfg(workdir, *extra)
-    executor = FakeExecutor()
+    executor = InstantExecutor(fake_result)
     url = url or sqlite_url(workdir / db)
     out = io.StringIO()
     with opened(url) as store:
