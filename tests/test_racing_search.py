@@ -317,3 +317,25 @@ def test_a_killed_racing_search_continues_where_it_stopped(workdir: Path) -> Non
     assert found is not None and len(found.configurations) == 3 and not found.state.racing
     assert found.incumbent is not None and found.incumbent.seeds == 5
     assert not math.isnan(found.incumbent.iqm)
+
+
+@pytest.mark.slow
+def test_a_racing_search_on_ray_races_as_on_local_workers(workdir: Path) -> None:
+    pytest.importorskip("ray")
+    racing_cfg(workdir)
+    common = ["optuna", "--racing", "search=fake", *TINY, "budget.seeds=4", "search.trials=2",
+              "workers=1"]
+    local, ray = sqlite_url(workdir / "local.db"), sqlite_url(workdir / "ray.db")
+    assert run_cli(*common, f"storage={local}") == 0
+    env_ray = ["executor=ray", f"storage={ray}"]
+    proc = spawn_cli(*common, *env_ray, cwd=workdir)
+    out, _ = proc.communicate(timeout=600)
+    assert proc.returncode == 0, out
+
+    def raced(url: str) -> list[tuple[str, dict[str, Any], dict[int, float], str]]:
+        study = load(url, "fake")
+        found = racing_search(study.user_attrs["kraby_definition"], study.get_trials())
+        assert found is not None
+        return [(c.key, c.params, c.scores, c.left_text()) for c in found.configurations]
+
+    assert raced(ray) == raced(local)  # the same runs, scores and moves, bit for bit
