@@ -222,6 +222,20 @@ def test_a_search_run_again_runs_nothing_and_an_extended_one_asks_as_one_run_wou
     assert [c.params for c in split.configurations] == [c.params for c in whole.configurations]
 
 
+@pytest.mark.parametrize("changed", [["compare.margin=0.1"], ["racing.enabled=false"]])
+def test_a_racing_search_is_never_resumed_at_other_rules_nor_unraced(
+        workdir: Path, capsys: pytest.CaptureFixture[str], changed: list[str]) -> None:
+    run_fake(workdir, 1, "search.trials=2")
+    db = workdir / "r.db"
+    before = db.read_bytes()
+    capsys.readouterr()
+    assert run_cli("optuna", "search=fake", *TINY, "budget.seeds=6", "racing.enabled=true",
+                   f"storage={sqlite_url(db)}", *changed) == 2
+    err = capsys.readouterr().err
+    assert "defined differently" in err and len(err.strip().splitlines()) == 1
+    assert db.read_bytes() == before
+
+
 def test_best_list_confirm_and_report_read_the_incumbent(
         workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     _, _, found = run_fake(workdir, 2)
