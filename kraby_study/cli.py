@@ -452,6 +452,17 @@ def build_parser() -> argparse.ArgumentParser:
             "(as racing.enabled=true; racing.min_seeds, default 4, racing.alpha, default "
             "0.05, and racing.paired, default false, tune it); budget.seeds (confirm: --seeds) "
             "is the most any value gets")
+    parsers["optuna"].add_argument(
+        "--racing", action="store_true",
+        help="a racing search (as racing.enabled=true): each configuration the sampler asks "
+        "for trains racing.min_seeds (4) seeds side by side, then one at a time against the "
+        "incumbent; it leaves once shown worse by more than compare.margin (or equivalent and "
+        "not cheaper), replaces the incumbent once shown better (or equivalent and cheaper in "
+        "CPU s per run), or, undecided at the incumbent's seed count, if its IQM on the common "
+        "seeds is higher; the incumbent earns a seed whenever no challenger wants one, up to "
+        "budget.seeds. Ends at --cpu-budget or --trials configurations; the pick is the "
+        "incumbent. One objective, no --pruner, --recheck or --trial-share; TPE is "
+        "multivariate")
     parsers["confirm"].add_argument(
         "--baseline", action="append", type=_baseline, metavar="ppo=NAME",
         help="add a ppo config's settings as one more configuration (repeatable), e.g. "
@@ -495,9 +506,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     # Overrides may come after flags (optuna --trials 5 budget=quick): argparse leaves them over.
     args, extras = parser.parse_known_args(argv)
     unknown = [e for e in extras if e.startswith("-")]
-    if args.command == "optuna" and any(e.partition("=")[0] == "--racing" for e in unknown):
-        parser.error("--racing races a sweep's seeds; a search races its trials' seeds with "
-                     "--pruner wilcoxon")
     if unknown:
         parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     args.overrides = list(args.overrides) + extras

@@ -34,7 +34,7 @@ def test_bad_input_raises_one_line_before_any_work(workdir: Path) -> None:
     with pytest.raises(ks.ConfigError) as err:
         ks.compose(["ppo.gamma=high"])
     assert "\n" not in str(err.value) and "ppo.gamma" in str(err.value)
-    with pytest.raises(ks.ConfigError, match="racing is for run and confirm"):
+    with pytest.raises(ks.ConfigError, match="racing is for run, optuna and confirm"):
         ks.compose(["racing.enabled=true"], command="train")
     with pytest.raises(ks.ConfigError, match="command 'sweep'"):
         ks.compose([], command="sweep")

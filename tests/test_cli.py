@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import TINY, file_digest, run_cli, sqlite_url
+from conftest import TINY, file_digest, refused_before_work, run_cli, sqlite_url
 
 from kraby_study.cli import build_parser
 from kraby_study.config.compose import compose_config
@@ -133,16 +133,18 @@ def test_a_report_setting_out_of_range_is_one_line(
     assert file_digest(one_study) == before and not (workdir / "r").exists()
 
 
-@pytest.mark.parametrize("argv", [["--racing"], ["--racing=true"],
-                                  ["--trials", "3", "--racing", "budget=smoke"]])
-def test_optuna_refuses_racing_in_one_line_naming_the_wilcoxon_pruner(
-        workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
-    with pytest.raises(SystemExit) as caught:
-        run_cli("optuna", *argv)
-    assert caught.value.code == 2
-    err = capsys.readouterr().err
-    assert "--pruner wilcoxon" in err and err.count("\n") == 1
-    assert not (workdir / "studies").exists()
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--racing", "--pruner", "median"], "--racing stops configurations by its race"),
+    (["--racing", "--objective", "final_reward,training_time", "--pruner", "none"],
+     "--racing races one objective"),
+    (["--racing", "--recheck", "2"], "drop --recheck"),
+    (["--racing", "--sampler", "nsga2"], "choose --sampler tpe, gp or random"),
+    (["--racing", "budget.seeds=3"], "racing.min_seeds (4) must not exceed budget.seeds (3)"),
+])
+def test_optuna_racing_refuses_what_it_cannot_race_in_one_line(
+        workdir: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str) -> None:
+    err = refused_before_work(workdir, capsys, "optuna", "--trials", "3", "budget=smoke", *argv)
+    assert message in err
 
 
 def test_optuna_help_offers_the_wilcoxon_pruner(capsys: pytest.CaptureFixture[str]) -> None:

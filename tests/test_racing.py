@@ -28,6 +28,7 @@ from conftest import (
     tiny_with_steps,
     write_study_file,
 )
+from fake_pool import InstantExecutor
 from optuna.trial import TrialState
 
 from kraby_study.answers.raced import race_of
@@ -38,7 +39,6 @@ from kraby_study.plan.spec import RaceRules, TrialSpec
 from kraby_study.plan.sweep import expand_study
 from kraby_study.records.attributes import StudyAttrs, TrialAttrs, TrialResult
 from kraby_study.records.stored import Outcome, counted, latest_by_key, outcome, parse_sweep_key
-from kraby_study.run.pool import Event
 from kraby_study.run.study_run import run_plan
 from kraby_study.store.store import opened
 
@@ -238,50 +238,17 @@ SCORES = {  # value -> final score of seeds 0, 1, 2, ...
 }
 
 
-class ScorePool:
-    """A pool whose runs end at once with the score SCORES gives their value and seed."""
-
-    def __init__(self, size: int) -> None:
-        self.size = size
-        self.playing: dict[int, TrialSpec] = {}
-        self.submitted: list[TrialSpec] = []
-
-    def idle(self) -> int:
-        return self.size - len(self.playing)
-
-    def submit(self, number: int, spec: TrialSpec) -> None:
-        self.playing[number] = spec
-        self.submitted.append(spec)
-
-    def running(self) -> dict[int, TrialSpec]:
-        return dict(self.playing)
-
-    def events(self, timeout: float) -> list[Event]:
-        out = []
-        for number, spec in list(self.playing.items()):
-            del self.playing[number]
-            out.append(Event("result", number, TrialResult(
-                outcome=Outcome.COMPLETE, final_score=SCORES[spec.value][spec.seed],
-                env_steps=spec.steps, wall_time=1.0)))
-        return out
-
-    def reply(self, event: Event, keep_going: bool) -> None:
-        raise AssertionError("sweeps never checkpoint")
-
-    def close(self, terminate: bool = False) -> None:
-        self.playing.clear()
+def sweep_result(spec: TrialSpec) -> TrialResult:
+    """The score SCORES gives the run's value and seed."""
+    return TrialResult(outcome=Outcome.COMPLETE, final_score=SCORES[spec.value][spec.seed],
+                       env_steps=spec.steps, wall_time=1.0)
 
 
-class ScoreExecutor:
+class ScoreExecutor(InstantExecutor):
+    """Runs that end at once with their SCORES."""
+
     def __init__(self) -> None:
-        self.pools: list[ScorePool] = []
-
-    def workers(self, configured: int | None) -> int:
-        return configured or 1
-
-    def pool(self, size: int) -> ScorePool:
-        self.pools.append(ScorePool(size))
-        return self.pools[-1]
+        super().__init__(sweep_result)
 
 
 def raced_plan(workdir: Path, seeds: int = 6, *extra: str) -> Any:
@@ -378,14 +345,11 @@ def test_bad_racing_input_is_one_line_and_writes_nothing(
     assert not (workdir / "studies").exists()
 
 
-def test_racing_on_a_search_or_a_train_run_is_refused(
+def test_racing_on_a_train_run_is_refused(
         workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    # --racing itself is refused by the parser (tests/test_cli.py); its key=value form here.
-    assert run_cli("optuna", "racing.enabled=true", "--trials", "1", *TINY) == 2
-    err = capsys.readouterr().err
-    assert "--pruner wilcoxon" in err and len(err.strip().splitlines()) == 1
+    # A racing search's own refusals are in tests/test_racing_search.py.
     assert run_cli("train", "racing.enabled=true", *TINY) == 2
-    assert "racing is for run and confirm" in capsys.readouterr().err
+    assert "racing is for run, optuna and confirm" in capsys.readouterr().err
     assert run_cli("confirm", "--racing", "--baseline", "ppo=tuned", "--seeds", "3", *TINY) == 2
     assert "racing.min_seeds (4) must not exceed confirm.seeds (3)" in capsys.readouterr().err
     assert not (workdir / "studies").exists()

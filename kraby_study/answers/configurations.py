@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
+from kraby_study.answers.racing_search import RacingSearch, racing_rules, racing_search
 from kraby_study.answers.search_front import search_front
 from kraby_study.answers.selected import searched_env_keys
 from kraby_study.decision.front import spread
@@ -51,7 +53,13 @@ def confirmed_study(ledger: StudyLedger, top: int) -> ConfirmedStudy:
     done = [t for t in trials if outcome(t) == Outcome.COMPLETE and score(t) is not None
             and t.user_attrs.get("settings")]
     front = attrs.kind == StudyKind.SEARCH and two_objectives(definition)
-    if attrs.kind == StudyKind.SEARCH:
+    raced = racing_search(definition, ledger.trials()) if racing_rules(
+        attrs.kind, definition) is not None else None
+    if raced is not None:
+        arms = _racing_arms(ledger.name, raced)
+        used = {seed for t in ledger.trials() for seed in trial_seeds(t)}
+        env_keys = searched_env_keys(definition)
+    elif attrs.kind == StudyKind.SEARCH:
         arms = (_front_arms(ledger.name, done, top, stored_floor(definition)) if front
                 else _search_arms(ledger.name, done))
         used = _search_seeds(ledger.trials(), int(definition.get("seeds", 1)))
@@ -129,6 +137,18 @@ def _search_arms(name: str, done: list[Any]) -> list[Arm]:
                         settings=settings, origin=f"trial {trial.number} of search {name!r}",
                         source_score=float(score(trial))))  # type: ignore[arg-type]
     return arms
+
+
+def _racing_arms(name: str, raced: RacingSearch) -> list[Arm]:
+    """A racing search's configurations with a complete seed: the incumbent first, then by
+    seeds ended (the evidence each earned), then by IQM."""
+    inc = raced.incumbent
+    done = [c for c in raced.configurations if math.isfinite(c.iqm) and c.settings]
+    ordered = sorted(done, key=lambda c: (c is not inc, -c.seeds, -c.iqm))
+    return [Arm(label=c.key, settings=c.settings,
+                origin=f"configuration {c.key} of racing search {name!r} ({c.left_text()}; IQM "
+                       f"over {c.seeds} seed(s))",
+                source_score=c.iqm) for c in ordered]
 
 
 def _sweep_arms(name: str, parameter: str, planned: list[Any], done: list[Any]) -> list[Arm]:

@@ -20,6 +20,7 @@ from optuna.distributions import (
 )
 from optuna.trial import FrozenTrial
 
+from kraby_study.answers.racing_search import RacingSearch, racing_rules, racing_search
 from kraby_study.answers.search_front import SearchFront, front_rule, search_front
 from kraby_study.answers.study_data import StudyData
 from kraby_study.answers.sweep_evidence import option
@@ -48,6 +49,7 @@ class Search:
         distributions: A distribution per parameter (from the trials that used it).
         importances: Parameter importances (PED-ANOVA), or None with ``importance_note`` saying why.
         front: A two-objective search's front and selection; None for one objective.
+        racing: A racing search's configurations and incumbent; None for another search.
     """
 
     data: StudyData
@@ -58,6 +60,7 @@ class Search:
     importances: dict[str, float] | None
     importance_note: str
     front: SearchFront | None = None
+    racing: RacingSearch | None = None
 
     @property
     def complete(self) -> list[FrozenTrial]:
@@ -192,7 +195,9 @@ def build_search(data: StudyData, options: Any = None) -> Search:
                   importance_note=note,
                   front=(search_front(data.trials, stored_floor(data.definition),
                                       front_rule(data.ledger.attrs.select, judged), judged)
-                         if two else None))
+                         if two else None),
+                  racing=(racing_search(data.definition, data.trials)
+                          if racing_rules(data.kind, data.definition) is not None else None))
 
 
 def is_two_objective(data: StudyData) -> bool:
@@ -257,6 +262,20 @@ def answer_of(choice: FrontChoice[int] | None, key: int) -> str:
     if compared is None or key not in compared.answers:
         return ""
     return str(compared.answers[key])
+
+
+def configuration_frame(racing: RacingSearch) -> pd.DataFrame:
+    """configurations.csv of a racing search: one row per configuration, in the order it was
+    asked for, with its seeds, IQM, CPU s per run, how it left and its parameters."""
+    names = list(dict.fromkeys(name for c in racing.configurations for name in c.params))
+    return pd.DataFrame(
+        [{"configuration": c.key, "enqueued": c.enqueued or "", "seeds": c.seeds,
+          "failed": c.failed, "iqm": c.iqm, "cpu_per_run": c.cpu,
+          "standing": c.standing.left.value, "left": c.left_text(),
+          "scores": " ".join(f"{v:.6g}" for v in c.scores.values()),
+          **{name: c.params.get(name) for name in names}} for c in racing.configurations],
+        columns=["configuration", "enqueued", "seeds", "failed", "iqm", "cpu_per_run",
+                 "standing", "left", "scores", *names])
 
 
 def top_trials(search: Search, count: int = TOP) -> pd.DataFrame:

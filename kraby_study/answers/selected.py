@@ -11,11 +11,13 @@ it. Every function takes the command's
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from kraby_study.answers.raced import dropped_indices
+from kraby_study.answers.racing_search import RacingSearch, racing_rules, racing_search
 from kraby_study.answers.search_front import (
     front_lines,
     front_rule,
@@ -102,6 +104,8 @@ def selection_of(ledger: StudyLedger, options: CompareOptions | None = None
                          env_keys=env_keys, steps=chosen.trials[0].user_attrs.get("steps"))
     if attrs.kind == StudyKind.SEARCH and two_objectives(definition):
         return front_selection(ledger.name, definition, trials, attrs.select, options)
+    if racing_rules(attrs.kind, definition) is not None:
+        return racing_selection(ledger.name, definition, racing_search(definition, trials))
     trial = best_trial(trials, ledger.maximize)
     if trial is None:
         return None
@@ -116,6 +120,33 @@ def selection_of(ledger: StudyLedger, options: CompareOptions | None = None
                                  f"{ledger.name!r}: score {value:.4g}{seeds} ({params})",
                      settings=trial.user_attrs.get("settings", {}), env_keys=env_keys,
                      steps=trial.user_attrs.get("steps"))
+
+
+def racing_selection(name: str, definition: dict[str, Any], found: RacingSearch | None
+                     ) -> Selection | None:
+    """A racing search's pick: its incumbent, on all its seeds; None before it has a
+    complete seed."""
+    inc = found.incumbent if found is not None else None
+    if inc is None or not math.isfinite(inc.iqm):
+        return None
+    params = ", ".join(f"{k}={value_label(v)}" for k, v in inc.params.items())
+    return Selection(short=racing_short(found),
+                     description=f"configuration {inc.key} of racing search {name!r}, its "
+                                 f"incumbent: IQM final score {inc.iqm:.4g} over {inc.seeds} "
+                                 f"seed(s){f', {inc.failed} failed' if inc.failed else ''} "
+                                 f"({params})",
+                     settings=inc.settings, env_keys=searched_env_keys(definition),
+                     steps=definition.get("steps"))
+
+
+def racing_short(found: RacingSearch | None) -> str:
+    """A racing search's incumbent in a few words: ``c3 (IQM -0.0123, 8 seeds)``; ``-``
+    before it has a complete seed."""
+    inc = found.incumbent if found is not None else None
+    if inc is None or not math.isfinite(inc.iqm):
+        return "-"
+    failed = f", {inc.failed} failed" if inc.failed else ""
+    return f"{inc.key} (IQM {inc.iqm:.4g}, {inc.seeds} seeds{failed})"
 
 
 def front_selection(name: str, definition: dict[str, Any], trials: Sequence[StoredTrial],
@@ -151,6 +182,8 @@ def selected_short(attrs: StudyAttrs, trials: Sequence[StoredTrial], maximize: b
     if attrs.kind == StudyKind.SEARCH and two_objectives(attrs.definition):
         return front_short(search_front(trials, stored_floor(attrs.definition),
                                         front_rule(attrs.select, options), options))
+    if racing_rules(attrs.kind, attrs.definition) is not None:
+        return racing_short(racing_search(attrs.definition, trials))
     trial = best_trial(trials, maximize)
     return trial_short(trial) if trial is not None else "-"
 

@@ -132,9 +132,7 @@ def compose(overrides: Sequence[str] = (), command: str = "run") -> Config:
         from kraby_study.plan.settings import validate_outputs
 
         validate_outputs(found.cfg)
-    if command in ("train", "search") and found.cfg.racing.enabled:
-        raise ConfigError("racing is for run and confirm: " + (
-            "train makes one run" if command == "train"
-            else "a search races its trials' seeds with --pruner wilcoxon"))
+    if command == "train" and found.cfg.racing.enabled:
+        raise ConfigError("racing is for run, optuna and confirm: train makes one run")
     return Config(cfg=found.cfg, overrides=chosen, command=command, choices=found.choices,
                   inputs=inputs)

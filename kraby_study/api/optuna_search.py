@@ -48,7 +48,10 @@ def search_plan(config: Config) -> SearchPlan:
 
 
 def search(config: Config, stream: TextIO | None = None) -> RunResult:
-    """Run (or resume) an Optuna search until its study holds ``search.trials`` trials.
+    """Run (or resume) an Optuna search until its study holds ``search.trials`` trials; with
+    ``racing.enabled`` a racing search instead (configurations raced over seeds against an
+    incumbent, until ``search.cpu_budget`` is used or ``search.trials`` configurations are
+    decided; docs/guide/studies.md).
 
     Args:
         config: A config composed for ``search`` (`kraby_study.compose`; its default
@@ -72,18 +75,24 @@ def search(config: Config, stream: TextIO | None = None) -> RunResult:
         ('ppo_search', 1)
     """
     from kraby_study.answers.standing import study_standing
-    from kraby_study.plan.space import objectives
+    from kraby_study.plan.space import objectives, racing
     from kraby_study.run.executor import executor_for
+    from kraby_study.run.racing_search import run_racing_search
     from kraby_study.run.search_source import run_search
 
     found = search_plan(config)
     cfg = found.cfg
+    run = run_racing_search if racing(cfg) else run_search
     with executor_for(cfg) as executor, open_writer(cfg) as store:
-        summary, ledger = run_search(store, cfg, executor, executor.workers(cfg.workers),
-                                     output(stream), starts=found.starts)
+        summary, ledger = run(store, cfg, executor, executor.workers(cfg.workers),
+                              output(stream), starts=found.starts)
         state = study_standing(ledger)
     counts = state.tally
     chosen = state.selected if len(objectives(cfg)) == 2 else f"best {state.selected}"
+    if racing(cfg):
+        return run_result(state.name, summary, counts,
+                          f"search {state.name}: {counts.complete} complete and "
+                          f"{counts.failed} failed runs; picked {state.selected}")
     return run_result(state.name, summary, counts,
                f"search {state.name}: {counts.complete} complete, {counts.pruned} pruned, "
                f"{counts.failed} failed of {counts.planned}; {chosen}")

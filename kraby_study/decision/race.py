@@ -39,11 +39,15 @@ computes it, so a race resumes after a crash and is shared by commands on one da
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable, Mapping, Sequence
+from collections.abc import Collection, Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Generic, TypeVar
 
-from kraby_study.decision.comparison import Answer, compare
+import numpy as np
+
+from kraby_study.decision.comparison import Answer, Comparison, compare
+from kraby_study.decision.robust import iqm
 from kraby_study.plan.spec import RaceRules
 
 K = TypeVar("K", bound=Hashable)
@@ -99,6 +103,13 @@ class Race(Generic[K]):
                 and index < self.rules.seeds and not self.over)
 
 
+def take_look(scores: Mapping[K, Sequence[float]], rules: RaceRules) -> Comparison[K]:
+    """One look of a race (or of a racing search's challenger): the report's comparison at
+    the race's margin, at the look's level (alpha spent over the looks)."""
+    return compare(scores, rules.margin, alpha=rules.look_alpha, min_seeds=2,
+                   paired=rules.paired)
+
+
 def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: RaceRules
          ) -> Race[K]:
     """Replay a race on the runs that have ended.
@@ -127,8 +138,7 @@ def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: Race
             continue
         # Aligned by seed (NaN where a run failed): a paired look pairs position i of each.
         scores = {v: [runs[v][i] for i in range(r)] for v in alive}
-        look = compare(scores, rules.margin, alpha=rules.look_alpha, min_seeds=2,
-                       paired=rules.paired)
+        look = take_look(scores, rules)
         for v in look.worse:
             dropped[v] = Drop(round=r, p=look.p_worse[v])
         for v in look.equivalent:
@@ -193,3 +203,252 @@ class RaceRuns:
                          runs=sum(len(r) for r in self.runs.values()),
                          fixed_runs=self.planned * self.rules.seeds, rounds=state.rounds,
                          over=state.over, settled=mapped(state.settled))
+
+
+# A racing search: challengers raced over seeds against an incumbent -----------------------------
+#
+# SMAC's intensification (Hutter, Hoos and Leyton-Brown, LION 2011; Lindauer et al., JMLR 2022)
+# decided by this project's comparison: a challenger asked from the sampler trains its first
+# ``min_seeds`` seeds side by side, then one seed at a time; after each seed (from ``min_seeds``
+# on) its first k seeds are compared with the incumbent's seeds by
+# [`compare`][kraby_study.decision.comparison.compare] at the margin, at the look's level (alpha
+# spent equally over the ``seeds - min_seeds + 1`` looks a configuration can take, as a race
+# spends it). It leaves once shown worse (by more than the margin); it replaces the incumbent
+# once shown better (the incumbent shown worse than it), or shown equivalent (within the
+# margin) and cheaper in CPU seconds per run; shown equivalent and not cheaper, it leaves. A
+# challenger that reaches the incumbent's seed count undecided replaces it only if its IQM on
+# their common seeds (the same seed indices) is higher, else it leaves (SMAC's rule on the
+# common instances). The incumbent earns one more seed whenever no challenger wants one, up to
+# ``seeds`` (the cap). The pick is the incumbent, on all its seeds.
+
+
+class Left(StrEnum):
+    """Where a configuration of a racing search stands, or how it left."""
+
+    INCUMBENT = "incumbent"
+    RACING = "racing"
+    """Still racing against the incumbent (or the search ended before it was decided)."""
+    WORSE = "worse"
+    """Shown worse than the incumbent by more than the margin."""
+    EQUIVALENT = "equivalent"
+    """Shown within the margin of the incumbent, and not cheaper."""
+    BELOW = "below"
+    """Undecided at the incumbent's seed count, its IQM on the common seeds not higher."""
+    REPLACED = "replaced"
+    """The incumbent until a challenger replaced it."""
+    REFUSED = "refused"
+    """Its settings could not run (refused before training)."""
+
+
+@dataclass(frozen=True)
+class RunEnd(Generic[K]):
+    """One ended run of a racing search, in the order the runs ended."""
+
+    config: K
+    index: int
+    """Its seed index (0: the configuration's first seed)."""
+    score: float
+    """Its final score; NaN for a run that ended without one (failed)."""
+    cpu: float = math.nan
+    """Its CPU seconds."""
+
+
+@dataclass(frozen=True)
+class Standing(Generic[K]):
+    """A configuration's standing: how it left (or that it has not), at how many seeds."""
+
+    left: Left
+    seeds: int = 0
+    """Seeds it had ended when it left (0 while it has not)."""
+    p: float = math.nan
+    """The p of the answer that moved it (the look's Holm-adjusted p of worse, or the
+    Bonferroni p of equivalent); NaN where the IQM rule or no test decided."""
+    by: K | None = None
+    """The configuration it lost to: the incumbent it was compared with, or the challenger
+    that replaced it."""
+    cheaper: bool = False
+    """It replaced the incumbent as equivalent and cheaper."""
+
+
+@dataclass
+class Intensification(Generic[K]):
+    """A racing search's state: the incumbent, every configuration's standing and runs."""
+
+    rules: RaceRules
+    order: list[K]
+    """The configurations in the order they were asked for."""
+    incumbent: K | None
+    standings: dict[K, Standing[K]]
+    scores: dict[K, dict[int, float]]
+    """Per configuration, its ended runs' final scores by seed index (NaN: failed)."""
+    cpu: dict[K, list[float]]
+    """Per configuration, its ended runs' CPU seconds."""
+    looks: dict[K, int] = field(default_factory=dict)
+    """Per configuration, the leading seeds its latest look read."""
+
+    def ended(self, config: K) -> int:
+        """Its leading ended seeds: 0, 1, ... k - 1 all ended (a look reads only these)."""
+        runs = self.scores.get(config, {})
+        k = 0
+        while k in runs:
+            k += 1
+        return k
+
+    @property
+    def racing(self) -> list[K]:
+        """Challengers still racing, in the order they were asked for."""
+        return [c for c in self.order if self.standings[c].left == Left.RACING]
+
+    def challenge_open(self) -> bool:
+        """Whether a new challenger may start: the incumbent has ended its first
+        ``min_seeds`` seeds (there is something to compare with)."""
+        return self.incumbent is not None and self.ended(self.incumbent) >= self.rules.min_seeds
+
+    def next_run(self, started: Mapping[K, Collection[int]]) -> tuple[K, int] | None:
+        """The run (configuration, seed index) the race wants now, given the seed indices each
+        configuration has started (ended, running or queued); None when it wants none of a
+        known configuration (a new challenger may be asked, if
+        [`challenge_open`][kraby_study.decision.race.Intensification.challenge_open]).
+
+        In order: the incumbent's first ``min_seeds`` seeds side by side; a racing challenger's
+        first ``min_seeds`` side by side, then its next seed once none of its runs is in flight
+        and it has fewer than the incumbent; else, with no challenger wanting one, the
+        incumbent's next seed (one at a time, up to the cap)."""
+        inc = self.incumbent
+        if inc is None:
+            return None
+        first = self.rules.min_seeds
+
+        def following(config: K) -> int:
+            have = set(started.get(config, ()))
+            return next(i for i in range(len(have) + 1) if i not in have)
+
+        inc_started = len(started.get(inc, ()))
+        if inc_started < first:
+            return inc, following(inc)
+        inc_ended = self.ended(inc)
+        if inc_ended < first:
+            return None
+        for config in self.racing:
+            count = len(started.get(config, ()))
+            if count < first or (count == self.ended(config) and count < inc_ended):
+                return config, following(config)
+        if inc_started == inc_ended and inc_ended < self.rules.seeds:
+            return inc, following(inc)
+        return None
+
+
+def challenge(incumbent: Sequence[float], challenger: Sequence[float], rules: RaceRules
+              ) -> tuple[Answer, Answer, float]:
+    """One look: the challenger's first seeds against the incumbent's, at the look's level.
+
+    Returns:
+        The challenger's answer and the incumbent's ([`Answer`][Answer]; the higher IQM is
+        best, undecided where no answer holds), and the p of the answer that decides (NaN when
+        undecided). With ``rules.paired`` both are read on their common seed indices.
+    """
+    if rules.paired:
+        n = min(len(incumbent), len(challenger))
+        scores = {0: list(incumbent[:n]), 1: list(challenger[:n])}
+    else:
+        scores = {0: list(incumbent), 1: list(challenger)}
+    look = take_look(scores, rules)
+    ch = look.answers.get(1, Answer.UNDECIDED)
+    inc = look.answers.get(0, Answer.UNDECIDED)
+    loser = 1 if ch in (Answer.WORSE, Answer.EQUIVALENT) else 0
+    answer = look.answers.get(loser)
+    p = (look.p_worse.get(loser, math.nan) if answer == Answer.WORSE
+         else look.p_equivalent.get(loser, math.nan) if answer == Answer.EQUIVALENT
+         else math.nan)
+    return ch, inc, p
+
+
+def _iqm(scores: Sequence[float]) -> float:
+    """The IQM of the complete scores; -inf with none (it never beats anything)."""
+    clean = np.asarray([s for s in scores if not math.isnan(s)], dtype=float)
+    return float(iqm(clean)) if len(clean) else -math.inf
+
+
+def _mean(values: Sequence[float]) -> float:
+    finite = [v for v in values if math.isfinite(v)]
+    return math.fsum(finite) / len(finite) if finite else math.nan
+
+
+def intensify(order: Sequence[K], ends: Sequence[RunEnd[K]], rules: RaceRules,
+              refused: Collection[K] = ()) -> Intensification[K]:
+    """Replay a racing search on its ended runs, in the order they ended.
+
+    Args:
+        order: Every configuration, in the order it was asked for; the first is the incumbent
+            from its start.
+        ends: The ended runs in the order they ended (a run of an unknown configuration is
+            ignored; a run of a configuration that has left is kept but decides nothing).
+        rules: ``seeds`` is the cap on the incumbent's seeds, ``min_seeds`` the first look,
+            ``alpha`` spent over the looks, ``margin`` and ``paired`` the comparison's.
+        refused: Configurations whose settings could not run: they leave at once.
+
+    Returns:
+        The [`Intensification`][kraby_study.decision.race.Intensification] after every run.
+    """
+    state: Intensification[K] = Intensification(
+        rules=rules, order=list(order), incumbent=order[0] if order else None,
+        standings={c: Standing(Left.RACING) for c in order},
+        scores={c: {} for c in order}, cpu={c: [] for c in order})
+    if state.incumbent is not None:
+        state.standings[state.incumbent] = Standing(Left.INCUMBENT)
+    for config in refused:
+        if config in state.standings and config != state.incumbent:
+            state.standings[config] = Standing(Left.REFUSED)
+    for end in ends:
+        if end.config not in state.scores:
+            continue
+        state.scores[end.config][end.index] = end.score
+        state.cpu[end.config].append(end.cpu)
+        if state.standings[end.config].left == Left.RACING:
+            _look(state, end.config)
+    return state
+
+
+def _look(state: Intensification[K], config: K) -> None:
+    """Compare a racing challenger with the incumbent when its leading seeds have grown past
+    ``min_seeds``, and move it (or the incumbent) as the answers say."""
+    inc = state.incumbent
+    assert inc is not None
+    k = state.ended(config)
+    if k < state.rules.min_seeds or k <= state.looks.get(config, 0):
+        return
+    state.looks[config] = k
+    m = state.ended(inc)
+    ch_scores = [state.scores[config][i] for i in range(k)]
+    inc_scores = [state.scores[inc][i] for i in range(m)]
+    ch, inc_answer, p = challenge(inc_scores, ch_scores, state.rules)
+    cheaper = _mean(state.cpu[config]) < _mean(state.cpu[inc])
+    if ch == Answer.WORSE:
+        state.standings[config] = Standing(Left.WORSE, seeds=k, p=p, by=inc)
+    elif inc_answer == Answer.WORSE:
+        _replace(state, config, p)
+    elif Answer.EQUIVALENT in (ch, inc_answer):
+        if cheaper:
+            _replace(state, config, p, cheaper=True)
+        else:
+            state.standings[config] = Standing(Left.EQUIVALENT, seeds=k, p=p, by=inc)
+    elif k >= m:
+        n = min(k, m)
+        if _iqm(ch_scores[:n]) > _iqm(inc_scores[:n]):
+            _replace(state, config, math.nan)
+        else:
+            state.standings[config] = Standing(Left.BELOW, seeds=k, by=inc)
+
+
+def _replace(state: Intensification[K], config: K, p: float, cheaper: bool = False) -> None:
+    """The challenger becomes the incumbent; every challenger still racing with at least the
+    new incumbent's seeds takes a look against it at once (it would get no more seeds)."""
+    old = state.incumbent
+    assert old is not None
+    state.standings[old] = Standing(Left.REPLACED, seeds=state.ended(old), p=p, by=config)
+    state.standings[config] = Standing(Left.INCUMBENT, cheaper=cheaper)
+    state.incumbent = config
+    for other in state.racing:
+        if state.ended(other) >= state.ended(config):
+            state.looks.pop(other, None)
+            _look(state, other)

@@ -12,7 +12,12 @@ from typing import Any
 from omegaconf import DictConfig
 
 from kraby_study.config.validate import to_container
-from kraby_study.plan.space import recheck_text, search_cpu_budget, search_definition
+from kraby_study.plan.space import (
+    recheck_text,
+    search_cpu_budget,
+    search_definition,
+    search_race_rules,
+)
 from kraby_study.plan.spec import StudyPlan
 
 
@@ -60,8 +65,16 @@ def stage_count(cfg: DictConfig, name: str) -> Count:
 
 
 def search_count(cfg: DictConfig) -> Count:
-    """A search's count: ``search.trials`` trials of ``budget.seeds`` seeds each."""
+    """A search's count: ``search.trials`` trials of ``budget.seeds`` seeds each; a racing
+    search's: at most ``search.trials`` configurations of up to ``budget.seeds`` runs each."""
     seeds = int(cfg.budget.seeds)
+    rules = search_race_rules(cfg)
+    if rules is not None:
+        return Count(study=str(cfg.search.name), trials=int(cfg.search.trials) * seeds,
+                     steps_per_trial=int(cfg.budget.steps), at_most=True,
+                     shape=f"search.trials configurations, each raced on {rules.min_seeds} to "
+                           f"{seeds} seeds (runs) of {int(cfg.budget.steps):,} env steps"
+                           + _budget_part(cfg), definition=search_definition(cfg))
     return Count(study=str(cfg.search.name), trials=int(cfg.search.trials),
                  steps_per_trial=seeds * int(cfg.budget.steps),
                  shape=f"search.trials, each {seeds} seeds x {int(cfg.budget.steps):,} env "

@@ -19,9 +19,11 @@ from kraby_study.config.validate import (
     validate_run_length,
 )
 from kraby_study.errors import ConfigError
+from kraby_study.plan.racing import race_rules
 from kraby_study.plan.settings import resolved_settings, with_value
 from kraby_study.plan.spec import (
     OPTIONAL_PPO,
+    RaceRules,
     evaluation_of,
     ppo_setting,
     seeding_of,
@@ -51,6 +53,8 @@ def validate_search(cfg: DictConfig) -> None:
     if search.pruner is not None and search.pruner not in PRUNERS:
         _fail(f"unknown pruner {search.pruner!r}: choose {', '.join(PRUNERS)}")
     names = objectives(cfg)
+    if racing(cfg):
+        _validate_racing_search(cfg)
     if len(names) == 2 and search.pruner not in (None, "none"):
         _fail(f"Optuna cannot prune a trial with several objectives: search.objective="
               f"[{','.join(names)}] runs with --pruner none, not {search.pruner}")
@@ -129,11 +133,57 @@ def objectives(cfg: DictConfig) -> list[str]:
 
 def pruner_name(cfg: DictConfig) -> str:
     """The search's pruner: ``search.pruner``, or when it is null, median with one objective
-    and none with two (Optuna prunes no trial of several objectives) or with the gp sampler
-    (which learns nothing from a pruned trial)."""
+    and none with two (Optuna prunes no trial of several objectives), with the gp sampler
+    (which learns nothing from a pruned trial) or in a racing search (its race stops
+    configurations)."""
+    if racing(cfg):
+        return "none"
     if cfg.search.pruner is not None:
         return str(cfg.search.pruner)
     return "none" if len(objectives(cfg)) == 2 or cfg.search.sampler == "gp" else "median"
+
+
+def racing(cfg: DictConfig) -> bool:
+    """Whether the search races configurations over seeds (``racing.enabled``, ``--racing``)."""
+    found = cfg.get("racing")
+    return bool(found is not None and found.enabled)
+
+
+def search_race_rules(cfg: DictConfig) -> RaceRules | None:
+    """A racing search's rules: a configuration's looks from ``racing.min_seeds`` seeds on,
+    alpha spent over them, ``compare.margin``, and ``budget.seeds`` the most seeds any
+    configuration gets (the incumbent's cap); None for a search that does not race."""
+    seeds = [int(cfg.seed) + i for i in range(int(cfg.budget.seeds))]
+    return race_rules(cfg, seeds, "budget.seeds") if racing(cfg) else None
+
+
+def racing_text(rules: RaceRules, sampler: str) -> str:
+    """A racing search as its start line and dry run name it."""
+    return (f"racing search: {sampler} sampler asks each challenger, which trains "
+            f"{rules.min_seeds} seeds side by side, then one at a time against the incumbent; "
+            f"it leaves once shown worse by more than compare.margin {rules.margin:g} (or "
+            f"equivalent and not cheaper), replaces it once shown better (or equivalent and "
+            f"cheaper in CPU s per run); alpha {rules.alpha:g} spent over {rules.looks} looks "
+            f"({rules.look_alpha:.3g} each){', paired by seed' if rules.paired else ''}; the "
+            f"incumbent earns a seed whenever no challenger wants one, up to {rules.seeds} "
+            "(budget.seeds)")
+
+
+def _validate_racing_search(cfg: DictConfig) -> None:
+    """A racing search decides by its race: one objective, no pruner, no rechecks, no cap on
+    one trial, a sampler that proposes one configuration at a time."""
+    search = cfg.search
+    if len(objectives(cfg)) == 2:
+        _fail("--racing races one objective: drop the cost from search.objective")
+    if search.pruner is not None and str(search.pruner) != "none":
+        _fail(f"--racing stops configurations by its race: drop --pruner {search.pruner}")
+    if int(search.recheck) > 0:
+        _fail("--racing gives the incumbent its seeds itself: drop --recheck")
+    if search.trial_share is not None:
+        _fail("--racing stops configurations by its race: drop --trial-share")
+    if str(search.sampler) == "nsga2":
+        _fail("--racing asks one objective's sampler: choose --sampler tpe, gp or random")
+    search_race_rules(cfg)
 
 
 def method_text(cfg: DictConfig) -> str:
@@ -143,6 +193,11 @@ def method_text(cfg: DictConfig) -> str:
     5 on), pruner median``."""
     sampler = str(cfg.search.sampler)
     start = int(cfg.search.startup_trials)
+    rules = search_race_rules(cfg)
+    if rules is not None:
+        return (f"sampler {sampler}{' multivariate' if sampler == 'tpe' else ''} (search.seed "
+                f"{int(cfg.search.seed)}; its model after {start} configurations), no pruner; "
+                + racing_text(rules, sampler))
     # The first trials are the enqueued ones, then random draws, until the model takes over.
     model = {"tpe": f"; its model from trial {start} on",
              "gp": f"; its model after {start} complete trials"}.get(sampler, "")
@@ -378,10 +433,15 @@ def search_definition(cfg: DictConfig) -> dict[str, Any]:
         # before they did (no key) evaluated every run on one fixed set.
         search = with_evaluation(search, eval_set)
     settings = resolved_settings(cfg)
-    return with_seeding({"kind": "search", "search": search, "settings": settings,
-                         "steps": int(cfg.budget.steps), "seeds": int(cfg.budget.seeds),
-                         "curve_every": int(cfg.budget.curve_every), "seed": int(cfg.seed)},
-                        seeding_of(cfg))
+    definition = {"kind": "search", "search": search, "settings": settings,
+                  "steps": int(cfg.budget.steps), "seeds": int(cfg.budget.seeds),
+                  "curve_every": int(cfg.budget.curve_every), "seed": int(cfg.seed)}
+    rules = search_race_rules(cfg)
+    if rules is not None:
+        # A racing search is never resumed unraced, nor at other rules: its past moves would
+        # change.
+        definition["racing"] = rules.stored()
+    return with_seeding(definition, seeding_of(cfg))
 
 
 def _setting_values(cfg: DictConfig, settings: dict[str, Any]) -> dict[str, Any]:

@@ -232,7 +232,7 @@ class TrialAttrs(TrialMeasures):
     key: str | None = None
     """Identity of the planned run within its study, stable across attempts (see the key
     functions below): ``v<value index>-s<seed>`` in sweeps, ``s<seed>`` for ``train``,
-    ``t<trial number>`` in searches."""
+    ``t<trial number>`` in searches, ``c<configuration>-s<seed>`` in racing searches."""
     seed: int | None = None
     """Seed of the run's first training run (a search trial trains seed, seed + 1, ...)."""
     settings: dict[str, Any] | None = None
@@ -261,6 +261,9 @@ class TrialAttrs(TrialMeasures):
     """A search trial: CPU seconds the command's process spent asking the sampler for it (a
     Gaussian process's fit costs more than TPE's); part of what the search spends under its
     CPU budget, not of the trial's own cpu_time."""
+    race_order: int | None = None
+    """A racing search's run: its place among the study's ended runs (1, 2, ...), stored as it
+    ends; its race is replayed in this order (`kraby_study.decision.race.intensify`)."""
     cost_stop: float | None = None
     """A search trial stopped for its cost (``search.trial_share``): the CPU seconds it was
     projected to use, to its last env step, at the checkpoint where it was stopped. It is

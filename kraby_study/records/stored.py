@@ -103,6 +103,21 @@ def parse_sweep_key(key: str | None) -> tuple[int, int] | None:
     return (int(match.group(1)), int(match.group(2))) if match else None
 
 
+RACING_KEY = re.compile(r"^c(\d+)-s(\d+)$")
+
+
+def racing_key(config: int, seed: int) -> str:
+    """The key of a racing search's run: its configuration's number (in the order the search
+    asked for them, from 0) and its seed."""
+    return f"c{config}-s{seed}"
+
+
+def parse_racing_key(key: str | None) -> tuple[int, int] | None:
+    """(configuration number, seed) of a racing search's key, or None for another key."""
+    match = RACING_KEY.match(str(key or ""))
+    return (int(match.group(1)), int(match.group(2))) if match else None
+
+
 def train_key(seed: int) -> str:
     """The key of a ``train`` run: its seed."""
     return f"s{seed}"

@@ -8,7 +8,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from kraby_study.answers.search_evidence import Search, front_frame, front_trials, top_trials
+from kraby_study.answers.search_evidence import (
+    Search,
+    configuration_frame,
+    front_frame,
+    front_trials,
+    top_trials,
+)
 from kraby_study.records.attributes import StudyKind
 from kraby_study.records.stored import Outcome, known_number
 from kraby_study.records.values import score
@@ -80,6 +86,40 @@ def top_table(search: Search) -> Table:
     return Table(header, rows, marks=marks)
 
 
+def racing_table(search: Search) -> Table:
+    """A racing search's configurations as formatted cells, in the order asked for; the
+    incumbent marked best."""
+    assert search.racing is not None
+    header = ["configuration", "seeds", "IQM", "CPU s per run", "how it left", *search.params]
+    rows, marks = [], []
+    for config in search.racing.configurations:
+        rows.append([config.key + (f" ({config.enqueued})" if config.enqueued else ""),
+                     str(config.seeds), _cell(config.iqm), _cell(config.cpu),
+                     config.left_text(),
+                     *[format_param(config.params.get(p), search.distributions.get(p))
+                       for p in search.params]])
+        marks.append("best" if config is search.racing.incumbent else "")
+    return Table(header, rows, marks=marks)
+
+
+def racing_verdict(search: Search) -> str:
+    """One sentence on a racing search's pick, its incumbent, and how the others left."""
+    assert search.racing is not None
+    inc = search.racing.incumbent
+    if inc is None or not np.isfinite(inc.iqm):
+        return "No configuration has a complete seed yet."
+    params = ", ".join(f"{p}={format_param(inc.params.get(p), search.distributions.get(p))}"
+                       for p in search.params if p in inc.params)
+    rules = search.racing.rules
+    return (f"Picked: configuration {inc.key}, the incumbent, IQM {number(inc.iqm)} over "
+            f"{inc.seeds} seeds ({params}). {search.racing.summary()}. Each challenger was "
+            f"compared with the incumbent after each of its seeds from seed {rules.min_seeds} "
+            f"on (the answers' step-down on the IQM at compare.margin {rules.margin:g}, alpha "
+            f"{rules.alpha:g} spent over {rules.looks} looks, {rules.look_alpha:.3g} each"
+            f"{', paired by seed' if rules.paired else ''}); the incumbent's seeds are capped "
+            f"at {rules.seeds}.")
+
+
 def failed_items(search: Search) -> list[str]:
     """One line per failed trial: number (and attempt, when a retry or recheck failed),
     parameters, reason."""
@@ -97,6 +137,8 @@ def failed_items(search: Search) -> list[str]:
 def _tables(search: Search, folder: Path) -> list[Path]:
     frames: list[tuple[str, pd.DataFrame]] = [("trials.csv", search.trials),
                                               ("top_trials.csv", top_trials(search))]
+    if search.racing is not None:
+        frames.append(("configurations.csv", configuration_frame(search.racing)))
     if not search.data.curves.empty:
         frames.append(("curves.csv", search.data.curves.rename(columns={"number": "trial"})[
             ["trial", "step", "mean_reward", "wall_time", "episodes"]]))
@@ -109,7 +151,9 @@ def _tables(search: Search, folder: Path) -> list[Path]:
 
 def verdict(search: Search) -> str:
     """One sentence on the best trial; of a two-objective search, on its front and the trial
-    its rule selects."""
+    its rule selects; of a racing search, on its incumbent."""
+    if search.racing is not None:
+        return racing_verdict(search)
     best = search.best
     if best is None:
         return "No trial is complete yet."
@@ -131,6 +175,10 @@ def verdict(search: Search) -> str:
 def result_text(search: Search) -> str:
     """The index overview's cell: the best trial, and of a two-objective search the selected
     one."""
+    if search.racing is not None:
+        inc = search.racing.incumbent
+        return ("no complete seed" if inc is None or not np.isfinite(inc.iqm) else
+                f"incumbent {inc.key}, IQM {number(inc.iqm)} over {inc.seeds} seeds")
     best = search.best
     if best is None:
         return "no complete trial"
@@ -207,9 +255,15 @@ def write_search(search: Search, folder: Path, rel: str, fmt: str) -> StudyRepor
     if search.front is not None and search.front.front:
         section += [Text(f"The front ({len(search.front.front)} trials), best score first:"),
                     front_cells(search)]
-    section += [Text(f"Top {len(top_trials(search))} complete trials (of equal objectives, the "
-                     "one on more seeds, then the one with fewer CPU s per seed, first):"),
-                top_table(search)]
+    if search.racing is not None:
+        section += [Text(f"Configurations ({len(search.racing.configurations)}, in the order "
+                         "the sampler asked for them; a trial is one run, a configuration on "
+                         "one seed): seeds ended, IQM of the final scores, how each left:"),
+                    racing_table(search)]
+    else:
+        section += [Text(f"Top {len(top_trials(search))} complete trials (of equal objectives, "
+                         "the one on more seeds, then the one with fewer CPU s per seed, "
+                         "first):"), top_table(search)]
     failed = failed_items(search)
     if failed:
         section += [Text(f"Failed trials ({len(failed)}):"), Items(failed)]

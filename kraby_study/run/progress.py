@@ -167,6 +167,10 @@ class Progress:
         self.lost_steps += so_far
         self._print_line(f"{label}: {interrupted(reason)}")
 
+    def note(self, text: str) -> None:
+        """A line of the command's own between the trials' (a racing search's moves)."""
+        self._print_line(text)
+
     def close(self) -> None:
         """Leave the terminal clean: the bar is removed (the lines stay)."""
         if self.bar is not None:

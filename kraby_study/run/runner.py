@@ -251,6 +251,10 @@ def run_trials(source: TrialSource, workers: int, progress: Progress, executor: 
                 spec = running.get(event.number)
                 if spec is not None:
                     handlers[event.kind](event, spec)
+                if event.kind == "result":
+                    # An ended trial can make the source want more (a racing search waits
+                    # for an incumbent's first seeds): ask again now, not after the poll.
+                    next_claim = 0.0
     except KeyboardInterrupt:
         run.stop()
     except ClusterLost:

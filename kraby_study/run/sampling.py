@@ -68,6 +68,25 @@ def make_sampler(cfg: DictConfig, opening: int = 0) -> optuna.samplers.BaseSampl
                                       constant_liar=True)
 
 
+def racing_sampler(cfg: DictConfig, asked: int) -> optuna.samplers.BaseSampler:
+    """The sampler a racing search asks its ``asked``-th configuration (from 0) of: seeded from
+    (search.seed, asked) ([`sampler_seed`][kraby_study.run.sampling.sampler_seed]), so a resumed
+    search, rebuilding it from the store, asks what an uninterrupted one would have. TPE is
+    multivariate (one joint density over the space, not one per parameter: Falkner et al.
+    2018); the GP and random samplers as in a search."""
+    seed = sampler_seed(int(cfg.search.seed), asked)
+    startup = int(cfg.search.startup_trials)
+    if cfg.search.sampler == "random":
+        return optuna.samplers.RandomSampler(seed=seed)
+    if cfg.search.sampler == "gp":
+        return optuna.samplers.GPSampler(seed=seed, n_startup_trials=startup)
+    # Multivariate TPE is experimental in Optuna: its warning would only alarm users.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        return optuna.samplers.TPESampler(seed=seed, n_startup_trials=startup,
+                                          multivariate=True)
+
+
 def make_pruner(cfg: DictConfig) -> optuna.pruners.BasePruner:
     """The pruner of a search; its steps are env steps.
 

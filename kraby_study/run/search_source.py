@@ -233,25 +233,7 @@ class SearchSource(StudySource):
         return next_recheck(trials, 1 if over else self.recheck)
 
     def _spec(self, key: str, trial_cfg: DictConfig, params: dict[str, Any]) -> TrialSpec:
-        cfg = self.cfg
-        # The wilcoxon pruner pairs seeds: it sees each seed's score, nothing within a seed.
-        pruner = pruner_name(cfg)
-        seed_scores = pruner == "wilcoxon"
-        names = objectives(cfg)
-        eval_set, episodes = evaluation_of(cfg)
-        # Optuna takes no intermediate value from a trial of several objectives.
-        every = None if seed_scores or len(names) == 2 else checkpoint_every(cfg)
-        return TrialSpec(
-            study=self.ledger.name, key=key, seed=int(cfg.seed),
-            steps=int(cfg.budget.steps), curve_every=int(cfg.budget.curve_every),
-            settings=resolved_settings(trial_cfg),
-            model_path=model_path(cfg, self.ledger.name, key),
-            checkpoint_every=every, seed_scores=seed_scores, seeds=int(cfg.budget.seeds),
-            objective=names[0], cost=names[1] if len(names) == 2 else None,
-            eval_set=eval_set, eval_episodes=episodes,
-            label=short_label(params, key),
-            tensorboard_run=tensorboard_run(cfg, self.ledger.name, key),
-            seeding=seeding_of(cfg))
+        return search_spec(self.cfg, self.ledger.name, key, trial_cfg, params)
 
     def _recheck_spec(self, spec: TrialSpec, original: Any) -> TrialSpec:
         """A recheck of the trial ``original``: the seeds after its own, nothing for the
@@ -317,6 +299,30 @@ class SearchSource(StudySource):
             gap = 0.0 if measured is None else measured - float(result.final_score)
             self.ledger.set_constraint(number, FLOOR_CONSTRAINT, gap)
         super().record(number, spec, result)
+
+
+def search_spec(cfg: DictConfig, study: str, key: str, trial_cfg: DictConfig,
+                params: dict[str, Any]) -> TrialSpec:
+    """The spec of a search trial: the sampled ``params`` applied (``trial_cfg``), trained on
+    ``budget.seeds`` seeds from ``seed`` one after another, checkpointed for the pruner."""
+    # The wilcoxon pruner pairs seeds: it sees each seed's score, nothing within a seed.
+    pruner = pruner_name(cfg)
+    seed_scores = pruner == "wilcoxon"
+    names = objectives(cfg)
+    eval_set, episodes = evaluation_of(cfg)
+    # Optuna takes no intermediate value from a trial of several objectives.
+    every = None if seed_scores or len(names) == 2 else checkpoint_every(cfg)
+    return TrialSpec(
+        study=study, key=key, seed=int(cfg.seed),
+        steps=int(cfg.budget.steps), curve_every=int(cfg.budget.curve_every),
+        settings=resolved_settings(trial_cfg),
+        model_path=model_path(cfg, study, key),
+        checkpoint_every=every, seed_scores=seed_scores, seeds=int(cfg.budget.seeds),
+        objective=names[0], cost=names[1] if len(names) == 2 else None,
+        eval_set=eval_set, eval_episodes=episodes,
+        label=short_label(params, key),
+        tensorboard_run=tensorboard_run(cfg, study, key),
+        seeding=seeding_of(cfg))
 
 
 def pruner_label(cfg: DictConfig) -> str:
