@@ -366,19 +366,20 @@ class Result:
     confirmed: Confirmed
 
 
-def check_fresh_seeds(confirmed: Confirmed, count: int) -> None:
+def check_fresh_seeds(results: Sequence[Result]) -> None:
     """Every pick is retrained on the same fresh seeds, so picks pair seed by seed."""
-    expected = list(range(TEST_SEED, TEST_SEED + count))
-    if confirmed.seeds != expected:
-        raise SystemExit(f"bench_methods: {confirmed.name} trained seeds {confirmed.seeds}, not "
-                         f"the fresh seeds {TEST_SEED}-{expected[-1]} of every other pick")
+    first = results[0].confirmed if results else None
+    for result in results:
+        if first is not None and result.confirmed.seeds != first.seeds:
+            raise SystemExit(f"bench_methods: {result.confirmed.name} trained seeds "
+                             f"{result.confirmed.seeds}, {first.name} {first.seeds}: every "
+                             "pick must be retrained on the same fresh seeds")
 
 
 def read_result(ctx: Context, arm: Arm) -> Result:
     """One repetition's tuning cost and confirmed pick, checked."""
     cpu, runs = tuning_cost(ctx.storage, arm.studies)
     confirmed = read_confirm(ctx.storage, arm.confirm)
-    check_fresh_seeds(confirmed, ctx.confirm_seeds)
     if arm.method == "campaign":
         check_campaign_pick(ctx, arm, confirmed)
     return Result(arm, cpu, runs, confirmed)
@@ -396,6 +397,20 @@ def check_campaign_pick(ctx: Context, arm: Arm, confirmed: Confirmed) -> None:
                          f"settings campaign {arm.tuning} ends with ({chosen.description})")
 
 
+def check_campaign_top(ctx: Context, arm: Arm) -> None:
+    """Before the campaign's confirm: its last stage's top value by IQM, which ``confirm --top
+    1`` retrains, must be the value the stage selected. They part only when a value with
+    fewer complete seeds than ``report.min_seeds`` (its other runs failed) ranks first: it is
+    never selected."""
+    found = ks.open_store(ctx.storage).answers(arm.picked)
+    top = max((v for v in found.values if v.seeds), key=lambda v: v.iqm)  # first on ties
+    if top.value != found.selected:
+        raise SystemExit(f"bench_methods: {arm.picked}'s top value by IQM is {top.value} "
+                         f"({top.seeds} complete seed(s)), not its selected {found.selected}: "
+                         "confirm --top 1 would retrain another pick than the campaign's; rerun "
+                         "the stage's failed runs (run ... --retry-failed) first")
+
+
 def run_arm(ctx: Context, arm: Arm, cpu_budget: float | None,
             sets: dict[str, list[str]], confirm: bool = True) -> None:
     """Tune one repetition and confirm its pick, each step skipped when the store holds it."""
@@ -406,6 +421,8 @@ def run_arm(ctx: Context, arm: Arm, cpu_budget: float | None,
     kraby(tuning_command(ctx, arm, cpu_budget, sets))
     if not confirm:
         return
+    if arm.method == "campaign":
+        check_campaign_top(ctx, arm)
     kraby(["confirm", "--study-name", arm.picked, "--top", "1", "--seeds",
            str(ctx.confirm_seeds), *ctx.common])
 
@@ -419,9 +436,8 @@ def stored(ctx: Context, stages: tuple[str, ...]) -> tuple[list[Result], list[Re
     full = []
     for arm in every:
         if finished(known.get(arm.full)):
-            confirmed = read_confirm(ctx.storage, arm.full)
-            check_fresh_seeds(confirmed, ctx.confirm_seeds)
-            full.append(Result(arm, math.nan, 0, confirmed))
+            full.append(Result(arm, math.nan, 0, read_confirm(ctx.storage, arm.full)))
+    check_fresh_seeds([*rows, *full])
     return rows, full
 
 

@@ -238,6 +238,44 @@ def test_methods_plan_names_every_command_and_refuses_bad_input(tmp_path: Path) 
         assert not list(tmp_path.iterdir())
 
 
+def test_methods_checks_the_campaign_pick_and_answers_by_the_projects_decision(
+        tmp_path: Path) -> None:
+    """Before the campaign's confirm, the harness checks that its last stage's top value by
+    IQM (what confirm --top 1 retrains) is the value the stage selected: a value whose other
+    seed failed can rank first but is never selected, and the harness stops there. A pick's
+    answer against the campaign's is ks.compare's, read from the pick's side."""
+    from conftest import sqlite_url
+    from synthetic import Run, add_sweep
+
+    from kraby_study.records.stored import Outcome
+    from kraby_study.store.store import Store
+
+    sys.path.insert(0, str(BENCHMARKS))
+    import bench_methods as bm
+
+    url = sqlite_url(tmp_path / "k.db")
+    store = Store(url)
+    try:
+        for repetition, failed in ((0, True), (1, False)):
+            add_sweep(store, f"leg-campaign-r{repetition}-ent_coef", "ppo.ent_coef", [0.0, 0.01], [
+                Run(0.0, 0, final_score=-0.1),
+                Run(0.0, 1, outcome=Outcome.FAILED) if failed else Run(0.0, 1, final_score=-0.12),
+                Run(0.01, 0, final_score=-0.3), Run(0.01, 1, final_score=-0.31)])
+    finally:
+        store.close()
+    ctx = bm.Context(url, 1, [], [], 10, "leg")
+    with pytest.raises(SystemExit, match=r"top value by IQM is 0 \(1 complete seed\(s\)\), "
+                                         r"not its selected 0.01"):
+        bm.check_campaign_top(ctx, bm.Arm("campaign", 0, "leg", ("ent_coef",)))
+    bm.check_campaign_top(ctx, bm.Arm("campaign", 1, "leg", ("ent_coef",)))
+
+    high, low = [1.0, 1.1, 0.9, 1.0, 1.05, 0.95], [0.5, 0.55, 0.45, 0.5, 0.52, 0.48]
+    assert bm.against(high, low, 0.2, 0.05) == "better"
+    assert bm.against(low, high, 0.2, 0.05) == "worse"
+    assert bm.against(high, [h + 0.01 for h in high], 0.2, 0.05) == "equivalent"
+    assert bm.against(high[:2], low[:2], 0.2, 0.05) == "undecided"  # below 4 seeds, by rule
+
+
 EXPERIMENTS = sorted(path.name for path in (ROOT / "experiments").glob("*.py"))
 
 
