@@ -24,6 +24,21 @@ slow = pytest.mark.slow
 postgres = [pytest.mark.postgres,
             pytest.mark.skipif(not SERVER, reason="KRABY_TEST_POSTGRES_URL is not set")]
 
+
+
+def optuna_has_racing() -> bool:
+    """Whether ``kraby-study optuna --help`` lists ``--racing`` (the racing search is built)."""
+    done = subprocess.run([sys.executable, "-m", "kraby_study.cli", "optuna", "--help"],
+                          capture_output=True, text=True, timeout=120)
+    return "--racing" in done.stdout
+
+
+# bench_methods at smoke size: the documented campaign's nine stages need 32 legs (batch_size
+# 4096 divides only a rollout of 128 x 32), so its runs are cut to 1,024 steps and tiny nets.
+METHODS_SMOKE = ["--cpu-budget", "10", "--confirm-seeds", "2", "--workers", "2",
+                 "budget=smoke", "budget.steps=1024", "budget.curve_every=128",
+                 "ppo.net_arch=[8]"]
+
 # (script, smoke arguments, a line its output must hold): the smallest run that still goes
 # through every step of the script. The leg needs 1,024 steps and Pendulum-v1 1,600 before an
 # episode can end in the scored last tenth of a run.
@@ -69,6 +84,17 @@ SMOKE = [
                  id="bench_actor_start"),
     pytest.param("bench_ray_fault.py", ["--steps", "1024", "--seeds", "1", "--after", "2"],
                  "node lost at", marks=slow, id="bench_ray_fault"),
+    pytest.param("bench_methods.py", ["--seeds", "campaign=0", "random=0", "tpe=0",
+                                      *METHODS_SMOKE],
+                 "tpe - random confirmed IQM: mean difference", marks=slow, id="bench_methods"),
+    # A string condition is evaluated when the test runs, not when the module is collected.
+    pytest.param("bench_methods.py", ["--seeds", "random=0", "racing=0", "--set",
+                                      "racing:budget.seeds=4", *METHODS_SMOKE],
+                 "bench_methods: racing - random confirmed IQM: mean difference",
+                 marks=[slow, pytest.mark.skipif(
+                     "not optuna_has_racing()",
+                     reason="kraby-study optuna --help lists no --racing: the racing search "
+                            "is not on this branch")], id="bench_methods_racing"),
     pytest.param("bench_zoo_rerun.py", [str(ROOT / "docs/results/pendulum_beats_zoo.yml"),
                                         "--smoke"],
                  "bench_zoo_rerun: IQM difference", marks=slow, id="bench_zoo_rerun"),
@@ -179,6 +205,75 @@ def test_zoo_rerun_sets_the_confirm_of_the_same_settings_beside(tmp_path: Path,
         ("rerun", "500"), ("rerun", "500"), *[("confirm 'mcc-confirm': t34", s)
                                               for s in ("1000", "1001")],
         *[("confirm 'mcc-confirm': zoo", s) for s in ("1000", "1001")]]
+
+
+def methods(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, str(BENCHMARKS / "bench_methods.py"), *args],
+                          cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def test_methods_plan_names_every_command_and_refuses_bad_input(tmp_path: Path) -> None:
+    """bench_methods --plan prints each repetition's tuning and confirm commands (repetition
+    r: sampler seed r, tuning seeds from 100 r, its own studies, the documented start only)
+    and their CPU, and starts nothing; bad input is one line and exit 2, before any work."""
+    store = ["--storage", f"sqlite:///{tmp_path / 'm.db'}"]
+    shown = methods("--plan", "--cpu-budget", "300", "--seeds", "campaign=0", "random=0-1",
+                    *store, "budget.steps=20480", "budget.seeds=2", cwd=tmp_path)
+    assert shown.returncode == 0, shown.stderr[-2000:]
+    commands = [line for line in shown.stdout.splitlines() if line.startswith("$ kraby-study")]
+    assert len(commands) == 6
+    assert "campaign=documented campaign.name=leg-campaign-r0 seed=0" in commands[0]
+    assert "confirm --study-name leg-campaign-r0-ent_coef --top 1 --seeds 10" in commands[1]
+    assert commands[4].startswith("$ kraby-study optuna ")
+    assert ("search.sampler=random search.name=leg-random-r1 search.seed=1 seed=100 "
+            "'search.enqueue=[start]' search.cpu_budget=300") in commands[4]
+    assert "a campaign repetition 108 runs x 20,480 steps" in shown.stdout
+    assert not list(tmp_path.iterdir())
+    for bad, message in [(["--seeds", "random=10"], "distinct repetitions from 0 to 9"),
+                         (["--seeds", "random=0"], "random need --cpu-budget B"),
+                         (["--seeds", "grid=0"], "--seeds 'grid=0': use METHOD=")]:
+        refused = methods(*bad, *store, cwd=tmp_path)
+        assert refused.returncode == 2 and refused.stderr.count("\n") == 1, refused.stderr
+        assert message in refused.stderr
+        assert not list(tmp_path.iterdir())
+
+
+def test_methods_checks_the_campaign_pick_and_answers_by_the_projects_decision(
+        tmp_path: Path) -> None:
+    """Before the campaign's confirm, the harness checks that its last stage's top value by
+    IQM (what confirm --top 1 retrains) is the value the stage selected: a value whose other
+    seed failed can rank first but is never selected, and the harness stops there. A pick's
+    answer against the campaign's is ks.compare's, read from the pick's side."""
+    from conftest import sqlite_url
+    from synthetic import Run, add_sweep
+
+    from kraby_study.records.stored import Outcome
+    from kraby_study.store.store import Store
+
+    sys.path.insert(0, str(BENCHMARKS))
+    import bench_methods as bm
+
+    url = sqlite_url(tmp_path / "k.db")
+    store = Store(url)
+    try:
+        for repetition, failed in ((0, True), (1, False)):
+            add_sweep(store, f"leg-campaign-r{repetition}-ent_coef", "ppo.ent_coef", [0.0, 0.01], [
+                Run(0.0, 0, final_score=-0.1),
+                Run(0.0, 1, outcome=Outcome.FAILED) if failed else Run(0.0, 1, final_score=-0.12),
+                Run(0.01, 0, final_score=-0.3), Run(0.01, 1, final_score=-0.31)])
+    finally:
+        store.close()
+    ctx = bm.Context(url, 1, [], [], 10, "leg")
+    with pytest.raises(SystemExit, match=r"top value by IQM is 0 \(1 complete seed\(s\)\), "
+                                         r"not its selected 0.01"):
+        bm.check_campaign_top(ctx, bm.Arm("campaign", 0, "leg", ("ent_coef",)))
+    bm.check_campaign_top(ctx, bm.Arm("campaign", 1, "leg", ("ent_coef",)))
+
+    high, low = [1.0, 1.1, 0.9, 1.0, 1.05, 0.95], [0.5, 0.55, 0.45, 0.5, 0.52, 0.48]
+    assert bm.against(high, low, 0.2, 0.05) == "better"
+    assert bm.against(low, high, 0.2, 0.05) == "worse"
+    assert bm.against(high, [h + 0.01 for h in high], 0.2, 0.05) == "equivalent"
+    assert bm.against(high[:2], low[:2], 0.2, 0.05) == "undecided"  # below 4 seeds, by rule
 
 
 EXPERIMENTS = sorted(path.name for path in (ROOT / "experiments").glob("*.py"))

@@ -258,6 +258,30 @@ def test_best_campaign_writes_the_settings_the_campaign_ends_with(inside: Path) 
     assert run_cli("best", "--campaign", "nope") == 2
 
 
+def test_campaign_name_runs_the_chain_again_as_its_own_studies(
+        ran: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """campaign.name=NAME stores a second run of the same chain in the same store as
+    NAME-STUDY (here on other seeds), each stage taking NAME's earlier winners, and best
+    --campaign NAME reads it; the first run's studies are left as they were."""
+    shutil.copytree(ran, tmp_path / "copy")
+    folder = tmp_path / "copy"
+    monkeypatch.chdir(folder)
+    before = {n: len(load(db(folder), n).trials) for n in ("tri-s_gamma", "tri-s_clip",
+                                                            "tri-s_ent")}
+    assert run_cli("run", "campaign=tri", "campaign.name=tri_b", "seed=100", *TINY,
+                   SEEDS) == 0
+    assert {n: len(load(db(folder), n).trials) for n in before} == before
+    gamma, clip = selected(folder, "tri_b-s_gamma"), selected(folder, "tri_b-s_clip")
+    assert all(s["ppo"]["gamma"] == gamma for s in settings_of(folder, "tri_b-s_clip"))
+    assert all(s["ppo"]["clip_range"] == clip for s in settings_of(folder, "tri_b-s_ent"))
+    assert {t.user_attrs["seed"] for t in load(db(folder), "tri_b-s_gamma").trials} == {100,
+                                                                                        101}
+    assert run_cli("best", "--campaign", "tri_b") == 0
+    written = yaml.safe_load((folder / "conf" / "ppo" / "campaign_tri_b.yaml").read_text())
+    assert (written["ppo"]["gamma"], written["ppo"]["clip_range"]) == (gamma, clip)
+    assert written["ppo"]["ent_coef"] == selected(folder, "tri_b-s_ent")
+
+
 def test_a_standalone_study_takes_a_stored_winner(inside: Path) -> None:
     assert run_cli("run", "study=s_after", *TINY, "budget.seeds=1") == 0
     gamma = selected(inside, "tri-s_gamma")

@@ -127,7 +127,9 @@ def campaign_of(cfg: DictConfig, overrides: Sequence[str]) -> Campaign:
         raise ConfigError(f"campaign.name {name!r}: use letters, digits, _ and -")
     if not spec.stages:
         raise ConfigError(f"campaign {name} lists no stages")
-    kept = [o for o in overrides if not o.startswith("campaign=")]
+    # The campaign's own settings (campaign=NAME, campaign.name=...) shape the chain, not a
+    # stage: a stage composes no campaign group to apply them to.
+    kept = [o for o in overrides if _key(o).split(".", 1)[0] != "campaign"]
     if any(_key(o) == "study" for o in kept):
         raise ConfigError(f"campaign {name} runs its own studies: drop study=...")
     studies = [str(s.study) for s in spec.stages]
