@@ -35,8 +35,8 @@ def campaign_selection(store: Store, name: str, options: CompareOptions | None =
             progress = (f"{done.tally.complete}/{done.tally.planned} complete" if done is not None
                         else "not run yet")
             raise StoreError(f"campaign {name!r} is not finished: stage {number}/{len(stages)} "
-                             f"{stage['name']} is {progress}; rerun `kraby-study run "
-                             f"campaign={name}`")
+                             f"{stage['name']} is {progress}; rerun the command that ran it "
+                             f"(`kraby-study run campaign=FILE`, campaign.name {name})")
         chosen = done
     assert chosen is not None
     last = stages[-1]
