@@ -7,6 +7,7 @@ import importlib.util
 import re
 import sys
 from pathlib import Path
+from typing import Any
 
 import optuna
 import pytest
@@ -38,6 +39,17 @@ def _benchmark(name: str) -> object:
 
 def _bench() -> object:
     return _benchmark("bench_search")
+
+
+def _recorded(monkeypatch: pytest.MonkeyPatch) -> tuple[Any, list[tuple[str, ...]]]:
+    """The benchmark's module with its commands recorded, not run (each search read as
+    nothing, each confirm as two scores), and the list they are recorded in."""
+    bench = _bench()
+    commands: list[tuple[str, ...]] = []
+    monkeypatch.setattr(bench, "kraby", lambda *args: commands.append(args))
+    monkeypatch.setattr(bench, "read_search", lambda storage, arm: None)
+    monkeypatch.setattr(bench, "read_confirm", lambda storage, name: ([-1.0, -2.0], 1.0))
+    return bench, commands
 
 
 def _run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, *args: str) -> str:
@@ -198,12 +210,8 @@ def test_with_cost_each_search_has_two_objectives_and_its_pick_is_the_one_confir
                                                  (["--enqueue", "zoo"], "search.enqueue=[zoo]")])
 def test_every_search_evaluates_the_enqueued_configs_first(
         monkeypatch: pytest.MonkeyPatch, extra: list[str], enqueued: str | None) -> None:
-    bench = _bench()
-    commands: list[tuple[str, ...]] = []
-    monkeypatch.setattr(bench, "kraby", lambda *args: commands.append(args))
-    monkeypatch.setattr(bench, "read_search", lambda storage, arm: None)
-    monkeypatch.setattr(bench, "read_confirm", lambda storage, name: ([-1.0, -2.0], 1.0))
-    assert bench.main(["--env-id", "Pendulum-v1", "--cpu-budget", "10",  # type: ignore[attr-defined]
+    bench, commands = _recorded(monkeypatch)
+    assert bench.main(["--env-id", "Pendulum-v1", "--cpu-budget", "10",
                        "--sampler-seeds", "0", "1", "--no-zoo", *extra]) == 0
     searches = [c for c in commands if c[0] == "optuna"]
     assert [c[c.index("--sampler") + 1] for c in searches] == ["tpe", "random"] * 2
@@ -242,13 +250,9 @@ def test_every_quoted_command_still_runs_the_searches_it_ran(
     as when they were measured (a sampler's arm with every command's overrides), so a rerun
     continues them; a planned racing arm races with its own overrides in place of the
     common ones of the same key."""
-    bench = _bench()
-    commands: list[tuple[str, ...]] = []
-    monkeypatch.setattr(bench, "kraby", lambda *args: commands.append(args))
-    monkeypatch.setattr(bench, "read_search", lambda storage, arm: None)
-    monkeypatch.setattr(bench, "read_confirm", lambda storage, name: ([-1.0, -2.0], 1.0))
-    assert bench.main(argv) == 0  # type: ignore[attr-defined]
-    args = bench.parse(argv)  # type: ignore[attr-defined]
+    bench, commands = _recorded(monkeypatch)
+    assert bench.main(argv) == 0
+    args = bench.parse(argv)
     tag = args.tag or args.env_id.split("-")[0].lower()
     env = ["env=gym", f"env.id={args.env_id}", "ppo=zoo", "budget=zoo", *args.overrides]
     flags = {"racing": ["--racing", "--sampler", "tpe"],
@@ -277,12 +281,8 @@ def test_every_quoted_command_still_runs_the_searches_it_ran(
 
 def test_a_racing_arm_races_on_its_own_overrides_and_the_other_arm_on_the_common_ones(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    bench = _bench()
-    commands: list[tuple[str, ...]] = []
-    monkeypatch.setattr(bench, "kraby", lambda *args: commands.append(args))
-    monkeypatch.setattr(bench, "read_search", lambda storage, arm: None)
-    monkeypatch.setattr(bench, "read_confirm", lambda storage, name: ([-1.0, -2.0], 1.0))
-    assert bench.main([  # type: ignore[attr-defined]
+    bench, commands = _recorded(monkeypatch)
+    assert bench.main([
         "--env-id", "MountainCarContinuous-v0", "--cpu-budget", "10", "--tag", "mccrace",
         "--no-zoo", "search=gym_sde", "budget.seeds=2", "--samplers", "racing-gp", "random",
         "--arm-overrides", "racing-gp:budget.seeds=8", "racing-gp:racing.min_seeds=4",
