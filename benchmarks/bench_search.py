@@ -3,7 +3,7 @@
 Run: python benchmarks/bench_search.py --env-id Pendulum-v1 --cpu-budget 1800
          [--sampler-seeds 0 1 2] [--confirm-seeds 5] [--storage URL] [--workers 2]
          [--samplers tpe random] [--tag NAME] [--enqueue [NAME ...]] [--no-zoo] [--cost]
-         [KEY=VALUE ...]
+         [--dry-run] [KEY=VALUE ...] [--arm-overrides ARM:KEY=VALUE ...]
 
 For each sampler seed and each sampler, one search (``kraby-study optuna``, evaluation
 objective, rl-zoo3's settings for the env as the fixed ones, ``budget=zoo``) runs until it has
@@ -37,8 +37,22 @@ an exact one-sided Wilcoxon signed-rank p (scipy) that the default does worse, w
 at least 2 sampler seeds. Extra ``KEY=VALUE`` overrides go to every command (e.g.
 ``budget.seeds=2``).
 
-The last line reads ``bench_search: <default> - random confirmed mean difference D (95 % t CI
-[lo, hi], S sampler seeds); CPU <default> C1 s, random C2 s``.
+An arm is a sampler's name (``--sampler NAME``: tpe, random, gp, ...) or a racing search
+(``--racing``, docs/guide/studies.md "Racing search"): ``racing`` with multivariate TPE,
+``racing-random`` and ``racing-gp`` with those samplers. A racing arm's pick is its
+incumbent, on all its seeds, which ``confirm --top 1`` retrains; its row gives the
+configurations asked and the runs ended in place of the trials, the incumbent's seeds
+beside its key, and the IQM over them as its search score. ``--arm-overrides
+ARM:KEY=VALUE ...`` go to one arm's commands only (its search and its confirm), after the
+common ones, and replace a common override of the same key: a racing arm races on more seeds
+(``racing:budget.seeds=8``, its cap) than the other arm's trials get (``budget.seeds=2``).
+``--dry-run`` asks each search for its plan (``kraby-study optuna --dry-run``) and stops.
+
+A rerun of the same command continues: each search is the stored one of its name (a search
+that has used its budget runs nothing more), and each confirm the stored confirm.
+
+The last line reads ``bench_search: <default> - <other> confirmed mean difference D (95 % t CI
+[lo, hi], S sampler seeds); CPU <default> C1 s, <other> C2 s``.
 """
 
 from __future__ import annotations
@@ -53,6 +67,7 @@ from dataclasses import dataclass
 import optuna
 from scipy import stats
 
+from kraby_study.answers.racing_search import racing_search
 from kraby_study.answers.search_front import search_front
 from kraby_study.decision.front import spread
 from kraby_study.records.stored import counted, known_number, search_key, spent_cpu
@@ -61,13 +76,57 @@ from kraby_study.records.values import best_trial
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
 
+RACING = "racing"
+"""The arm name of a racing search; ``racing-NAME`` races with sampler NAME."""
+
+
+def sampler_flags(arm: str) -> list[str]:
+    """The search's flags for an arm: ``racing`` a racing search with multivariate TPE,
+    ``racing-NAME`` one with sampler NAME, any other name that sampler's search."""
+    if arm == RACING:
+        return ["--racing", "--sampler", "tpe"]
+    if arm.startswith(f"{RACING}-"):
+        return ["--racing", "--sampler", arm.removeprefix(f"{RACING}-")]
+    return ["--sampler", arm]
+
+
+def override_key(override: str) -> str:
+    """The key a Hydra ``KEY=VALUE`` override sets."""
+    return override.split("=", 1)[0].lstrip("+~")
+
+
+def arm_overrides(items: list[str], arms: list[str]) -> dict[str, list[str]]:
+    """``ARM:KEY=VALUE`` items by arm; a ValueError names the first item that is not one of
+    an arm in ``arms``."""
+    found: dict[str, list[str]] = {arm: [] for arm in arms}
+    for item in items:
+        arm, colon, override = item.partition(":")
+        if not colon or "=" in arm or "=" not in override:
+            raise ValueError(f"--arm-overrides takes ARM:KEY=VALUE, not {item!r} (give the "
+                             "overrides of every arm before --arm-overrides)")
+        if arm not in found:
+            raise ValueError(f"--arm-overrides names arm {arm!r}, not one of --samplers "
+                             f"{' '.join(arms)}")
+        found[arm].append(override)
+    return found
+
+
+def with_own(common: list[str], own: list[str]) -> list[str]:
+    """The common overrides, less those whose key an arm's own set, then the arm's own."""
+    keys = {override_key(o) for o in own}
+    return [o for o in common if override_key(o) not in keys] + own
+
+
 @dataclass
 class Arm:
     """One search and its confirmed pick."""
 
     sampler: str
+    """The arm's name: a sampler, or ``racing``, ``racing-NAME`` for a racing search."""
     seed: int
     study: str
+    overrides: list[str] | None = None
+    """Its search's and confirm's Hydra overrides (common and its own)."""
     trials: str = ""
     cpu: float = math.nan
     pick: str = ""
@@ -80,9 +139,15 @@ class Arm:
     def mean(self) -> float:
         return statistics.fmean(self.confirmed) if self.confirmed else math.nan
 
+    @property
+    def racing(self) -> bool:
+        """Whether it is a racing search."""
+        return sampler_flags(self.sampler)[0] == "--racing"
 
-def kraby(*args: str) -> None:
-    """Run one kraby-study command; stop the benchmark if it fails."""
+
+def kraby(*args: str, plan: bool = False) -> None:
+    """Run one kraby-study command; stop the benchmark if it fails. Its last 3 lines are
+    printed, or with ``plan`` (a dry run) its plan, from the line that begins it."""
     command = [sys.executable, "-m", "kraby_study.cli", *args]
     print("$ kraby-study " + " ".join(args), flush=True)
     done = subprocess.run(command, text=True, capture_output=True)
@@ -90,15 +155,36 @@ def kraby(*args: str) -> None:
         sys.exit(f"bench_search: a command failed ({done.returncode}):\n{done.stdout}"
                  f"{done.stderr}")
     lines = done.stdout.strip().splitlines()
-    for line in lines[-3:]:
+    start = next((i for i, line in enumerate(lines) if line.startswith("plan")), -3)
+    for line in lines[start if plan else -3:]:
         print("  " + line)
+
+
+def read_racing(study: optuna.Study, arm: Arm) -> None:
+    """A racing search's configurations asked, runs ended, CPU seconds used and pick (its
+    incumbent, with its seeds and their IQM), replayed from the store as ``confirm`` reads
+    it."""
+    every = [t for t in study.trials if t.state != optuna.trial.TrialState.WAITING]
+    found = racing_search(study.user_attrs["kraby_definition"], study.trials)
+    incumbent = found.incumbent if found is not None else None
+    if found is None or incumbent is None:
+        sys.exit(f"bench_search: {arm.study} has no incumbent to confirm")
+    runs = sum(c.seeds for c in found.configurations)
+    arm.trials = f"{len(found.configurations)} configurations, {runs} runs"
+    arm.cpu = spent_cpu(every)
+    arm.pick = f"{incumbent.key} ({incumbent.seeds} seeds)"
+    arm.search_score = incumbent.iqm
+    arm.after_start = found.summary()
 
 
 def read_search(storage: str, arm: Arm) -> None:
     """The search's trials (each by its latest attempt: a rechecked trial by its recheck), CPU
     seconds used (every attempt's, and asking the sampler for each) and pick (its best
-    complete trial)."""
+    complete trial; a racing search's incumbent)."""
     study = optuna.load_study(study_name=arm.study, storage=storage)
+    if arm.racing:
+        read_racing(study, arm)
+        return
     two = len(study.directions) == 2
     every = [t for t in study.trials if t.state != optuna.trial.TrialState.WAITING]
     trials = counted(every)
@@ -180,15 +266,23 @@ def t_interval(values: list[float]) -> tuple[float, float]:
     return mean - half, mean + half
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse(argv: list[str] | None) -> argparse.Namespace:
+    """The benchmark's arguments; bad ones stop it (exit 2) before anything runs."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--env-id", required=True)
     parser.add_argument("--cpu-budget", type=float, required=True,
                         help="CPU seconds each search may use")
     parser.add_argument("--sampler-seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--samplers", nargs="+", default=["tpe", "random"],
-                        help="the default's sampler, then the one it is compared with (one "
-                             "sampler: its searches alone, no comparison)")
+                        help="the default's arm, then the one it is compared with (one arm: "
+                             "its searches alone, no comparison); an arm is a sampler (tpe, "
+                             "random, gp, ...) or a racing search: racing (multivariate TPE), "
+                             "racing-random, racing-gp")
+    parser.add_argument("--arm-overrides", nargs="+", action="extend", default=[],
+                        metavar="ARM:KEY=VALUE",
+                        help="overrides for one arm's commands only, after the common ones "
+                             "(a common override of the same key is replaced), e.g. "
+                             "racing:budget.seeds=8")
     parser.add_argument("--tag", default=None,
                         help="first word of the study names (default: the env's name)")
     parser.add_argument("--enqueue", nargs="*", default=None,
@@ -202,35 +296,84 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--confirm-seeds", type=int, default=5)
     parser.add_argument("--storage", default="sqlite:///bench_search.db")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--dry-run", action="store_true",
+                        help="print each search's plan (kraby-study optuna --dry-run) and stop")
     parser.add_argument("overrides", nargs="*", help="KEY=VALUE for every command")
     args = parser.parse_intermixed_args(argv)
+    if stray := next((a for a in args.samplers if "=" in a), None):
+        parser.error(f"--samplers takes arm names, not {stray!r}: give the KEY=VALUE overrides "
+                     "before --samplers")
     if (args.cpu_budget <= 0 or args.confirm_seeds < 2 or not args.sampler_seeds
             or len(args.samplers) > 2):
         parser.error("--cpu-budget must be positive, --confirm-seeds at least 2, "
                      "--sampler-seeds not empty and --samplers one or two")
-    env = ["env=gym", f"env.id={args.env_id}", "ppo=zoo", "budget=zoo", *args.overrides]
-    common = ["--storage", args.storage, "--workers", str(args.workers), "save_models=false"]
-    tag = args.tag or args.env_id.split("-")[0].lower()
+    if len(set(args.samplers)) != len(args.samplers):
+        parser.error(f"--samplers names {args.samplers[0]} twice: name two arms")
+    if args.cost and any(sampler_flags(a)[0] == "--racing" for a in args.samplers):
+        parser.error("--cost searches on two objectives, which a racing search does not race")
+    try:
+        args.own = arm_overrides(args.arm_overrides, args.samplers)
+    except ValueError as error:
+        parser.error(str(error))
+    return args
+
+
+def study_tag(args: argparse.Namespace) -> str:
+    """The first word of the study names: ``--tag``, else the env's name (``pendulum``)."""
+    return str(args.tag or args.env_id.split("-")[0].lower())
+
+
+def common_overrides(args: argparse.Namespace) -> list[str]:
+    """The Hydra overrides of every command: the env, rl-zoo3's settings and budget, and the
+    command line's own."""
+    return ["env=gym", f"env.id={args.env_id}", "ppo=zoo", "budget=zoo", *args.overrides]
+
+
+def plan_arms(args: argparse.Namespace) -> list[Arm]:
+    """The searches, by sampler seed then arm, each with its study name and overrides."""
+    common = common_overrides(args)
+    return [Arm(sampler, seed, f"{study_tag(args)}-{sampler}-s{seed}",
+                with_own(common, args.own[sampler]))
+            for seed in args.sampler_seeds for sampler in args.samplers]
+
+
+def search_command(args: argparse.Namespace, arm: Arm) -> list[str]:
+    """The arm's ``kraby-study optuna`` arguments."""
+    objective = (["--objective", "evaluation,training_time", "--floor", "none"]
+                 if args.cost else ["--objective", "evaluation"])
     queue = [] if args.enqueue is None else [f"search.enqueue=[{','.join(args.enqueue)}]"]
-    arms: list[Arm] = []
-    for seed in args.sampler_seeds:
-        for sampler in args.samplers:
-            arm = Arm(sampler, seed, f"{tag}-{sampler}-s{seed}")
-            objective = (["--objective", "evaluation,training_time", "--floor", "none"]
-                         if args.cost else ["--objective", "evaluation"])
-            kraby("optuna", *objective, "--sampler", sampler, "--seed",
-                  str(seed), "--cpu-budget", f"{args.cpu_budget:g}", "--trials", "100000",
-                  "--study-name", arm.study, *queue, *common, *env)
-            read_search(args.storage, arm)
-            kraby("confirm", "--study-name", arm.study, "--top", "1", "--seeds",
-                  str(args.confirm_seeds), *common, *env)
-            arm.confirmed, arm.confirm_cpu = read_confirm(args.storage, f"{arm.study}-confirm")
-            arms.append(arm)
+    return ["optuna", *objective, *sampler_flags(arm.sampler), "--seed", str(arm.seed),
+            "--cpu-budget", f"{args.cpu_budget:g}", "--trials", "100000", "--study-name",
+            arm.study, *queue, *common_flags(args), *(arm.overrides or [])]
+
+
+def common_flags(args: argparse.Namespace) -> list[str]:
+    """The storage, workers and model saving of every command."""
+    return ["--storage", args.storage, "--workers", str(args.workers), "save_models=false"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse(argv)
+    common = common_flags(args)
+    arms = plan_arms(args)
+    if args.dry_run:
+        for arm in arms:
+            kraby(*search_command(args, arm), "--dry-run", plan=True)
+        print(f"bench_search: dry run of {len(arms)} searches; each pick would be confirmed "
+              f"on {args.confirm_seeds} fresh seeds")
+        return 0
+    for arm in arms:
+        kraby(*search_command(args, arm))
+        read_search(args.storage, arm)
+        kraby("confirm", "--study-name", arm.study, "--top", "1", "--seeds",
+              str(args.confirm_seeds), *common, *(arm.overrides or []))
+        arm.confirmed, arm.confirm_cpu = read_confirm(args.storage, f"{arm.study}-confirm")
     zoo_scores: list[float] = []
     if not args.no_zoo:
-        zoo = f"{tag}-zoo-confirm"
+        zoo = f"{study_tag(args)}-zoo-confirm"
         kraby("confirm", "--baseline", "ppo=zoo", "--seeds", str(args.confirm_seeds),
-              f"confirm.name={zoo}", "search.objective=evaluation", *common, *env)
+              f"confirm.name={zoo}", "search.objective=evaluation", *common,
+              *common_overrides(args))
         zoo_scores, zoo_cpu = read_confirm(args.storage, zoo)
 
     print(f"\n{args.env_id}: each search {args.cpu_budget:,.0f} CPU s; picks retrained on "
@@ -247,7 +390,12 @@ def main(argv: list[str] | None = None) -> int:
         low, high = t_interval(zoo_scores)
         print(f"| ppo=zoo | - | - | - | - | - | {statistics.fmean(zoo_scores):.1f} "
               f"[{low:.1f}, {high:.1f}] | {zoo_cpu:.1f} |")
-    print("After each search's random start (the first search.startup_trials trials):")
+    if any(arm.racing for arm in arms):
+        print("A racing search's row: configurations asked and runs ended for its trials, its "
+              "incumbent with its seeds as its pick, their IQM as its search score.")
+    print("After each search's random start (the first search.startup_trials trials"
+          + ("; a racing search: its configurations" if any(a.racing for a in arms) else "")
+          + "):")
     for arm in arms:
         print(f"- {arm.sampler} seed {arm.seed}: {arm.after_start}")
     if len(args.samplers) == 1:
@@ -260,6 +408,9 @@ def main(argv: list[str] | None = None) -> int:
     if len(diffs) >= 2 and any(d != 0 for d in diffs):
         p, _ = signed_rank(diffs, "less")
         print(f"Wilcoxon signed-rank (exact, one-sided, {default} worse), n={len(diffs)} "
+              f"sampler seeds: p = {p:.3g}")
+        p, _ = signed_rank(diffs, "greater")
+        print(f"Wilcoxon signed-rank (exact, one-sided, {default} better), n={len(diffs)} "
               f"sampler seeds: p = {p:.3g}")
     cpu = {name: statistics.fmean(a.cpu for a in arms if a.sampler == name)
            for name in args.samplers}

@@ -7,6 +7,7 @@ import importlib.util
 import re
 import sys
 from pathlib import Path
+from typing import Any
 
 import optuna
 import pytest
@@ -38,6 +39,17 @@ def _benchmark(name: str) -> object:
 
 def _bench() -> object:
     return _benchmark("bench_search")
+
+
+def _recorded(monkeypatch: pytest.MonkeyPatch) -> tuple[Any, list[tuple[str, ...]]]:
+    """The benchmark's module with its commands recorded, not run (each search read as
+    nothing, each confirm as two scores), and the list they are recorded in."""
+    bench = _bench()
+    commands: list[tuple[str, ...]] = []
+    monkeypatch.setattr(bench, "kraby", lambda *args: commands.append(args))
+    monkeypatch.setattr(bench, "read_search", lambda storage, arm: None)
+    monkeypatch.setattr(bench, "read_confirm", lambda storage, name: ([-1.0, -2.0], 1.0))
+    return bench, commands
 
 
 def _run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, *args: str) -> str:
@@ -198,12 +210,8 @@ def test_with_cost_each_search_has_two_objectives_and_its_pick_is_the_one_confir
                                                  (["--enqueue", "zoo"], "search.enqueue=[zoo]")])
 def test_every_search_evaluates_the_enqueued_configs_first(
         monkeypatch: pytest.MonkeyPatch, extra: list[str], enqueued: str | None) -> None:
-    bench = _bench()
-    commands: list[tuple[str, ...]] = []
-    monkeypatch.setattr(bench, "kraby", lambda *args: commands.append(args))
-    monkeypatch.setattr(bench, "read_search", lambda storage, arm: None)
-    monkeypatch.setattr(bench, "read_confirm", lambda storage, name: ([-1.0, -2.0], 1.0))
-    assert bench.main(["--env-id", "Pendulum-v1", "--cpu-budget", "10",  # type: ignore[attr-defined]
+    bench, commands = _recorded(monkeypatch)
+    assert bench.main(["--env-id", "Pendulum-v1", "--cpu-budget", "10",
                        "--sampler-seeds", "0", "1", "--no-zoo", *extra]) == 0
     searches = [c for c in commands if c[0] == "optuna"]
     assert [c[c.index("--sampler") + 1] for c in searches] == ["tpe", "random"] * 2
@@ -213,6 +221,153 @@ def test_every_search_evaluates_the_enqueued_configs_first(
     else:
         assert all(enqueued in c and sum(a.startswith("search.enqueue=") for a in c) == 1
                    for c in searches)
+
+
+ROOT = Path(__file__).parents[1]
+
+
+def _quoted_commands() -> list[tuple[str, list[str]]]:
+    """Every bench_search command the docs quote, as (page, arguments); a placeholder sampler
+    seed ``S`` is read as 0."""
+    found = []
+    for page in sorted((ROOT / "docs").rglob("*.md")):
+        for line in page.read_text().splitlines():
+            words = line.strip().split()
+            if words[:2] == ["python", "benchmarks/bench_search.py"]:
+                found.append((str(page.relative_to(ROOT)),
+                              ["0" if w == "S" else w for w in words[2:]]))
+    return found
+
+
+QUOTED = _quoted_commands()
+
+
+@pytest.mark.parametrize(("page", "argv"), QUOTED, ids=[f"{p}:{i}" for i, (p, _) in
+                                                        enumerate(QUOTED)])
+def test_every_quoted_command_still_runs_the_searches_it_ran(
+        monkeypatch: pytest.MonkeyPatch, page: str, argv: list[str]) -> None:
+    """The commands the results quote name the same stored studies and run the same searches
+    as when they were measured (a sampler's arm with every command's overrides), so a rerun
+    continues them; a planned racing arm races with its own overrides in place of the
+    common ones of the same key."""
+    bench, commands = _recorded(monkeypatch)
+    assert bench.main(argv) == 0
+    args = bench.parse(argv)
+    tag = args.tag or args.env_id.split("-")[0].lower()
+    env = ["env=gym", f"env.id={args.env_id}", "ppo=zoo", "budget=zoo", *args.overrides]
+    flags = {"racing": ["--racing", "--sampler", "tpe"],
+             "racing-gp": ["--racing", "--sampler", "gp"],
+             "racing-random": ["--racing", "--sampler", "random"]}
+    own = {arm: [o.split(":", 1)[1] for o in args.arm_overrides if o.startswith(f"{arm}:")]
+           for arm in args.samplers}
+
+    def arm_env(arm: str) -> list[str]:
+        keys = {o.split("=")[0] for o in own[arm]}
+        return [o for o in env if o.split("=")[0] not in keys] + own[arm]
+    common = ["--storage", args.storage, "--workers", str(args.workers), "save_models=false"]
+    objective = (["--objective", "evaluation,training_time", "--floor", "none"] if args.cost
+                 else ["--objective", "evaluation"])
+    queue = [] if args.enqueue is None else [f"search.enqueue=[{','.join(args.enqueue)}]"]
+    expected = [("optuna", *objective, *flags.get(sampler, ["--sampler", sampler]), "--seed",
+                 str(seed), "--cpu-budget", f"{args.cpu_budget:g}", "--trials", "100000",
+                 "--study-name", f"{tag}-{sampler}-s{seed}", *queue, *common, *arm_env(sampler))
+                for seed in args.sampler_seeds for sampler in args.samplers]
+    assert [c for c in commands if c[0] == "optuna"] == expected
+    confirms = [c for c in commands if c[0] == "confirm" and "--study-name" in c]
+    assert confirms == [("confirm", "--study-name", f"{tag}-{sampler}-s{seed}", "--top", "1",
+                         "--seeds", str(args.confirm_seeds), *common, *arm_env(sampler))
+                        for seed in args.sampler_seeds for sampler in args.samplers]
+
+
+def test_a_racing_arm_races_on_its_own_overrides_and_the_other_arm_on_the_common_ones(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    bench, commands = _recorded(monkeypatch)
+    assert bench.main([
+        "--env-id", "MountainCarContinuous-v0", "--cpu-budget", "10", "--tag", "mccrace",
+        "--no-zoo", "search=gym_sde", "budget.seeds=2", "--samplers", "racing-gp", "random",
+        "--arm-overrides", "racing-gp:budget.seeds=8", "racing-gp:racing.min_seeds=4",
+        "--sampler-seeds", "3"]) == 0
+    (racing, racing_confirm, random, _) = commands
+    tail = ["search=gym_sde", "budget.seeds=8", "racing.min_seeds=4"]
+    assert racing[:8] == ("optuna", "--objective", "evaluation", "--racing", "--sampler", "gp",
+                          "--seed", "3")
+    assert "mccrace-racing-gp-s3" in racing and list(racing[-3:]) == tail
+    assert racing_confirm[:3] == ("confirm", "--study-name", "mccrace-racing-gp-s3")
+    assert "--racing" not in racing_confirm and list(racing_confirm[-3:]) == tail
+    assert "--racing" not in random and "mccrace-random-s3" in random
+    assert list(random[-2:]) == ["search=gym_sde", "budget.seeds=2"]
+
+
+@pytest.mark.parametrize(("extra", "error"), [
+    (["--samplers", "racing", "random", "--arm-overrides", "budget.seeds=8"],
+     "--arm-overrides takes ARM:KEY=VALUE, not 'budget.seeds=8'"),
+    (["--samplers", "racing", "random", "--arm-overrides", "tpe:budget.seeds=8"],
+     "--arm-overrides names arm 'tpe', not one of --samplers racing random"),
+    (["--samplers", "racing", "random", "budget.seeds=2"],
+     "--samplers takes arm names, not 'budget.seeds=2'"),
+    (["--samplers", "racing", "random", "--cost"], "--cost searches on two objectives"),
+    (["--samplers", "random", "random"], "--samplers names random twice"),
+])
+def test_bad_arms_are_refused_in_one_line_before_anything_runs(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+        extra: list[str], error: str) -> None:
+    bench = _bench()
+    monkeypatch.setattr(bench, "kraby", lambda *args: pytest.fail("a command ran"))
+    with pytest.raises(SystemExit) as stopped:
+        bench.main(["--env-id", "CartPole-v1", "--cpu-budget", "10",  # type: ignore[attr-defined]
+                    *extra])
+    assert stopped.value.code == 2
+    assert f": error: {error}" in capsys.readouterr().err
+
+
+def test_a_dry_run_shows_each_searchs_plan_and_stores_nothing(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert _bench().main([  # type: ignore[attr-defined]
+        "--env-id", "MountainCarContinuous-v0", "--cpu-budget", "1200", "--storage",
+        f"sqlite:///{tmp_path / 'd.db'}", "--no-zoo", "search=gym_sde", "budget.seeds=2",
+        "--samplers", "racing", "random", "--arm-overrides", "racing:budget.seeds=8",
+        "--sampler-seeds", "0", "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert ("racing search: tpe sampler asks each challenger, which trains 4 seeds side by side"
+            in out)
+    assert "up to 8 (budget.seeds)" in out
+    assert "mountaincarcontinuous-random-s0: 100000 trials (search.trials, each 2 seeds" in out
+    assert out.strip().splitlines()[-1] == ("bench_search: dry run of 2 searches; each pick "
+                                            "would be confirmed on 5 fresh seeds")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_a_racing_arm_confirms_its_incumbent_and_a_rerun_continues_the_stored_studies(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from kraby_study.answers.racing_search import racing_search
+
+    argv = ["--cpu-budget", "4", "--sampler-seeds", "0", "--no-zoo", "--samplers", "racing",
+            "--arm-overrides", "racing:budget.seeds=4"]
+    url = _run(tmp_path, monkeypatch, *argv)
+    out = capsys.readouterr().out
+    study = optuna.load_study(study_name="cartpole-racing-s0", storage=url)
+    found = racing_search(study.user_attrs["kraby_definition"], study.trials)
+    assert found is not None and found.incumbent is not None
+    inc = found.incumbent
+    runs = sum(c.seeds for c in found.configurations)
+    assert inc.seeds >= 4 and study.user_attrs["kraby_definition"]["racing"]
+    assert re.search(rf"^\| racing \| 0 \| {len(found.configurations)} configurations, {runs} "
+                     rf"runs \| [\d,]+ \| {inc.key} \({inc.seeds} seeds\) \| {inc.iqm:.1f} \| ",
+                     out, re.M), out
+    confirm = optuna.load_study(study_name="cartpole-racing-s0-confirm", storage=url)
+    assert len(confirm.trials) == 2
+    assert all(t.user_attrs["settings"] == inc.settings for t in confirm.trials)
+    stored = {name: len(optuna.load_study(study_name=name, storage=url).trials)
+              for name in ("cartpole-racing-s0", "cartpole-racing-s0-confirm")}
+    _run(tmp_path, monkeypatch, *argv)
+    again = capsys.readouterr().out
+    assert stored == {name: len(optuna.load_study(study_name=name, storage=url).trials)
+                      for name in stored}
+    assert again.split("\nCartPole-v1: ")[1] == out.split("\nCartPole-v1: ")[1]
 
 
 def test_the_budget_replay_drops_the_trials_started_once_running_ones_used_the_budget(
