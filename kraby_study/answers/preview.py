@@ -96,7 +96,8 @@ def count_lines(count: Count, stored: Tally | None) -> list[str]:
     most = "at most " if count.at_most else ""
     lines = [f"{count.study}: {most}{count.trials} trials ({count.shape}), "
              f"{count.steps_per_trial:,} env steps each, {most}{count.env_steps:,} in all"
-             + (" (raced: values worse than the best stop early)" if count.at_most else "")]
+             + (" (raced: a value or configuration shown worse stops early)"
+                if count.at_most else "")]
     if count.definition is not None:
         lines.append(f"  seeding {SEEDING_TEXT[stored_seeding(count.definition)]}")
         if isinstance(count.definition.get("seeds"), list):

@@ -34,7 +34,8 @@ class Count:
     shape: str
     """How the trials come about, e.g. '8 values x 10 seeds'."""
     at_most: bool = False
-    """A raced plan: values worse than the best stop early, so fewer may run."""
+    """A raced plan or a racing search: a value or configuration shown worse stops early, so
+    fewer may run."""
     definition: dict[str, Any] | None = None
     """The definition the command would store (and check against a stored study of the same
     name); None when not known yet (a campaign stage waiting for earlier winners)."""
