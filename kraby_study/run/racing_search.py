@@ -48,21 +48,20 @@ from kraby_study.records.stored import (
     is_interrupted,
     latest_by_key,
     racing_key,
-    spent_cpu,
 )
 from kraby_study.run.executor import Executor
 from kraby_study.run.progress import Progress
 from kraby_study.run.runner import CommandRun, Retrying, run_trials
 from kraby_study.run.sampling import directions, distributions, racing_sampler
 from kraby_study.run.search_source import search_spec, short_label
-from kraby_study.run.source import StudySource, requeue_orphans, retry_failed
+from kraby_study.run.source import BudgetedSource, requeue_orphans, retry_failed
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
 
 WITHDRAWN = "withdrawn: its configuration left the race"
 
 
-class RacingSource(StudySource):
+class RacingSource(BudgetedSource):
     """Hands out the runs a racing search wants, one at a time, and notes its moves."""
 
     def __init__(self, ledger: StudyLedger, cfg: DictConfig,
@@ -88,18 +87,9 @@ class RacingSource(StudySource):
         assert found is not None
         return found
 
-    def spent(self) -> float:
-        """CPU seconds used: every attempt's stored CPU, the sampler's, and what this command's
-        running runs have used so far."""
-        return spent_cpu(self.ledger.trials()) + sum(self._running.values())
-
-    def over_budget(self) -> bool:
-        """Whether the search has used its CPU budget (never without one)."""
-        return self.cpu_budget is not None and self.spent() >= self.cpu_budget
-
-    def used_text(self) -> str:
-        """``845 of 1,200 CPU s used``."""
-        return f"{self.spent():,.0f} of {self.cpu_budget or 0:,.0f} CPU s used"
+    def running_cpu(self) -> float:
+        """CPU seconds the runs this command runs have used so far."""
+        return sum(self._running.values())
 
     def using(self, number: int, steps: int, cpu: float) -> None:
         """Note the CPU seconds a running run has used so far."""
@@ -284,11 +274,10 @@ def run_racing_search(store: Store, cfg: DictConfig, executor: Executor, workers
     source = RacingSource(ledger, cfg, starts)
     found = source.standing()
     runs = len([t for t in counted(ledger.trials()) if t.state != TrialState.WAITING])
-    budget = ("" if source.cpu_budget is None else
-              f"; until {source.cpu_budget:,.0f} CPU s are used ({source.spent():,.0f} so far)")
     print(f"search {ledger.name}: up to {source.total} configurations, {len(found.configurations)}"
           f" asked, {runs} runs so far, on {workers} worker(s); {cfg.budget.steps:,} steps a "
-          f"run{budget}; {racing_text(rules, str(cfg.search.sampler))}", file=stream, flush=True)
+          f"run{source.budget_text()}; {racing_text(rules, str(cfg.search.sampler))}",
+          file=stream, flush=True)
     progress = Progress(ledger.name, max(runs + workers, 1), runs, stream, live,
                         budget=None if source.cpu_budget is None else source.used_text)
     source.progress = progress

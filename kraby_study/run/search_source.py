@@ -46,7 +46,7 @@ from kraby_study.run.recheck import (
 )
 from kraby_study.run.runner import CommandRun, Retrying, run_trials
 from kraby_study.run.sampling import directions, distributions, make_pruner, make_sampler
-from kraby_study.run.source import StudySource, requeue_orphans, retry_failed
+from kraby_study.run.source import BudgetedSource, requeue_orphans, retry_failed
 from kraby_study.store.ledger import StudyLedger
 from kraby_study.store.store import Store
 
@@ -95,7 +95,7 @@ class RunningTrial:
     """The CPU seconds it was projected to use when it was stopped for its cost."""
 
 
-class SearchSource(StudySource):
+class SearchSource(BudgetedSource):
     """Asks the sampler for trials until the study holds its total; prunes at checkpoints."""
 
     def __init__(self, ledger: StudyLedger, cfg: DictConfig) -> None:
@@ -113,13 +113,7 @@ class SearchSource(StudySource):
         self._explored = (self.cpu_budget is not None and bool(self.recheck)
                           and ledger.attrs.explored == self.cpu_budget)
 
-    def spent(self) -> float:
-        """CPU seconds the search has used: its ended trials', every attempt counted, what
-        the trials this command runs have used so far (a trial another machine runs counts
-        once it ends), and what asking the sampler for each trial cost."""
-        return spent_cpu(self.ledger.trials()) + self._running_cpu()
-
-    def _running_cpu(self) -> float:
+    def running_cpu(self) -> float:
         """CPU seconds the trials this command runs have used so far."""
         return sum(running.cpu for running in self._running.values())
 
@@ -142,14 +136,6 @@ class SearchSource(StudySource):
         ([`exploring`][kraby_study.run.search_source.SearchSource.exploring])."""
         return self._explored
 
-    def over_budget(self) -> bool:
-        """Whether the search has used its CPU budget (never without one)."""
-        return self.cpu_budget is not None and self.spent() >= self.cpu_budget
-
-    def used_text(self) -> str:
-        """What a progress line shows of the CPU budget: ``845 of 1,200 CPU s used``."""
-        return f"{self.spent():,.0f} of {self.cpu_budget or 0:,.0f} CPU s used"
-
     def exploring(self, trials: list[Any]) -> bool:
         """Whether the search still asks its sampler for new trials: its total is not reached
         and, with rechecks under a CPU budget, the budget holds what is spent, what the
@@ -168,7 +154,7 @@ class SearchSource(StudySource):
         if self._explored:
             return False
         reserved = reserve(trials, self.recheck, self.recheck_seeds)
-        self._explored = (spent_cpu(trials) + self._running_cpu() + self._to_spend(trials)
+        self._explored = (spent_cpu(trials) + self.running_cpu() + self._to_spend(trials)
                           + reserved >= self.cpu_budget)
         return not self._explored
 
@@ -410,7 +396,7 @@ def run_search(store: Store, cfg: DictConfig, executor: Executor, workers: int, 
     rechecks = recheck_text(cfg)
     print(f"search {ledger.name}: {source.total} trials, {done} done, {left} to run on "
           f"{slots} worker(s); {cfg.budget.seeds} seed(s) x {cfg.budget.steps:,} steps each, "
-          f"{cfg.search.sampler} sampler, {pruner_label(cfg)}{_budget_text(source)}"
+          f"{cfg.search.sampler} sampler, {pruner_label(cfg)}{source.budget_text()}"
           f"{'; ' + rechecks if rechecks else ''}", file=stream, flush=True)
     progress = Progress(ledger.name, source.total + source.recheck, done, stream, live,
                         budget=None if source.cpu_budget is None else source.used_text)
@@ -456,10 +442,3 @@ def _leaders_text(source: SearchSource) -> str:
         mark = "" if lead_attrs.recheck_of is not None else ", not rechecked"
         parts.append(f"{lead.trial.user_attrs.get('key')} {lead.score:.4g} ({seeds} seeds{mark})")
     return "leaders by all their seeds: " + "; ".join(parts)
-
-
-def _budget_text(source: SearchSource) -> str:
-    """The start line's CPU budget part: the budget and what is already spent."""
-    if source.cpu_budget is None:
-        return ""
-    return (f"; until {source.cpu_budget:,.0f} CPU s are used ({source.spent():,.0f} so far)")

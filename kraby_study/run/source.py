@@ -9,7 +9,7 @@ from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.records.attributes import TrialResult
-from kraby_study.records.stored import counted
+from kraby_study.records.stored import counted, spent_cpu
 from kraby_study.run.provenance import command_facts
 from kraby_study.store.ledger import StudyLedger
 
@@ -61,6 +61,40 @@ class StudySource:
     def counted(self) -> list[FrozenTrial]:
         """The trials that make up this command's part of the study (one attempt per run)."""
         return counted(self.ledger.trials())
+
+
+class BudgetedSource(StudySource):
+    """A search's source under ``search.cpu_budget``: what it has spent, whether the budget is
+    used, and how its progress lines and start line say so. Subclasses say what the runs this
+    command runs have used so far
+    ([`running_cpu`][kraby_study.run.source.BudgetedSource.running_cpu])."""
+
+    cpu_budget: float | None
+    """CPU seconds the search may use; None: no limit."""
+
+    def running_cpu(self) -> float:
+        """CPU seconds the trials this command runs have used so far."""
+        raise NotImplementedError
+
+    def spent(self) -> float:
+        """CPU seconds the search has used: its ended trials', every attempt counted, what
+        the trials this command runs have used so far (a trial another machine runs counts
+        once it ends), and what asking the sampler for each trial cost."""
+        return spent_cpu(self.ledger.trials()) + self.running_cpu()
+
+    def over_budget(self) -> bool:
+        """Whether the search has used its CPU budget (never without one)."""
+        return self.cpu_budget is not None and self.spent() >= self.cpu_budget
+
+    def used_text(self) -> str:
+        """What a progress line shows of the CPU budget: ``845 of 1,200 CPU s used``."""
+        return f"{self.spent():,.0f} of {self.cpu_budget or 0:,.0f} CPU s used"
+
+    def budget_text(self) -> str:
+        """The start line's CPU budget part: the budget and what is already spent."""
+        if self.cpu_budget is None:
+            return ""
+        return f"; until {self.cpu_budget:,.0f} CPU s are used ({self.spent():,.0f} so far)"
 
 
 def requeue_orphans(ledger: StudyLedger, stream: TextIO) -> None:
