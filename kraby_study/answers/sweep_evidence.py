@@ -107,6 +107,8 @@ class Sweep:
     race: StudyRace | None = None
     comparison: Comparison[int] | None = None
     """The study's one comparison: the summary's answers, the verdict and the selection."""
+    final_scores: dict[int, list[float]] = field(default_factory=dict)
+    """Per value index, the complete runs' final scores the comparison read, in run order."""
     reach: pd.DataFrame = field(default_factory=pd.DataFrame)
     """Per value, the mean env steps and seconds to the threshold over the seeds that reached
     it, with their intervals ([`reach_means`][kraby_study.decision.summary.reach_means])."""
@@ -325,5 +327,6 @@ def build_sweep(data: StudyData, options: Any = None) -> Sweep:
                  threshold_default=decided.threshold_default, untrained=decided.untrained,
                  bootstrap=decided.bootstrap, verdict=decided.verdict,
                  min_seeds=decided.comparison.min_seeds, race=decided.race,
-                 comparison=decided.comparison, failure_line=decided.failure_line,
+                 comparison=decided.comparison, final_scores=found.final,
+                 failure_line=decided.failure_line,
                  reach=decided.reach)

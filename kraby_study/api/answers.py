@@ -310,14 +310,12 @@ def read_answers(url: str, name: str, margin: float | None = None,
             raise StoreError(f"study {name!r} is a {data.kind.value}: its trials are not "
                              "answered against a best; read its runs")
         sweep = build_sweep(data, options)
-    complete = sweep.trials[sweep.trials["outcome"] == "complete"]
-    scores = {i: list(complete.loc[complete["value_index"] == i, "final_score"])
-              for i in range(len(sweep.values))}
     labels = dict(enumerate(sweep.labels))
     # The summary's rows carry the one selection the study's rule made from this comparison.
     selected = next((row.value for row in sweep.rows if row.selected), None)
-    return _answers(sweep.comparison, scores, labels, answers_name(ALPHA), study=data.name,
-                    parameter=sweep.parameter or None, rule=str(sweep.rule), selected=selected)
+    return _answers(sweep.comparison, sweep.final_scores, labels, answers_name(ALPHA),
+                    study=data.name, parameter=sweep.parameter or None, rule=str(sweep.rule),
+                    selected=selected)
 
 
 def read_studies(url: str) -> list[StudyInfo]:
