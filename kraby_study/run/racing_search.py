@@ -69,6 +69,8 @@ class RacingSource(BudgetedSource):
         super().__init__(ledger)
         self.cfg = cfg
         self.definition = ledger.attrs.definition
+        self.seed_base = int(self.definition.get("seed", 0))
+        """The seed of every configuration's first run; its i-th run trains seed_base + i."""
         self.total = int(cfg.search.trials)
         self.cpu_budget = search_cpu_budget(cfg)
         self.space = distributions(cfg)
@@ -128,7 +130,7 @@ class RacingSource(BudgetedSource):
     def _withdraw_left(self, found: RacingSearch, latest: dict[str, FrozenTrial]) -> bool:
         """End the queued runs of configurations that have left the race; True when a queued
         run of one still in it waits."""
-        base = int(self.definition.get("seed", 0))
+        base = self.seed_base
         standings = {c.number: c.standing.left for c in found.configurations}
         waiting = False
         for trial in latest.values():
@@ -146,7 +148,7 @@ class RacingSource(BudgetedSource):
         """Queue the run the race wants, or a new challenger's first run; returns the CPU
         seconds asking the sampler took (0 for a known configuration), None when nothing is
         wanted now."""
-        base = int(self.definition.get("seed", 0))
+        base = self.seed_base
         started: dict[int, set[int]] = {}
         for trial in latest.values():
             where = run_place(trial, base)
@@ -200,7 +202,7 @@ class RacingSource(BudgetedSource):
             return None
         config = key.split("-", 1)[0]
         spec = search_spec(self.cfg, self.ledger.name, key, trial_cfg, params)
-        index = seed - int(self.definition.get("seed", 0))
+        index = seed - self.seed_base
         spec = replace(spec, seed=seed, seeds=1, checkpoint_every=None,
                        label=short_label(params, config) + f" seed {index}")
         self.ledger.set_attrs(trial.number, TrialAttrs(
