@@ -32,7 +32,7 @@ import sys
 import tempfile
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -65,11 +65,14 @@ def full_result(seed: int) -> TrialResult:
 
 
 class StubPool:
-    """A Pool whose every trial returns at once: started (provenance), then the result."""
+    """A Pool whose every trial returns at once: started (provenance), then the result
+    (``result(spec)``; by default what a full-budget trial of the spec's seed returns)."""
 
-    def __init__(self, size: int, facts: dict[str, str]) -> None:
+    def __init__(self, size: int, facts: dict[str, str],
+                 result: Callable[[TrialSpec], TrialResult] | None = None) -> None:
         self.size = size
         self._facts = facts
+        self._result = result or (lambda spec: full_result(spec.seed))
         self._running: dict[int, TrialSpec] = {}
 
     def idle(self) -> int:
@@ -85,7 +88,7 @@ class StubPool:
         out: list[Event] = []
         for number, spec in self._running.items():
             out += [Event("started", number, self._facts),
-                    Event("result", number, full_result(spec.seed))]
+                    Event("result", number, self._result(spec))]
         self._running.clear()
         return out
 

@@ -9,7 +9,10 @@ server skip without KRABY_TEST_POSTGRES_URL.
 
 from __future__ import annotations
 
+import math
 import os
+import random
+import statistics
 import subprocess
 import sys
 from pathlib import Path
@@ -119,7 +122,8 @@ def test_benchmark_runs_at_smoke_size(script: str, args: list[str], expected: st
 
 def test_every_benchmark_is_smoke_tested_and_documented() -> None:
     scripts = {path.name for path in BENCHMARKS.glob("*.py")}
-    tested = {param.values[0] for param in SMOKE}
+    # bench_racing_sampler needs a store of measured runs: its own test writes one.
+    tested = {param.values[0] for param in SMOKE} | {"bench_racing_sampler.py"}
     assert scripts == tested
     pages = "".join(page.read_text() for page in (ROOT / "docs/benchmarks").glob("*.md")
                     if page.name != "index.md")
@@ -294,3 +298,72 @@ def test_experiment_still_starts(script: str, tmp_path: Path) -> None:
                             cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-2000:]
     assert f"`{script}`" in (ROOT / "experiments/README.md").read_text()
+
+
+def surrogate_data(url: str) -> None:
+    """A store of measured leg runs as searches store them (a trial's resolved settings, its
+    seeds' scores, its CPU): 40 configurations of the leg's search space, 2 seeds each, on a
+    landscape where the default observation costs 0.15 and a learning rate away from 1e-3
+    costs 0.05 a decade."""
+    import optuna
+
+    import kraby_study as ks
+    from kraby_study.plan.settings import resolved_settings
+    from kraby_study.plan.space import apply_params
+
+    cfg = ks.compose(["budget.steps=20480"], command="search").cfg
+    rng = random.Random(3)
+    study = optuna.create_study(study_name="measured", storage=url, direction="maximize")
+    for _ in range(40):
+        params = {"observation": rng.choice(["default", "with_tip", "sin_angles"]),
+                  "n_steps": rng.choice([32, 64, 128]), "nminibatches": rng.choice([1, 4, 8]),
+                  "n_epochs": rng.randint(1, 50), "gamma": rng.uniform(0.2, 0.99),
+                  "clip_range": rng.uniform(0.1, 0.4),
+                  "learning_rate": 10 ** rng.uniform(-4, -1), "gae_lambda": rng.uniform(0.8, 1),
+                  "ent_coef": 10 ** rng.uniform(-8, -1)}
+        settings = resolved_settings(apply_params(cfg, params))
+        mean = (-0.02 - 0.15 * (params["observation"] == "default")
+                - 0.05 * abs(math.log10(params["learning_rate"]) + 3))
+        scores = [mean + rng.gauss(0, 0.005) for _ in range(2)]
+        study.add_trial(optuna.trial.create_trial(
+            value=statistics.fmean(scores), user_attrs={
+                "settings": settings, "scores": scores, "steps": 20480,
+                "cpu_time": 2 * (0.5 + params["n_epochs"] / 50)}))
+
+
+@slow
+def test_racing_sampler_races_each_sampler_on_a_surrogate_of_the_measured_runs(
+        tmp_path: Path) -> None:
+    """The surrogate ranks configurations as the measured runs do, gives one configuration's
+    seed the same score whichever search asks (and another seed another), and each sampler's
+    racing search spends its CPU budget on it and is scored by its pick's surrogate mean."""
+    import csv
+
+    sys.path.insert(0, str(BENCHMARKS))
+    import bench_racing_sampler as bench
+
+    url = f"sqlite:///{tmp_path / 'measured.db'}"
+    surrogate_data(url)
+    runs = bench.measured_runs(url, 20480)
+    assert len(runs) == 40 and all(len(r.scores) == 2 for r in runs.values())
+    surrogate = bench.Surrogate(runs, trees=50)
+    rho, n = surrogate.cross_validated()
+    assert n == 40 and rho > 0.6
+    settings = next(iter(runs.values())).settings
+    assert surrogate.score(settings, 5, 0) == surrogate.score(settings, 5, 0)
+    assert surrogate.score(settings, 5, 0) != surrogate.score(settings, 6, 0)
+
+    out = tmp_path / "rows.csv"
+    result = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "bench_racing_sampler.py"), "--data", url,
+         "--cpu-budget", "30", "--repetitions", "1", "--samplers", "tpe", "random",
+         "--trees", "50", "--out", str(out)],
+        cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    assert result.returncode == 0, (result.stdout + result.stderr)[-3000:]
+    assert "bench_racing_sampler: tpe - random worth difference" in result.stdout
+    rows = list(csv.DictReader(out.open()))
+    assert [r["sampler"] for r in rows] == ["tpe", "random"]
+    lowest = min(surrogate.mean(r.settings) for r in runs.values())
+    for row in rows:
+        assert float(row["cpu"]) >= 30 and int(row["runs"]) >= 4
+        assert int(row["seeds"]) >= 4 and lowest - 0.01 <= float(row["worth"]) <= 0
