@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +31,14 @@ from kraby_study.plan.settings import resolved_settings
 from kraby_study.plan.space import apply_params
 from kraby_study.plan.spec import RaceRules, TrialSpec
 from kraby_study.records.attributes import TrialResult
-from kraby_study.records.stored import Outcome, counted, latest_by_key, parse_racing_key
+from kraby_study.records.stored import (
+    Failure,
+    Outcome,
+    counted,
+    failure,
+    latest_by_key,
+    parse_racing_key,
+)
 from kraby_study.run.racing_search import run_racing_search
 from kraby_study.store.store import opened
 
@@ -103,6 +110,33 @@ def test_the_race_is_replayed_in_the_order_the_runs_ended() -> None:
     assert state.standings[2].by == 1
 
 
+def diverged(config: int, seeds: range) -> list[RunEnd[int]]:
+    return [RunEnd(config, i, math.nan, 1.0, diverged=True) for i in seeds]
+
+
+def test_a_challenger_whose_runs_diverge_leaves_once_the_counts_show_it() -> None:
+    # The look's level: 0.05 over 5 looks, 0.01. 4 of 4 diverged against 0 of 5: one-sided
+    # Fisher exact p = 1/126 = 0.0079, worse; against 0 of 4 it is 1/70 = 0.014, so the
+    # challenger would race on, and at the incumbent's seed count it leaves below it.
+    state = intensify([0, 1], runs(0, 100.0, 5) + diverged(1, range(4)), RULES)
+    worse = state.standings[1]
+    assert (worse.left, worse.seeds, worse.diverged) == (Left.WORSE, 4, 4)
+    assert worse.p == pytest.approx(1 / 126)
+    two = intensify([0, 1], runs(0, 100.0, 6) + diverged(1, range(2))
+                    + runs(1, 100.0, 4)[2:], RULES)  # 2 of 4 against 0 of 6: p 0.13
+    assert two.standings[1].diverged == 0
+
+
+def test_an_incumbent_whose_runs_diverge_is_replaced_and_errors_are_no_evidence() -> None:
+    good = runs(1, 100.0, 4)
+    state = intensify([0, 1], diverged(0, range(5)) + good, RULES)
+    assert state.incumbent == 1 and state.standings[0].left == Left.REPLACED
+    assert state.standings[0].p == pytest.approx(1 / 126)
+    # The same runs failed by an error (a machine's fault, not the settings'): no answer.
+    errors = [RunEnd(0, i, math.nan, 1.0) for i in range(5)]
+    assert intensify([0, 1], errors + good, RULES).standings[1].left == Left.RACING
+
+
 def test_next_run_gives_first_seeds_side_by_side_then_one_at_a_time_and_caps_the_incumbent(
         ) -> None:
     rules = RaceRules(seeds=5, round_seeds=tuple(range(5)), min_seeds=4, alpha=0.05)
@@ -168,9 +202,11 @@ def good_start(cfg: Any) -> list[tuple[str, dict[str, Any]]]:
 
 
 def run_fake(workdir: Path, workers: int, *extra: str, db: str = "r.db",
-             starts: bool = True, url: str | None = None) -> tuple[InstantExecutor, str, Any]:
+             starts: bool = True, url: str | None = None,
+             result: Callable[[TrialSpec], TrialResult] = fake_result,
+             ) -> tuple[InstantExecutor, str, Any]:
     cfg = racing_cfg(workdir, *extra)
-    executor = InstantExecutor(fake_result)
+    executor = InstantExecutor(result)
     url = url or sqlite_url(workdir / db)
     out = io.StringIO()
     with opened(url) as store:
@@ -202,6 +238,25 @@ def test_a_challenger_that_cannot_learn_leaves_early_and_the_incumbent_earns_its
         ran = [seed for key, seed in submitted if key.startswith(config.key + "-")]
         assert sorted(ran) == [0, 1, 2, 3]
     assert "every configuration is asked and decided" in out
+
+
+def diverging_result(spec: TrialSpec) -> TrialResult:
+    """clip_range 0.3 diverges on every seed."""
+    if spec.settings["ppo"]["clip_range"] == 0.3:
+        return TrialResult(outcome=Outcome.FAILED, env_steps=spec.steps, cpu_time=1.0,
+                           failure=failure(Failure.DIVERGED, "NaN in the policy loss"))
+    return fake_result(spec)
+
+
+def test_a_challenger_whose_every_run_diverges_leaves_as_worse(workdir: Path) -> None:
+    executor, out, found = run_fake(workdir, 1, "search.trials=6", result=diverging_result)
+    bad = [c for c in found.configurations if c.params["clip_range"] == 0.3]
+    assert bad and found.incumbent.params["clip_range"] == 0.1
+    for config in bad:
+        assert config.standing.left == Left.WORSE and config.standing.diverged
+        assert config.seeds <= found.incumbent.seeds
+        assert (f"race: {config.key} worse than c0 at seed {config.standing.seeds}: "
+                f"{config.standing.seeds} of {config.standing.seeds} runs diverged, p") in out
 
 
 def test_a_racing_search_stores_and_replays_alike_on_each_backend(

@@ -22,8 +22,10 @@ from kraby_study.decision.robust import iqm
 from kraby_study.plan.spec import RaceRules
 from kraby_study.records.attributes import StudyKind, TrialAttrs
 from kraby_study.records.stored import (
+    Failure,
     Outcome,
     StoredTrial,
+    failure_kind,
     latest_by_key,
     outcome,
     parse_racing_key,
@@ -95,6 +97,8 @@ class RacedConfiguration:
         if s.left == Left.INCUMBENT:
             return "incumbent" + (" (replaced its predecessor as equivalent and cheaper)"
                                   if s.cheaper else "")
+        if s.left == Left.WORSE and s.diverged:
+            return f"worse than {by} at seed {s.seeds}: {s.diverged} of {s.seeds} runs diverged{p}"
         if s.left == Left.WORSE:
             return f"worse than {by} at seed {s.seeds}{p}"
         if s.left == Left.EQUIVALENT:
@@ -187,8 +191,9 @@ def racing_search(definition: Mapping[str, Any], trials: Sequence[StoredTrial]
         else:
             continue
         cpu = math.nan if attrs.cpu_time is None else float(attrs.cpu_time)
+        diverged = failure_kind(attrs.failure) == Failure.DIVERGED
         ends.append(((attrs.race_order if attrs.race_order is not None else 1 << 62, trial.number),
-                     RunEnd(config, index, value, cpu)))
+                     RunEnd(config, index, value, cpu, diverged=diverged)))
     order = sorted(params)
     state = intensify(order, [end for _, end in sorted(ends, key=lambda e: e[0])], rules,
                       refused)

@@ -251,6 +251,9 @@ class RunEnd(Generic[K]):
     """Its final score; NaN for a run that ended without one (failed)."""
     cpu: float = math.nan
     """Its CPU seconds."""
+    diverged: bool = False
+    """It failed because training diverged (not an error, which says nothing of its
+    settings)."""
 
 
 @dataclass(frozen=True)
@@ -268,6 +271,8 @@ class Standing(Generic[K]):
     that replaced it."""
     cheaper: bool = False
     """It replaced the incumbent as equivalent and cheaper."""
+    diverged: int = 0
+    """Runs of its first ``seeds`` that diverged, when their count decided (0 otherwise)."""
 
 
 @dataclass
@@ -283,6 +288,8 @@ class Intensification(Generic[K]):
     """Per configuration, its ended runs' final scores by seed index (NaN: failed)."""
     cpu: dict[K, list[float]]
     """Per configuration, its ended runs' CPU seconds."""
+    diverged: dict[K, set[int]] = field(default_factory=dict)
+    """Per configuration, the seed indices whose runs diverged."""
     looks: dict[K, int] = field(default_factory=dict)
     """Per configuration, the leading seeds its latest look read."""
 
@@ -404,6 +411,10 @@ def intensify(order: Sequence[K], ends: Sequence[RunEnd[K]], rules: RaceRules,
             continue
         state.scores[end.config][end.index] = end.score
         state.cpu[end.config].append(end.cpu)
+        if end.diverged:
+            state.diverged.setdefault(end.config, set()).add(end.index)
+        else:
+            state.diverged.get(end.config, set()).discard(end.index)
         if state.standings[end.config].left == Left.RACING:
             _look(state, end.config)
     return state
@@ -419,6 +430,8 @@ def _look(state: Intensification[K], config: K) -> None:
         return
     state.looks[config] = k
     m = state.ended(inc)
+    if _diverging(state, config, k, inc, m):
+        return
     ch_scores = [state.scores[config][i] for i in range(k)]
     inc_scores = [state.scores[inc][i] for i in range(m)]
     ch, inc_answer, p = challenge(inc_scores, ch_scores, state.rules)
@@ -438,6 +451,28 @@ def _look(state: Intensification[K], config: K) -> None:
             _replace(state, config, math.nan)
         else:
             state.standings[config] = Standing(Left.BELOW, seeds=k, by=inc)
+
+
+def _diverging(state: Intensification[K], config: K, k: int, inc: K, m: int) -> bool:
+    """Whether the diverged runs decide this look: the configuration whose runs diverge more
+    often (one-sided Fisher exact test on the diverged counts of the challenger's first ``k``
+    and the incumbent's first ``m`` runs, at the look's level) loses, the challenger as worse,
+    the incumbent replaced. A diverged run has no score, so the IQMs cannot see it."""
+    from scipy import stats  # only here: reading where studies stand loads no scipy.stats
+    ch = len({i for i in state.diverged.get(config, set()) if i < k})
+    held = len({i for i in state.diverged.get(inc, set()) if i < m})
+    if not ch and not held:
+        return False
+    table = [[ch, k - ch], [held, m - held]]
+    p_ch = float(stats.fisher_exact(table, alternative="greater").pvalue)
+    if p_ch < state.rules.look_alpha:
+        state.standings[config] = Standing(Left.WORSE, seeds=k, p=p_ch, by=inc, diverged=ch)
+        return True
+    p_inc = float(stats.fisher_exact(table, alternative="less").pvalue)
+    if p_inc < state.rules.look_alpha:
+        _replace(state, config, p_inc)
+        return True
+    return False
 
 
 def _replace(state: Intensification[K], config: K, p: float, cheaper: bool = False) -> None:
