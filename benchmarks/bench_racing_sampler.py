@@ -29,6 +29,9 @@ run ends at once with the surrogate's score.
   see the same score (common random numbers);
 - a run's CPU seconds: a second forest on the same coordinates, fitted on log CPU s per seed.
 
+Pruned, failed and diverged runs are not in the data, and every surrogate run completes: the
+benchmark says nothing of how a sampler meets settings that diverge.
+
 **The measurement:** for each repetition r and sampler, one racing search of ``--cpu-budget``
 CPU seconds (``search.sampler``, ``search.seed=r``, ``seed=100r``, from the documented starting
 point ``search.enqueue=[start]``, the incumbent's cap ``budget.seeds=--cap``, 2 workers, as
