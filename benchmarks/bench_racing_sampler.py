@@ -1,9 +1,12 @@
-"""Benchmark: which sampler a racing search should ask its challengers from, on a surrogate of
-the leg.
+"""Benchmark: which sampler a racing search should ask its challengers from, and by which rule
+they leave, on a surrogate of the leg.
 
 Run: python benchmarks/bench_racing_sampler.py --data sqlite:///methods.db --cpu-budget 1592
-         [--repetitions 20] [--samplers tpe gp random] [--cap 10] [--steps 20480]
+         [--repetitions 20] [--arms tpe gp random] [--cap 10] [--steps 20480]
          [--trees 200] [--out racing_sampler.csv]
+
+An arm is a sampler (``tpe``, ``gp``, ``random``), or a sampler and overrides of the racing
+search joined by ``+``: ``tpe+racing.below=look`` races TPE's challengers under another rule.
 
 A racing search spends most of its CPU training runs, so comparing its samplers on the leg
 itself would cost hours per repetition. This benchmark races them on a surrogate instead
@@ -32,7 +35,7 @@ run ends at once with the surrogate's score.
 Pruned, failed and diverged runs are not in the data, and every surrogate run completes: the
 benchmark says nothing of how a sampler meets settings that diverge.
 
-**The measurement:** for each repetition r and sampler, one racing search of ``--cpu-budget``
+**The measurement:** for each repetition r and arm, one racing search of ``--cpu-budget``
 CPU seconds (``search.sampler``, ``search.seed=r``, ``seed=100r``, from the documented starting
 point ``search.enqueue=[start]``, the incumbent's cap ``budget.seeds=--cap``, 2 workers, as
 benchmarks/bench_methods.py runs the racing arm), stored in a fresh SQLite file. Its pick is
@@ -40,14 +43,14 @@ its incumbent; the pick's worth is the surrogate's mean score of it (no noise: w
 is worth, not what its seeds said). The CPU a sampler spends asking counts against the budget
 as in a real search.
 
-The table gives per sampler the mean worth of its picks with a 95 % Student-t interval over
+The table gives per arm the mean worth of its picks with a 95 % Student-t interval over
 repetitions, the configurations asked and the seeds the incumbent earned; then, for each pair
-of samplers, the mean paired difference and the exact two-sided Wilcoxon signed-rank p
+of arms, the mean paired difference and the exact two-sided Wilcoxon signed-rank p
 (scipy; zero differences dropped), alpha 0.05, n the repetitions.
 ``--out`` gets one row per search.
 
-Each pair's line reads ``bench_racing_sampler: <first> - <second> worth difference D (95 % t
-CI [lo, hi], n repetitions), exact two-sided Wilcoxon p P``.
+Each pair's line reads ``bench_racing_sampler: <first arm> - <second arm> worth difference D
+(95 % t CI [lo, hi], n repetitions), exact two-sided Wilcoxon p P``.
 """
 
 from __future__ import annotations
@@ -58,6 +61,7 @@ import hashlib
 import io
 import json
 import math
+import re
 import statistics
 import tempfile
 import time
@@ -77,6 +81,7 @@ from sklearn.model_selection import KFold
 import kraby_study as ks
 from kraby_study.answers.racing_search import racing_search
 from kraby_study.api.optuna_search import search_plan
+from kraby_study.errors import ConfigError
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.records.attributes import TrialResult
 from kraby_study.records.stored import Outcome
@@ -89,6 +94,7 @@ FEATURES = [*(f"obs={o}" for o in OBSERVATIONS), "log2 n_steps", "log2 minibatch
             "n_epochs", "gamma", "clip_range", "gae_lambda", "log10 learning_rate",
             "log10 ent_coef"]
 NOISE_BINS = 4
+SAMPLERS = ("tpe", "gp", "random")
 
 
 def coordinates(settings: Mapping[str, Any]) -> list[float]:
@@ -217,7 +223,7 @@ class Surrogate:
 class Search:
     """What one racing search on the surrogate picked, and what it cost."""
 
-    sampler: str
+    arm: str
     repetition: int
     worth: float
     """The surrogate's mean score of the pick."""
@@ -232,9 +238,11 @@ class Search:
     pick: str
 
 
-def run_search(surrogate: Surrogate, sampler: str, repetition: int, cpu_budget: float,
+def run_search(surrogate: Surrogate, arm: str, repetition: int, cpu_budget: float,
                cap: int, steps: int, folder: Path) -> Search:
-    """One racing search of ``cpu_budget`` CPU s on the surrogate, in a fresh store."""
+    """One racing search of ``cpu_budget`` CPU s on the surrogate, in a fresh store; ``arm``
+    is a sampler, then any overrides, joined by ``+``."""
+    sampler, *overrides = arm.split("+")
 
     def result(spec: TrialSpec) -> TrialResult:
         score = surrogate.score(spec.settings, spec.seed, repetition)
@@ -242,14 +250,14 @@ def run_search(surrogate: Surrogate, sampler: str, repetition: int, cpu_budget: 
         return TrialResult(outcome=Outcome.COMPLETE, final_score=score, train_reward=score,
                            scores=[score], env_steps=steps, wall_time=cpu, cpu_time=cpu)
 
-    name = f"surrogate-{sampler}-r{repetition}"
+    name = f"surrogate-{re.sub(r'[^A-Za-z0-9_.-]', '_', arm)}-r{repetition}"
     url = f"sqlite:///{folder / name}.db"
     config = ks.compose([
         "budget=quick", f"budget.steps={steps}", f"budget.seeds={cap}", "save_models=false",
         "racing.enabled=true", f"search.sampler={sampler}", f"search.seed={repetition}",
         f"seed={100 * repetition}", "search.enqueue=[start]", f"search.cpu_budget={cpu_budget}",
-        "search.trials=100000", f"search.name={name}", f"storage={url}", "workers=2"],
-        command="search")
+        "search.trials=100000", f"search.name={name}", f"storage={url}", "workers=2",
+        *overrides], command="search")
     plan = search_plan(config)
     facts = trial_facts({"kind": "leg"})
     executor = StubExecutor(lambda size: StubPool(size, facts, result))
@@ -263,7 +271,7 @@ def run_search(surrogate: Surrogate, sampler: str, repetition: int, cpu_budget: 
     pick = found.incumbent
     cpu = sum(float(t.user_attrs.get("cpu_time") or 0.0) for t in trials)
     ask = sum(float(t.user_attrs.get("suggest_cpu") or 0.0) for t in trials)
-    return Search(sampler=sampler, repetition=repetition, worth=surrogate.mean(pick.settings),
+    return Search(arm=arm, repetition=repetition, worth=surrogate.mean(pick.settings),
                   iqm=pick.iqm, seeds=pick.seeds, configurations=len(found.configurations),
                   runs=len(trials), cpu=cpu + ask, ask_cpu=ask, pick=pick.key)
 
@@ -272,17 +280,17 @@ def fmt(x: float) -> str:
     return f"{x:.4g}"
 
 
-def table(searches: Sequence[Search], samplers: Sequence[str]) -> list[str]:
-    """Per sampler: mean worth [95 % t interval], configurations, incumbent's seeds, CPU."""
-    lines = ["| sampler | searches | mean worth of the pick [95 % t CI] | configurations asked "
+def table(searches: Sequence[Search], arms: Sequence[str]) -> list[str]:
+    """Per arm: mean worth [95 % t interval], configurations, incumbent's seeds, CPU."""
+    lines = ["| arm | searches | mean worth of the pick [95 % t CI] | configurations asked "
              "(mean) | incumbent's seeds (mean) | CPU s (mean) | asking CPU s (mean) |",
              "|---|---|---|---|---|---|---|"]
-    for sampler in samplers:
-        mine = [s for s in searches if s.sampler == sampler]
+    for arm in arms:
+        mine = [s for s in searches if s.arm == arm]
         worth = [s.worth for s in mine]
         low, high = t_interval(worth)
         lines.append(
-            f"| {sampler} | {len(mine)} | {fmt(statistics.fmean(worth))} [{fmt(low)}, "
+            f"| {arm} | {len(mine)} | {fmt(statistics.fmean(worth))} [{fmt(low)}, "
             f"{fmt(high)}] | {statistics.fmean(s.configurations for s in mine):.1f} | "
             f"{statistics.fmean(s.seeds for s in mine):.1f} | "
             f"{statistics.fmean(s.cpu for s in mine):,.0f} | "
@@ -291,8 +299,8 @@ def table(searches: Sequence[Search], samplers: Sequence[str]) -> list[str]:
 
 
 def paired(searches: Sequence[Search], first: str, second: str) -> str:
-    """The paired worth difference of two samplers over repetitions, with its test."""
-    by = {(s.sampler, s.repetition): s.worth for s in searches}
+    """The paired worth difference of two arms over repetitions, with its test."""
+    by = {(s.arm, s.repetition): s.worth for s in searches}
     reps = sorted(r for (name, r) in by if name == first and (second, r) in by)
     diffs = [by[(first, r)] - by[(second, r)] for r in reps]
     low, high = t_interval(diffs)
@@ -310,16 +318,27 @@ def parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--cpu-budget", type=float, required=True,
                         help="CPU seconds each racing search may use")
     parser.add_argument("--repetitions", type=int, default=20)
-    parser.add_argument("--samplers", nargs="+", default=["tpe", "gp", "random"],
-                        choices=["tpe", "gp", "random"])
+    parser.add_argument("--arms", nargs="+", default=["tpe", "gp", "random"],
+                        help="SAMPLER or SAMPLER+KEY=VALUE[+KEY=VALUE ...] (tpe, gp, random)")
     parser.add_argument("--cap", type=int, default=10, help="the incumbent's most seeds")
     parser.add_argument("--steps", type=int, default=20480, help="steps a run of --data")
     parser.add_argument("--trees", type=int, default=200)
     parser.add_argument("--out", default="racing_sampler.csv")
     args = parser.parse_args(argv)
-    if args.repetitions < 1 or args.cpu_budget <= 0 or args.cap < 4 or len(args.samplers) < 2:
+    if args.repetitions < 1 or args.cpu_budget <= 0 or args.cap < 4 or len(args.arms) < 2:
         parser.error("needs --repetitions >= 1, --cpu-budget > 0, --cap >= 4 (the race's "
-                     "first look) and 2 or more --samplers")
+                     "first look) and 2 or more --arms")
+    for arm in args.arms:
+        sampler, *overrides = arm.split("+")
+        if sampler not in SAMPLERS or any("=" not in o for o in overrides):
+            parser.error(f"arm {arm!r}: a sampler ({', '.join(SAMPLERS)}), then any "
+                         "+KEY=VALUE overrides")
+    try:  # every arm's config composes before anything is fitted or run
+        for arm in args.arms:
+            ks.compose(["racing.enabled=true", f"budget.seeds={args.cap}",
+                        *arm.split("+")[1:]], command="search")
+    except ConfigError as err:
+        parser.error(str(err))
     return args
 
 
@@ -339,12 +358,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     searches: list[Search] = []
     with tempfile.TemporaryDirectory() as folder:
         for repetition in range(args.repetitions):
-            for sampler in args.samplers:
+            for arm in args.arms:
                 began = time.perf_counter()
-                found = run_search(surrogate, sampler, repetition, args.cpu_budget, args.cap,
+                found = run_search(surrogate, arm, repetition, args.cpu_budget, args.cap,
                                    args.steps, Path(folder))
                 searches.append(found)
-                print(f"r{repetition} {sampler}: pick {found.pick} worth {fmt(found.worth)} "
+                print(f"r{repetition} {arm}: pick {found.pick} worth {fmt(found.worth)} "
                       f"(IQM {fmt(found.iqm)} over {found.seeds} seeds), "
                       f"{found.configurations} configurations, {found.runs} runs, "
                       f"{found.cpu:,.0f} CPU s ({time.perf_counter() - began:.0f} s here)",
@@ -353,11 +372,11 @@ def main(argv: Sequence[str] | None = None) -> None:
         writer = csv.DictWriter(handle, fieldnames=list(Search.__dataclass_fields__))
         writer.writeheader()
         writer.writerows(s.__dict__ for s in searches)
-    for line in table(searches, args.samplers):
+    for line in table(searches, args.arms):
         print(line)
-    samplers = args.samplers
-    for i, first in enumerate(samplers):
-        for second in samplers[i + 1:]:
+    arms = args.arms
+    for i, first in enumerate(arms):
+        for second in arms[i + 1:]:
             print(paired(searches, first, second))
 
 

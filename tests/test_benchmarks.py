@@ -335,8 +335,9 @@ def surrogate_data(url: str) -> None:
 def test_racing_sampler_races_each_sampler_on_a_surrogate_of_the_measured_runs(
         tmp_path: Path) -> None:
     """The surrogate ranks configurations as the measured runs do, gives one configuration's
-    seed the same score whichever search asks (and another seed another), and each sampler's
-    racing search spends its CPU budget on it and is scored by its pick's surrogate mean."""
+    seed the same score whichever search asks (and another seed another), and each arm's
+    racing search (a sampler, with overrides after +) spends its CPU budget on it and is
+    scored by its pick's surrogate mean; a bad arm is refused in one line before any work."""
     import csv
 
     sys.path.insert(0, str(BENCHMARKS))
@@ -356,14 +357,24 @@ def test_racing_sampler_races_each_sampler_on_a_surrogate_of_the_measured_runs(
     out = tmp_path / "rows.csv"
     result = subprocess.run(
         [sys.executable, str(BENCHMARKS / "bench_racing_sampler.py"), "--data", url,
-         "--cpu-budget", "30", "--repetitions", "1", "--samplers", "tpe", "random",
+         "--cpu-budget", "30", "--repetitions", "1", "--arms", "tpe",
+         "random+racing.below=look",
          "--trees", "50", "--out", str(out)],
         cwd=tmp_path, capture_output=True, text=True, timeout=900)
     assert result.returncode == 0, (result.stdout + result.stderr)[-3000:]
-    assert "bench_racing_sampler: tpe - random worth difference" in result.stdout
+    assert ("bench_racing_sampler: tpe - random+racing.below=look worth difference"
+            in result.stdout)
     rows = list(csv.DictReader(out.open()))
-    assert [r["sampler"] for r in rows] == ["tpe", "random"]
+    assert [r["arm"] for r in rows] == ["tpe", "random+racing.below=look"]
     lowest = min(surrogate.mean(r.settings) for r in runs.values())
     for row in rows:
         assert float(row["cpu"]) >= 30 and int(row["runs"]) >= 4
         assert int(row["seeds"]) >= 4 and lowest - 0.01 <= float(row["worth"]) <= 0
+    for arm, message in [("annealing", "arm 'annealing': a sampler (tpe, gp, random)"),
+                         ("tpe+racing.below=soon", "racing.below must be one of cap, look")]:
+        bad = subprocess.run(
+            [sys.executable, str(BENCHMARKS / "bench_racing_sampler.py"), "--data", url,
+             "--cpu-budget", "30", "--arms", "tpe", arm, "--out", str(tmp_path / "no.csv")],
+            cwd=tmp_path, capture_output=True, text=True, timeout=300)
+        assert bad.returncode == 2 and message in bad.stderr
+        assert not (tmp_path / "no.csv").exists()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -100,6 +101,26 @@ def test_undecided_at_the_incumbents_seeds_the_higher_iqm_on_common_seeds_wins(
     assert (state.incumbent == 1) is replaces
     if not replaces:
         assert state.standings[1].left == Left.BELOW and state.standings[1].seeds == 4
+
+
+def test_below_at_a_look_stops_a_noisy_challenger_far_below_that_no_test_shows_worse(
+        ) -> None:
+    # A challenger with widely spread scores far below the incumbent (the leg's c15): the
+    # comparison gives no answer at 4 seeds, so at the cap rule it races on; at the look rule
+    # it leaves below at its first look.
+    incumbent = [-0.047, -0.055, -0.061, -0.049, -0.05, -0.056, -0.052, -0.071, -0.049, -0.053]
+    spread = [-0.233, -0.229, -0.656, -0.342]
+    ends = (runs(0, 0.0, 10, noise=incumbent) + runs(1, 0.0, 4, noise=spread))
+    rules = RaceRules(seeds=10, round_seeds=tuple(range(10)), min_seeds=4, alpha=0.05,
+                      margin=0.2)
+    assert intensify([0, 1], ends, rules).standings[1].left == Left.RACING
+    look = replace(rules, below="look")
+    below = intensify([0, 1], ends, look).standings[1]
+    assert (below.left, below.seeds, below.by) == (Left.BELOW, 4, 0)
+    # Above the incumbent on the common seeds, it races on to the incumbent's count.
+    above = runs(0, 0.0, 10, noise=incumbent) + runs(1, 0.0, 4, noise=[-0.04, -0.3, -0.045,
+                                                                        -0.03])
+    assert intensify([0, 1], above, look).standings[1].left == Left.RACING
 
 
 def test_the_race_is_replayed_in_the_order_the_runs_ended() -> None:
@@ -277,7 +298,8 @@ def test_a_search_run_again_runs_nothing_and_an_extended_one_asks_as_one_run_wou
     assert [c.params for c in split.configurations] == [c.params for c in whole.configurations]
 
 
-@pytest.mark.parametrize("changed", [["compare.margin=0.1"], ["racing.enabled=false"]])
+@pytest.mark.parametrize("changed", [["compare.margin=0.1"], ["racing.enabled=false"],
+                                     ["racing.below=look"]])
 def test_a_racing_search_is_never_resumed_at_other_rules_nor_unraced(
         workdir: Path, capsys: pytest.CaptureFixture[str], changed: list[str]) -> None:
     run_fake(workdir, 1, "search.trials=2")
@@ -338,6 +360,7 @@ def test_dry_run_says_what_the_racing_search_would_do_and_writes_nothing(
     (["--pruner", "wilcoxon"], "--racing stops configurations by its race: drop --pruner"),
     (["--trial-share", "0.5", "--cpu-budget", "100"], "drop --trial-share"),
     (["racing.min_seeds=5"], "racing.min_seeds (5) must not exceed budget.seeds (4)"),
+    (["racing.below=soon"], "racing.below must be one of cap, look, got 'soon'"),
 ])
 def test_bad_racing_search_input_is_one_line_and_stores_nothing(
         workdir: Path, capsys: pytest.CaptureFixture[str], extra: list[str],
@@ -345,6 +368,22 @@ def test_bad_racing_search_input_is_one_line_and_stores_nothing(
     racing_cfg(workdir)
     err = refused_before_work(workdir, capsys, "optuna", "--racing", *TINY_RACE, *extra)
     assert message in err
+
+
+def test_below_at_a_look_is_refused_on_a_race_of_values(
+        workdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    err = refused_before_work(workdir, capsys, "run", "study=gamma", *TINY, "budget.seeds=4",
+                              "--racing", "racing.below=look")
+    assert "racing.below=look applies to a racing search (optuna --racing) only" in err
+
+
+def test_a_racing_search_stores_below_at_a_look_and_its_start_line_says_so(
+        workdir: Path) -> None:
+    _, out, found = run_fake(workdir, 1, "search.trials=3", "racing.below=look")
+    assert found.rules.below == "look"
+    assert "undecided, it leaves at any look (racing.below=look)" in out
+    _, out, found = run_fake(workdir, 1, "search.trials=3", db="cap.db")
+    assert found.rules.below == "cap" and "at the incumbent's seed count" in out
 
 
 def test_the_api_runs_a_racing_search_and_best_reads_its_incumbent(workdir: Path) -> None:

@@ -289,6 +289,10 @@ class RacingConfig:
     paired: bool = False
     """Compare values on the seeds they share (seeds as blocks) instead of each value's seeds
     apart; pays where a seed moves every value's score alike."""
+    below: str = "cap"
+    """A racing search's challenger with no answer yet and an IQM below the incumbent's on
+    their common seeds leaves: at the incumbent's seed count (``cap``) or at any look
+    (``look``, SMAC's rule, without the comparison's error control)."""
 
 
 @dataclass

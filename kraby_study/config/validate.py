@@ -263,6 +263,8 @@ def validate_racing(racing: DictConfig, seeds: int | None = None,
     ``seeds`` the most seeds a value gets (named ``where``), at most that."""
     alpha = float(racing.alpha)
     _require(0 < alpha <= 0.5, f"racing.alpha must be in (0, 0.5], got {racing.alpha}")
+    _require(str(racing.below) in BELOW_RULES,
+             f"racing.below must be one of {', '.join(BELOW_RULES)}, got {racing.below!r}")
     _require(int(racing.min_seeds) >= ANSWER_FROM,
              f"racing.min_seeds must be at least {ANSWER_FROM} (no value is answered worse or "
              f"equivalent with fewer seeds), got {racing.min_seeds}")
@@ -271,6 +273,9 @@ def validate_racing(racing: DictConfig, seeds: int | None = None,
                  f"racing.min_seeds ({racing.min_seeds}) must not exceed {where} ({seeds}), "
                  "the most seeds a value gets")
 
+
+BELOW_RULES = ("cap", "look")
+"""When a racing search's challenger below the incumbent on their common seeds leaves."""
 
 EXECUTORS = ("local", "ray")
 

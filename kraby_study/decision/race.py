@@ -445,12 +445,12 @@ def _look(state: Intensification[K], config: K) -> None:
             _replace(state, config, p, cheaper=True)
         else:
             state.standings[config] = Standing(Left.EQUIVALENT, seeds=k, p=p, by=inc)
-    elif k >= m:
+    elif k >= m or state.rules.below == "look":
         n = min(k, m)
-        if _iqm(ch_scores[:n]) > _iqm(inc_scores[:n]):
-            _replace(state, config, math.nan)
-        else:
+        if _iqm(ch_scores[:n]) <= _iqm(inc_scores[:n]):
             state.standings[config] = Standing(Left.BELOW, seeds=k, by=inc)
+        elif k >= m:
+            _replace(state, config, math.nan)
 
 
 def _diverging(state: Intensification[K], config: K, k: int, inc: K, m: int) -> bool:

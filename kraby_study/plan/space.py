@@ -154,17 +154,20 @@ def search_race_rules(cfg: DictConfig) -> RaceRules | None:
     alpha spent over them, ``compare.margin``, and ``budget.seeds`` the most seeds any
     configuration gets (the incumbent's cap); None for a search that does not race."""
     seeds = [int(cfg.seed) + i for i in range(int(cfg.budget.seeds))]
-    return race_rules(cfg, seeds, "budget.seeds") if racing(cfg) else None
+    return race_rules(cfg, seeds, "budget.seeds", search=True) if racing(cfg) else None
 
 
 def racing_text(rules: RaceRules, sampler: str) -> str:
     """A racing search as its start line and dry run name it."""
+    below = ("at any look (racing.below=look)" if rules.below == "look"
+             else "at the incumbent's seed count")
     return (f"racing search: {sampler} sampler asks each challenger, which trains "
             f"{rules.min_seeds} seeds side by side, then one at a time against the incumbent; "
             f"it leaves once shown worse by more than compare.margin {rules.margin:g} (or "
             f"equivalent and not cheaper), replaces it once shown better (or equivalent and "
             f"cheaper in CPU s per run); alpha {rules.alpha:g} spent over {rules.looks} looks "
-            f"({rules.look_alpha:.3g} each){', paired by seed' if rules.paired else ''}; the "
+            f"({rules.look_alpha:.3g} each){', paired by seed' if rules.paired else ''}; "
+            f"undecided, it leaves {below} if its IQM on the common seeds is not higher; the "
             f"incumbent earns a seed whenever no challenger wants one, up to {rules.seeds} "
             "(budget.seeds)")
 

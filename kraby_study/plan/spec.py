@@ -110,6 +110,9 @@ class RaceRules:
     """``compare.margin`` when the race began: a value shown within it of the look's best
     leaves as equivalent, one shown below the best by more than it as worse; 0: only values
     shown worse leave (races before margins)."""
+    below: str = "cap"
+    """A racing search's challenger with no answer and an IQM below the incumbent's on their
+    common seeds leaves at the incumbent's seed count (``cap``) or at any look (``look``)."""
 
     @property
     def looks(self) -> int:
@@ -141,7 +144,8 @@ class RaceRules:
         another margin is a changed definition, refused."""
         return {"seeds": self.seeds, "min_seeds": self.min_seeds, "alpha": self.alpha,
                 "round_seeds": list(self.round_seeds), **({"paired": True} if self.paired else {}),
-                **({"margin": self.margin} if self.margin > 0 else {})}
+                **({"margin": self.margin} if self.margin > 0 else {}),
+                **({"below": self.below} if self.below != "cap" else {})}
 
     @classmethod
     def of(cls, definition: dict[str, Any]) -> RaceRules | None:
@@ -153,7 +157,8 @@ class RaceRules:
                    round_seeds=tuple(int(s) for s in stored["round_seeds"]),
                    min_seeds=int(stored["min_seeds"]), alpha=float(stored["alpha"]),
                    paired=bool(stored.get("paired", False)),
-                   margin=float(stored.get("margin", 0.0)))
+                   margin=float(stored.get("margin", 0.0)),
+                   below=str(stored.get("below", "cap")))
 
 
 @dataclass(frozen=True)
