@@ -73,7 +73,7 @@ from typing import Any
 import numpy as np
 import optuna
 from bench_head import StubExecutor, StubPool
-from bench_search import t_interval
+from bench_search import signed_rank, t_interval
 from scipy import stats
 from sklearn.ensemble import RandomForestRegressor
 from sklearn.model_selection import KFold
@@ -304,9 +304,7 @@ def paired(searches: Sequence[Search], first: str, second: str) -> str:
     reps = sorted(r for (name, r) in by if name == first and (second, r) in by)
     diffs = [by[(first, r)] - by[(second, r)] for r in reps]
     low, high = t_interval(diffs)
-    left = [d for d in diffs if d != 0]
-    p = (float(stats.wilcoxon(left, alternative="two-sided", method="exact").pvalue)
-         if left else 1.0)
+    p, _ = signed_rank(diffs, "two-sided")
     return (f"bench_racing_sampler: {first} - {second} worth difference "
             f"{fmt(statistics.fmean(diffs))} (95 % t CI [{fmt(low)}, {fmt(high)}], "
             f"{len(diffs)} repetitions), exact two-sided Wilcoxon p {p:.3g}")
