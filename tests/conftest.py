@@ -223,13 +223,18 @@ def kill_when(predicate: Callable[[], bool], proc: subprocess.Popen[str],
     (SIGSTOP), and the signal is sent only if that one finds it too: what the predicate read
     is then what the signal meets, no trial ending between the look and the kill however
     loaded the machine. A stopped look the writer's lock refuses (SQLite, the command stopped
-    mid-commit) lets the command go on and looks again. Fails as :func:`wait_for` does.
+    mid-commit) lets the command go on and looks again. Fails as :func:`wait_for` does, and
+    at once if the command has ended by the time the point is found.
     """
     from processes import descendants
 
     deadline = time.monotonic() + timeout
     while True:
         wait_for(predicate, timeout=max(deadline - time.monotonic(), 0.0), proc=proc)
+        if proc.poll() is not None:  # it ended after the look: the point was passed, not met
+            out = proc.stdout.read() if proc.stdout else ""
+            raise AssertionError(f"the command ended (exit {proc.returncode}) before it could be "
+                                 f"signalled at the point looked for:\n{out}")
         group = [proc.pid, *descendants([proc.pid])]
         _signal_all(group, signal.SIGSTOP)
         try:

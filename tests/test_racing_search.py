@@ -403,14 +403,16 @@ def test_the_api_runs_a_racing_search_and_best_reads_its_incumbent(workdir: Path
 def test_a_killed_racing_search_continues_where_it_stopped(workdir: Path) -> None:
     racing_cfg(workdir)
     db = sqlite_url(workdir / "k.db")
-    args = ["optuna", "--racing", "search=fake", *TINY, "budget.seeds=5", "search.trials=3",
-            "workers=2", f"storage={db}"]
+    # runs of about a second (4,096 steps): the kill comes with most of the runs still to go
+    args = ["optuna", "--racing", "search=fake", *TINY, "budget.steps=4096",
+            "budget.curve_every=512", "budget.seeds=5", "search.trials=3", "workers=2",
+            f"storage={db}"]
 
     def complete() -> int:
         return sum(t.state == TrialState.COMPLETE for t in load(db, "fake").get_trials())
 
     proc = spawn_cli(*args, cwd=workdir)
-    kill_when(lambda: has_study(db, "fake") and complete() >= 5, proc)
+    kill_when(lambda: has_study(db, "fake") and complete() >= 4, proc)
     before = complete()
     proc = spawn_cli(*args, cwd=workdir)
     out, _ = proc.communicate(timeout=600)
