@@ -47,7 +47,10 @@ The table gives per arm the mean worth of its picks with a 95 % Student-t interv
 repetitions, the configurations asked and the seeds the incumbent earned; then, for each pair
 of arms, the mean paired difference and the exact two-sided Wilcoxon signed-rank p
 (scipy; zero differences dropped), alpha 0.05, n the repetitions.
-``--out`` gets one row per search.
+``--out`` gets one row per search as it ends. A rerun of the same command reads the rows
+already there and runs only the searches missing (stop it at any time and rerun it); rows of
+another setup (``--data`` with other runs, another budget, cap, steps or trees) stop it with a
+message.
 
 Each pair's line reads ``bench_racing_sampler: <first arm> - <second arm> worth difference D
 (95 % t CI [lo, hi], n repetitions), exact two-sided Wilcoxon p P``.
@@ -66,7 +69,7 @@ import statistics
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -236,6 +239,16 @@ class Search:
     ask_cpu: float
     """CPU seconds asking the sampler took (counted in ``cpu``)."""
     pick: str
+    setup: str = ""
+    """What the search ran on: --data, its configurations and seeds, the budget, the cap,
+    the steps and the trees (a rerun reuses only rows of the same setup)."""
+
+    @classmethod
+    def row(cls, row: Mapping[str, str]) -> Search:
+        """A search read back from a row of ``--out``."""
+        kinds = {"repetition": int, "seeds": int, "configurations": int, "runs": int,
+                 "worth": float, "iqm": float, "cpu": float, "ask_cpu": float}
+        return cls(**{key: kinds.get(key, str)(row[key]) for key in cls.__dataclass_fields__})
 
 
 def run_search(surrogate: Surrogate, arm: str, repetition: int, cpu_budget: float,
@@ -274,6 +287,30 @@ def run_search(surrogate: Surrogate, arm: str, repetition: int, cpu_budget: floa
     return Search(arm=arm, repetition=repetition, worth=surrogate.mean(pick.settings),
                   iqm=pick.iqm, seeds=pick.seeds, configurations=len(found.configurations),
                   runs=len(trials), cpu=cpu + ask, ask_cpu=ask, pick=pick.key)
+
+
+def stored_searches(out: Path, setup: str) -> list[Search]:
+    """The searches an earlier run wrote to ``out`` (none when it does not exist); a row of
+    another setup stops the benchmark, since its pick was scored on another surrogate."""
+    if not out.exists():
+        return []
+    with out.open(newline="") as handle:
+        rows = [Search.row(row) for row in csv.DictReader(handle)]
+    other = next((row.setup for row in rows if row.setup != setup), None)
+    if other is not None:
+        raise SystemExit(f"bench_racing_sampler: {out} holds searches of another setup "
+                         f"({other}); give another --out")
+    return rows
+
+
+def append(out: Path, search: Search) -> None:
+    """One search's row added to ``out`` (its header first when the file is new)."""
+    new = not out.exists()
+    with out.open("a", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(Search.__dataclass_fields__))
+        if new:
+            writer.writeheader()
+        writer.writerow(search.__dict__)
 
 
 def fmt(x: float) -> str:
@@ -347,6 +384,11 @@ def main(argv: Sequence[str] | None = None) -> None:
     if len(runs) < 10:
         raise SystemExit(f"bench_racing_sampler: {len(runs)} leg configuration(s) at "
                          f"{args.steps} steps in --data; the surrogate needs 10 or more")
+    out = Path(args.out)
+    setup = (f"data={args.data} configurations={len(runs)} "
+             f"seeds={sum(len(r.scores) for r in runs.values())} cpu_budget={args.cpu_budget:g} "
+             f"cap={args.cap} steps={args.steps} trees={args.trees}")
+    stored = {(s.arm, s.repetition): s for s in stored_searches(out, setup)}
     surrogate = Surrogate(runs, args.trees)
     rho, n = surrogate.cross_validated()
     best = max(surrogate.mean(c.settings) for c in runs.values())
@@ -358,18 +400,20 @@ def main(argv: Sequence[str] | None = None) -> None:
         for repetition in range(args.repetitions):
             for arm in args.arms:
                 began = time.perf_counter()
-                found = run_search(surrogate, arm, repetition, args.cpu_budget, args.cap,
-                                   args.steps, Path(folder))
+                found = stored.get((arm, repetition))
+                if found is None:
+                    found = replace(run_search(surrogate, arm, repetition, args.cpu_budget,
+                                               args.cap, args.steps, Path(folder)),
+                                    setup=setup)
+                    append(out, found)
+                    where = f"{time.perf_counter() - began:.0f} s here"
+                else:
+                    where = f"read from {out}"
                 searches.append(found)
                 print(f"r{repetition} {arm}: pick {found.pick} worth {fmt(found.worth)} "
                       f"(IQM {fmt(found.iqm)} over {found.seeds} seeds), "
                       f"{found.configurations} configurations, {found.runs} runs, "
-                      f"{found.cpu:,.0f} CPU s ({time.perf_counter() - began:.0f} s here)",
-                      flush=True)
-    with open(args.out, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(Search.__dataclass_fields__))
-        writer.writeheader()
-        writer.writerows(s.__dict__ for s in searches)
+                      f"{found.cpu:,.0f} CPU s ({where})", flush=True)
     for line in table(searches, args.arms):
         print(line)
     arms = args.arms

@@ -370,6 +370,26 @@ def test_racing_sampler_races_each_sampler_on_a_surrogate_of_the_measured_runs(
     for row in rows:
         assert float(row["cpu"]) >= 30 and int(row["runs"]) >= 4
         assert int(row["seeds"]) >= 4 and lowest - 0.01 <= float(row["worth"]) <= 0
+    # A rerun with more repetitions reads the searches already in --out and runs the rest.
+    again = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "bench_racing_sampler.py"), "--data", url,
+         "--cpu-budget", "30", "--repetitions", "2", "--arms", "tpe",
+         "random+racing.below=look", "--trees", "50", "--out", str(out)],
+        cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    assert again.returncode == 0, (again.stdout + again.stderr)[-3000:]
+    assert again.stdout.count(f"(read from {out})") == 2
+    more = list(csv.DictReader(out.open()))
+    assert more[:2] == rows and [(r["arm"], r["repetition"]) for r in more[2:]] == [
+        ("tpe", "1"), ("random+racing.below=look", "1")]
+    assert ", 2 repetitions), exact two-sided Wilcoxon" in again.stdout
+    other = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "bench_racing_sampler.py"), "--data", url,
+         "--cpu-budget", "40", "--repetitions", "1", "--arms", "tpe", "random",
+         "--trees", "50", "--out", str(out)],
+        cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert other.returncode == 1 and "holds searches of another setup" in other.stderr
+    assert len(other.stderr.strip().splitlines()) == 1
+    assert list(csv.DictReader(out.open())) == more
     for arm, message in [("annealing", "arm 'annealing': a sampler (tpe, gp, random)"),
                          ("tpe+racing.below=soon", "racing.below must be one of cap, look")]:
         bad = subprocess.run(
