@@ -64,7 +64,8 @@ def test_a_new_study_seeds_by_streams_and_repeats_itself(
         workdir: Path, offset_full: Path, capsys: pytest.CaptureFixture[str]) -> None:
     first, again = workdir / "first.db", workdir / "again.db"
     assert sweep(first, "--dry-run") == 0
-    streams = "streams: env i of the run with seed s (a leg, on the leg) draws from child i"
+    streams = ("streams: env i of the run with seed s (one of its ppo.n_envs environments) "
+               "draws from child i")
     assert f"seeding {streams}" in capsys.readouterr().out
     assert sweep(first) == 0 and sweep(again) == 0
     assert load(first, "clip_range").user_attrs[DEFINITION]["seeding"] == "streams"

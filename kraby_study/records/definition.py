@@ -73,8 +73,9 @@ SEEDING = "streams"
 UNRECORDED_SEEDING = "offset"
 """The scheme of a study whose definition has no ``seeding`` key: leg i seeded with seed + i."""
 SEEDING_TEXT = {
-    "streams": "streams: env i of the run with seed s (a leg, on the leg) draws from child i "
-               "of numpy.random.SeedSequence(s), so no two runs share an env's stream",
+    "streams": "streams: env i of the run with seed s (one of its ppo.n_envs environments) "
+               "draws from child i of numpy.random.SeedSequence(s), so no two runs share an "
+               "env's stream",
     "offset": "offset: env i of the run with seed s is seeded with s + i, so runs s and s + 1 "
               "share all envs but one (the scheme before streams)",
 }
