@@ -24,6 +24,7 @@ from kraby_study.records.attributes import CurvePoint, StudyAttrs, TrialAttrs
 from kraby_study.records.stored import (
     Failure,
     Outcome,
+    diverged_runs,
     ended_runs,
     failure,
     latest_by_key,
@@ -142,7 +143,8 @@ def add_raced_sweep(store: Store, name: str, parameter: str, values: Sequence[An
     ledger = add_sweep(store, name, parameter, values, runs, steps, curve_every, racing=rules)
     latest = latest_by_key(ledger.trials())
     done = ended_runs(latest, list(rules.round_seeds))
-    state = race(list(range(len(values))), done, rules)
+    state = race(list(range(len(values))), done, rules,
+                 diverged_runs(latest, list(rules.round_seeds)))
     ledger.update(StudyAttrs(select=select, race=race_record(list(values), state, done)))
     return ledger
 

@@ -38,7 +38,16 @@ from kraby_study.decision.race import race
 from kraby_study.plan.spec import RaceRules, TrialSpec
 from kraby_study.plan.sweep import expand_study
 from kraby_study.records.attributes import StudyAttrs, TrialAttrs, TrialResult
-from kraby_study.records.stored import Outcome, counted, latest_by_key, outcome, parse_sweep_key
+from kraby_study.records.stored import (
+    Failure,
+    Outcome,
+    counted,
+    failure,
+    latest_by_key,
+    outcome,
+    parse_sweep_key,
+)
+from kraby_study.report import write_report
 from kraby_study.run.study_run import run_plan
 from kraby_study.store.store import opened
 
@@ -137,6 +146,30 @@ def test_failed_runs_count_as_ended_without_a_score() -> None:
     state = race([0, 1, 2], runs, RaceRules(seeds=5))
     # Round 4 is decided; value 1 has no score, so it is never tested (never dropped).
     assert state.rounds == 4 and 1 not in state.dropped and 2 in state.dropped
+
+
+def test_a_value_whose_runs_diverge_is_dropped_once_the_counts_show_it() -> None:
+    # 10 seeds from round 4: 7 looks at 0.05 / 7 = 0.00714 each. Value 2 diverges on every
+    # seed. Its count against the best's (0 of r), one-sided Fisher, Holm over the 2 others:
+    # round 5: 2 x 1/252 = 0.0079, not below; round 6: 2 x 1/924 = 0.0022, dropped.
+    nan = math.nan
+    runs = {0: dict(enumerate([0.0, 0.1, -0.1, 0.05, 0.0, 0.02, 0.01])),
+            1: dict(enumerate([0.02, -0.08, 0.1, 0.0, -0.05, 0.01, 0.03])),
+            2: dict(enumerate([nan] * 7))}
+    rules = RaceRules(seeds=10)
+    at = {r: race([0, 1, 2], {v: {i: x for i, x in s.items() if i < r} for v, s in runs.items()},
+                  rules, {2: set(range(r))}) for r in (4, 5, 6)}
+    assert 2 not in at[4].dropped and 2 not in at[5].dropped
+    drop = at[6].dropped[2]
+    assert (drop.round, drop.diverged) == (6, 6)
+    assert drop.p == pytest.approx(2 / 924) and drop.p < rules.look_alpha
+    assert drop.why() == "6 of 6 runs diverged, adjusted p 0.002"
+    # Runs that failed with an error say nothing of the value: it is not dropped for them.
+    assert 2 not in race([0, 1, 2], runs, rules).dropped
+    # One diverged run in four (as learning_rate 1's 3 in 10 of the racing results) decides
+    # nothing: one-sided Fisher p 0.5.
+    some = {0: runs[0], 1: runs[1], 2: dict(enumerate([nan, -0.2, -0.1, 0.0]))}
+    assert not race([0, 1, 2], some, rules, {2: {0}}).dropped
 
 
 def _yuen_dependent_p(a: list[float], b: list[float]) -> float:
@@ -251,6 +284,14 @@ class ScoreExecutor(InstantExecutor):
         super().__init__(sweep_result)
 
 
+def diverging_sweep_result(spec: TrialSpec) -> TrialResult:
+    """SCORES's runs, but 0.3's diverge on every seed."""
+    if spec.value == 0.3:
+        return TrialResult(outcome=Outcome.FAILED, env_steps=spec.steps, wall_time=1.0,
+                           failure=failure(Failure.DIVERGED, "NaN in the policy loss"))
+    return sweep_result(spec)
+
+
 def raced_plan(workdir: Path, seeds: int = 6, *extra: str) -> Any:
     write_study_file(workdir, "fake", "ppo.clip_range", "[0.1, 0.2, 0.3, 0.4]")
     cfg = compose_config(["study=fake", *TINY, f"budget.seeds={seeds}", "racing.enabled=true",
@@ -298,6 +339,32 @@ def test_a_raced_sweep_drops_what_the_procedure_says_and_never_runs_its_later_se
         definition = ledger.attrs.definition
         replay = race_of(definition, ledger.trials(), definition["values"])
     assert replay is not None and {v: d.round for v, d in replay.dropped.items()} == {2: 4}
+
+
+def test_a_raced_sweep_drops_a_value_whose_every_run_diverges(workdir: Path) -> None:
+    # 10 seeds: 0.3 diverges on each; against the best's 0 of r (Fisher, Holm over 3 others)
+    # round 6 gives 3 x 1/924 = 0.0032 < 0.05 / 7, so it runs 6 seeds, not 10.
+    scores = {v: [*s, *s[:4]] for v, s in SCORES.items()}
+    plan = raced_plan(workdir, 10)
+    executor = InstantExecutor(lambda spec: diverging_sweep_result(spec) if spec.value == 0.3
+                               else TrialResult(outcome=Outcome.COMPLETE,
+                                                final_score=scores[spec.value][spec.seed],
+                                                env_steps=spec.steps, wall_time=1.0))
+    with opened(sqlite_url(workdir / "d.db")) as store:
+        run_plan(store, plan, executor, 1, io.StringIO(), live=False)
+        ledger = store.load("fake")
+        stored = ledger.attrs.race
+        found = race_of(ledger.attrs.definition, ledger.trials(), [0.1, 0.2, 0.3, 0.4])
+    submitted = [(spec.value, spec.seed) for spec in executor.pools[0].submitted]
+    assert sorted(s for v, s in submitted if v == 0.3) == list(range(6))
+    by_value = {v["value"]: v for v in stored["values"]}
+    assert (by_value[0.3]["dropped_at"], by_value[0.3]["diverged"]) == (6, 6)
+    assert found is not None and found.dropped[2].diverged == 6
+    assert all("diverged" not in by_value[v] for v in (0.1, 0.2, 0.4))
+    # The report says why it left.
+    index = write_report(sqlite_url(workdir / "d.db"), workdir / "out", policy=False)
+    text = (index.out / "fake" / "summary.md").read_text()
+    assert "dropped 0.3 after round 6 (6 of 6 runs diverged, adjusted p 0.003)" in text
 
 
 def test_a_race_run_again_runs_nothing(workdir: Path) -> None:

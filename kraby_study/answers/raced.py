@@ -7,7 +7,12 @@ from typing import Any
 
 from kraby_study.decision.race import Race, RaceRuns, StudyRace, race
 from kraby_study.plan.spec import RaceRules
-from kraby_study.records.stored import StoredTrial, ended_runs, latest_by_key
+from kraby_study.records.stored import (
+    StoredTrial,
+    diverged_runs,
+    ended_runs,
+    latest_by_key,
+)
 from kraby_study.records.values import value_key
 
 
@@ -15,8 +20,9 @@ def replay(rules: RaceRules, values: int, latest: Mapping[str, StoredTrial]
            ) -> tuple[Race[int], dict[int, dict[int, float]]]:
     """The race of ``values`` values (by index) replayed on the latest attempt of each run, and
     the ended runs it read ([`ended_runs`][kraby_study.records.stored.ended_runs])."""
-    runs = ended_runs(latest, list(rules.round_seeds))
-    return race(list(range(values)), runs, rules), runs
+    seeds = list(rules.round_seeds)
+    runs = ended_runs(latest, seeds)
+    return race(list(range(values)), runs, rules, diverged_runs(latest, seeds)), runs
 
 
 def race_runs(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
@@ -29,9 +35,10 @@ def race_runs(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
         return None
     planned = list(definition["values"])
     index = {value_key(v): i for i, v in enumerate(values)}
-    return RaceRuns(rules=rules, planned=len(planned),
-                    runs=ended_runs(latest_by_key(trials), list(rules.round_seeds)),
-                    index=[index.get(value_key(v)) for v in planned])
+    latest, seeds = latest_by_key(trials), list(rules.round_seeds)
+    return RaceRuns(rules=rules, planned=len(planned), runs=ended_runs(latest, seeds),
+                    index=[index.get(value_key(v)) for v in planned],
+                    diverged=diverged_runs(latest, seeds))
 
 
 def race_of(definition: Mapping[str, Any], trials: Sequence[StoredTrial],
@@ -61,6 +68,8 @@ def race_record(values: list[Any], state: Race[int], runs: dict[int, dict[int, f
         "values": [{"value": values[v], "seeds": len(runs.get(v, {})),
                     "dropped_at": state.dropped[v].round if v in state.dropped else None,
                     "p": state.dropped[v].p if v in state.dropped else None,
+                    **({"diverged": state.dropped[v].diverged}
+                       if v in state.dropped and state.dropped[v].diverged else {}),
                     **({"settled_at": state.settled[v].round, "p_equivalent": state.settled[v].p}
                        if v in state.settled else {})}
                    for v in range(len(values))],

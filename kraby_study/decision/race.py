@@ -16,6 +16,12 @@ to alpha over the looks (below), but truncation at ``seeds`` and the selection's
 are not covered by that argument: ``benchmarks/bench_error_rates.py`` measures the
 probability of a selection outside the margin, truncation included.
 
+A run that diverged (NaN) has no score, so the comparison cannot see it. Each look therefore
+also compares each value's diverged runs among its first r seeds with the look's best's
+(one-sided Fisher exact test, Holm over the values, at the look's level) and drops a value
+shown to diverge more often ([`diverging`][kraby_study.decision.race.diverging]). A run that
+failed with an error is not counted: it says nothing of the value.
+
 Every value runs the same seeds, and a seed can move the scores of all values together (the
 same initial weights and action-noise stream). With ``RaceRules.paired`` (``racing.paired``)
 each pair of values is compared on the seeds both have ended (the common seeds resampled
@@ -46,7 +52,7 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
-from kraby_study.decision.comparison import Answer, Comparison, compare
+from kraby_study.decision.comparison import Answer, Comparison, compare, holm
 from kraby_study.decision.robust import iqm
 from kraby_study.plan.spec import RaceRules
 
@@ -64,6 +70,15 @@ class Drop:
     margin below" for one settled as equivalent."""
     answer: Answer = Answer.WORSE
     """Why it left: worse (dropped) or equivalent (settled)."""
+    diverged: int = 0
+    """Runs of its first ``round`` seeds that diverged, when their count dropped it (0 when
+    its scores did); ``p`` is then the Holm-adjusted p of the diverged counts' test."""
+
+    def why(self) -> str:
+        """``adjusted p 0.004``, or ``5 of 5 runs diverged, adjusted p 0.02``."""
+        p = "< 0.001" if self.p < 0.001 else f"{self.p:.3f}"
+        head = f"{self.diverged} of {self.round} runs diverged, " if self.diverged else ""
+        return f"{head}adjusted p {p}"
 
 
 @dataclass(frozen=True)
@@ -110,8 +125,8 @@ def take_look(scores: Mapping[K, Sequence[float]], rules: RaceRules) -> Comparis
                    paired=rules.paired)
 
 
-def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: RaceRules
-         ) -> Race[K]:
+def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: RaceRules,
+         diverged: Mapping[K, Collection[int]] | None = None) -> Race[K]:
     """Replay a race on the runs that have ended.
 
     Args:
@@ -120,6 +135,9 @@ def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: Race
             for a run that ended without one (failed). Seeds beyond a round still running may
             be present (a round's tail): a look reads only each value's first r seeds.
         rules: The race's settings.
+        diverged: Per value, the seed indices of its failed runs that diverged (the others
+            failed with an error); a look drops a value shown to diverge more often than the
+            look's best ([`diverging`][kraby_study.decision.race.diverging]).
 
     Returns:
         The [`Race`][kraby_study.decision.race.Race] after every round whose seeds have all ended.
@@ -139,12 +157,45 @@ def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: Race
         # Aligned by seed (NaN where a run failed): a paired look pairs position i of each.
         scores = {v: [runs[v][i] for i in range(r)] for v in alive}
         look = take_look(scores, rules)
+        firsts = {v: {i for i in (diverged or {}).get(v, ()) if i < r} for v in alive}
+        for v, (p, count) in diverging(firsts, r, look.best, rules.look_alpha).items():
+            dropped[v] = Drop(round=r, p=p, diverged=count)
         for v in look.worse:
-            dropped[v] = Drop(round=r, p=look.p_worse[v])
+            dropped.setdefault(v, Drop(round=r, p=look.p_worse[v]))
         for v in look.equivalent:
-            settled[v] = Drop(round=r, p=look.p_equivalent[v], answer=Answer.EQUIVALENT)
+            if v not in dropped:
+                settled[v] = Drop(round=r, p=look.p_equivalent[v], answer=Answer.EQUIVALENT)
     return Race(values=list(values), rules=rules, rounds=rounds, dropped=dropped,
                 settled=settled)
+
+
+def diverging(diverged: Mapping[K, Collection[int]], r: int, best: K | None, level: float
+              ) -> dict[K, tuple[float, int]]:
+    """The values of a look shown to diverge more often than its best, with their adjusted p
+    and diverged count.
+
+    A diverged run has no score, so the look's IQMs cannot see it; its count can. Each value's
+    diverged runs among its first ``r`` seeds against the best's: one-sided Fisher exact test
+    (scipy), Holm-adjusted over the values compared (the look's family), shown where the
+    adjusted p is below ``level`` (the look's). Nothing is compared without a best (no value
+    has scores enough) or when no run of the look diverged.
+
+    Args:
+        diverged: Per value racing at this look, the seed indices below ``r`` that diverged.
+        r: The look's round: each value's first ``r`` seeds.
+        best: The look's best, the reference (None: nothing is compared).
+        level: The look's level (alpha spent over the looks).
+    """
+    if best is None or not any(diverged.values()):
+        return {}
+    from scipy import stats  # only here: reading where studies stand loads no scipy.stats
+
+    others = [v for v in diverged if v != best]
+    held = len(diverged.get(best, ()))
+    p = [float(stats.fisher_exact([[len(diverged[v]), r - len(diverged[v])], [held, r - held]],
+                                  alternative="greater").pvalue) for v in others]
+    return {v: (adjusted, len(diverged[v])) for v, adjusted in zip(others, holm(p), strict=True)
+            if adjusted < level}
 
 
 @dataclass(frozen=True)
@@ -189,12 +240,14 @@ class RaceRuns:
     """Per planned value, its ended runs' final scores by seed index (NaN: failed)."""
     index: Sequence[int | None]
     """The caller's index of each planned value, None where the caller does not list it."""
+    diverged: Mapping[int, Collection[int]] = field(default_factory=dict)
+    """Per planned value, the seed indices of its runs that diverged."""
 
     def replayed(self) -> StudyRace:
         """The race of the planned values (by their index in the study file) replayed on these
         runs, its dropped and settled values mapped to the caller's indices (a value the
         caller does not list is left out)."""
-        state = race(list(range(self.planned)), self.runs, self.rules)
+        state = race(list(range(self.planned)), self.runs, self.rules, self.diverged)
 
         def mapped(left: Mapping[int, Drop]) -> dict[int, Drop]:
             return {at: drop for v, drop in left.items() if (at := self.index[v]) is not None}

@@ -87,7 +87,7 @@ def untested_note() -> str:
 
 def dropped_note(drop: Drop, look_alpha: float) -> str:
     """Why a value the race dropped is shown as worse: the look that dropped it."""
-    return (f"{DROPPED_PREFIX} after round {drop.round}, adjusted p {_p_short(drop.p)}, at the "
+    return (f"{DROPPED_PREFIX} after round {drop.round}, {drop.why()}, at the "
             f"race's per-look alpha {look_alpha:.3g}")
 
 

@@ -296,3 +296,16 @@ def ended_runs(latest: Mapping[str, StoredTrial], seeds: list[int]
         elif ended == Outcome.FAILED:
             runs.setdefault(where[0], {})[where[1]] = math.nan
     return runs
+
+
+def diverged_runs(latest: Mapping[str, StoredTrial], seeds: list[int]) -> dict[int, set[int]]:
+    """Per value, the seed indices of its ended runs that diverged (a failure whose kind is
+    [`Failure.DIVERGED`][kraby_study.records.stored.Failure]; an error is not counted)."""
+    found: dict[int, set[int]] = {}
+    for key, trial in latest.items():
+        where = place(key, seeds)
+        if where is None or outcome(trial) != Outcome.FAILED:
+            continue
+        if failure_kind(trial.user_attrs.get("failure")) == Failure.DIVERGED:
+            found.setdefault(where[0], set()).add(where[1])
+    return found

@@ -256,8 +256,8 @@ def race_text(sweep: Sweep) -> str | None:
     race = sweep.race
     if race is None:
         return None
-    dropped = ", ".join(f"{_label(sweep, value_index)} after round {drop.round} (adjusted p "
-                        f"{_p_text(drop.p)})" for value_index, drop in sorted(
+    dropped = ", ".join(f"{_label(sweep, value_index)} after round {drop.round} "
+                        f"({drop.why()})" for value_index, drop in sorted(
                             sweep.dropped.items(), key=lambda item: (item[1].round, item[0])))
     state = "the race is over" if race.over else f"{race.rounds} round(s) decided so far"
     return (f"Race ({race.rules.describe()}): "
