@@ -108,6 +108,11 @@ def _clean(values: Sequence[float]) -> np.ndarray:
     return x[~np.isnan(x)]
 
 
+def p_text(p: float) -> str:
+    """A p as reports print it: ``< 0.001``, else three decimals (``0.004``)."""
+    return "< 0.001" if p < 0.001 else f"{p:.3f}"
+
+
 def holm(pvalues: Sequence[float]) -> list[float]:
     """Holm (1979) step-down adjusted p-values, in the order given.
 

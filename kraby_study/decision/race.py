@@ -52,7 +52,7 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
-from kraby_study.decision.comparison import Answer, Comparison, compare, holm
+from kraby_study.decision.comparison import Answer, Comparison, compare, holm, p_text
 from kraby_study.decision.robust import iqm
 from kraby_study.plan.spec import RaceRules
 
@@ -76,9 +76,8 @@ class Drop:
 
     def why(self) -> str:
         """``adjusted p 0.004``, or ``5 of 5 runs diverged, adjusted p 0.02``."""
-        p = "< 0.001" if self.p < 0.001 else f"{self.p:.3f}"
         head = f"{self.diverged} of {self.round} runs diverged, " if self.diverged else ""
-        return f"{head}adjusted p {p}"
+        return f"{head}adjusted p {p_text(self.p)}"
 
 
 @dataclass(frozen=True)
@@ -144,6 +143,7 @@ def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: Race
     """
     dropped: dict[K, Drop] = {}
     settled: dict[K, Drop] = {}
+    diverged = diverged or {}
     rounds = 0
     for r in range(1, rules.seeds + 1):
         alive = [v for v in values if v not in dropped and v not in settled]
@@ -157,7 +157,7 @@ def race(values: Sequence[K], runs: Mapping[K, Mapping[int, float]], rules: Race
         # Aligned by seed (NaN where a run failed): a paired look pairs position i of each.
         scores = {v: [runs[v][i] for i in range(r)] for v in alive}
         look = take_look(scores, rules)
-        firsts = {v: {i for i in (diverged or {}).get(v, ()) if i < r} for v in alive}
+        firsts = {v: {i for i in diverged.get(v, ()) if i < r} for v in alive}
         for v, (p, count) in diverging(firsts, r, look.best, rules.look_alpha).items():
             dropped[v] = Drop(round=r, p=p, diverged=count)
         for v in look.worse:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from kraby_study.decision.comparison import Comparison
+from kraby_study.decision.comparison import Comparison, p_text
 from kraby_study.decision.failed_seeds import failed_seeds, failure_line
 from kraby_study.decision.intervals import (
     BOOTSTRAP_REPETITIONS,
@@ -93,12 +93,8 @@ def dropped_note(drop: Drop, look_alpha: float) -> str:
 
 def settled_note(drop: Drop, look_alpha: float) -> str:
     """Why a value got no more seeds although it is a candidate: the look that settled it."""
-    return (f"{SETTLED_PREFIX} after round {drop.round} (p {_p_short(drop.p)} at the race's "
+    return (f"{SETTLED_PREFIX} after round {drop.round} (p {p_text(drop.p)} at the race's "
             f"per-look alpha {look_alpha:.3g}); compared on its {drop.round} seeds")
-
-
-def _p_short(p: float) -> str:
-    return "< 0.001" if p < 0.001 else f"{p:.3f}"
 
 
 def note_part(note: str, prefix: str) -> str | None:

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from kraby_study.answers.sweep_evidence import Sweep, confirm_arms
-from kraby_study.decision.comparison import ALPHA, ANSWER_FROM, answers_name
+from kraby_study.decision.comparison import ALPHA, ANSWER_FROM, answers_name, p_text
 from kraby_study.decision.coverage import coverage_note
 from kraby_study.decision.failed_seeds import definition_text
 from kraby_study.decision.intervals import (
@@ -76,9 +76,7 @@ DASHED_FIGURES = ("learning_curves", "wallclock")
 
 
 def _p_text(p: float) -> str:
-    if not np.isfinite(p):
-        return "n/a"
-    return "< 0.001" if p < 0.001 else f"{p:.3f}"
+    return p_text(p) if np.isfinite(p) else "n/a"
 
 
 def _interval(low: float, high: float, digits: int = 4) -> str:
