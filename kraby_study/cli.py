@@ -441,8 +441,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    help="--cfg job is Hydra's spelling of --dry-run")
         parsers[name].add_argument(
             "--retry-failed", action="store_true",
-            help="queue the study's failed runs again, with the same seeds and settings, "
-            "before running (complete runs are left alone), as retry_failed=true")
+            help="queue the study's runs that failed with an error again, with the same seeds "
+            "and settings, before running (complete and diverged runs are left alone), as "
+            "retry_failed=true")
     for name in ("run", "confirm"):
         parsers[name].add_argument(
             "--racing", action="store_true",

@@ -342,8 +342,8 @@ def test_a_node_without_the_project_fails_its_trial_in_one_line(
                                  f"storage={sqlite_url(db)}"], capture_output=True, text=True,
                                 check=True, cwd=workdir).stdout
         # No trial of it started, so no command is stored to quote.
-        assert ("clip_range: 1 failed run(s); to run them again with the same seeds and "
-                "settings: its command with --retry-failed") in listed
+        assert ("clip_range: 1 run(s) failed with an error; to run them again with the same "
+                "seeds and settings: its command with --retry-failed") in listed
         proc = spawn_cli("run", "study=clip_range", *TINY, "study.values=[0.2]",
                          "budget.seeds=1", "executor=ray", f"ray.address={fixed.address}",
                          f"storage={sqlite_url(db)}", "--retry-failed", cwd=workdir)

@@ -5,6 +5,7 @@ machine and the failure it retries. On a machine that lacks something until it i
 
 from __future__ import annotations
 
+import io
 import os
 from pathlib import Path
 
@@ -12,9 +13,13 @@ import pytest
 from conftest import TINY, TINY_SEARCH, load, run_cli
 from gym_fixtures import FIXED, NEEDS_FIX_ID
 from optuna.trial import TrialState
+from synthetic import DIVERGED, Run, add_sweep
 
+from kraby_study.answers.standing import study_standing
 from kraby_study.records.attributes import PROVENANCE_PREFIX
-from kraby_study.records.stored import latest_by_key
+from kraby_study.records.stored import Failure, Outcome, failure, latest_by_key
+from kraby_study.run.source import retry_failed
+from kraby_study.store.store import opened
 
 TESTS = Path(__file__).resolve().parent
 NEEDS_FIX = ["env=gym", f"env.id={NEEDS_FIX_ID}", "env.packages=[gym_fixtures]", *TINY,
@@ -52,7 +57,8 @@ def test_failed_runs_run_again_with_their_seeds_and_settings(
     # list says how many failed and how to run them again.
     assert run_cli("list", f"storage={store_url}") == 0
     listed = capsys.readouterr().out
-    assert ("clip_range: 2 failed run(s); to run them again with the same seeds and settings: "
+    assert ("clip_range: 2 run(s) failed with an error; to run them again with the same seeds "
+            "and settings: "
             "`kraby-study run study=clip_range") in listed
     assert "--retry-failed`" in listed
     # Fixed, then retried: only the failed runs train again.
@@ -145,3 +151,31 @@ def test_a_confirm_retries_its_failed_runs_on_the_same_fresh_seeds(
         assert trial.user_attrs["retry_of"] == by_key[key].number
         assert trial.user_attrs["seed"] == by_key[key].user_attrs["seed"]
         assert trial.user_attrs["settings"] == by_key[key].user_attrs["settings"]
+
+
+def test_a_diverged_run_is_a_result_and_is_not_queued_again(store_url: str) -> None:
+    """Its seed and settings would diverge again: only the run that failed with an error is
+    queued, and the command says why the diverged one is not."""
+    errored = failure(Failure.ERROR, "Python package 'kraby_study' is not installed")
+    runs = [Run(value=v, seed=s, final_score=-0.1 * s) for v in (0.1, 0.2) for s in range(2)]
+    runs[1].outcome, runs[1].failure = Outcome.FAILED, DIVERGED
+    runs[3].outcome, runs[3].failure = Outcome.FAILED, errored
+    with opened(store_url) as store:
+        ledger = add_sweep(store, "gamma", "ppo.gamma", [0.1, 0.2], runs)
+        before = {t.user_attrs["key"]: t.number for t in ledger.trials()}
+        stream = io.StringIO()
+        assert retry_failed(ledger, stream) == 1
+        queued = [t for t in ledger.trials() if t.state == TrialState.WAITING]
+        assert [t.user_attrs["key"] for t in queued] == ["v1-s1"]
+        assert queued[0].user_attrs["retry_of"] == before["v1-s1"]
+        assert queued[0].user_attrs["retried_failure"] == errored
+        assert stream.getvalue().splitlines() == [
+            f"1 failed trial(s) of gamma queued again with the same seeds and settings: "
+            f"{before['v1-s1']}",
+            "1 diverged run(s) of gamma not queued again: a divergence is a result of its "
+            "settings"]
+        # The diverged run still counts as failed; list offers no retry once the error is
+        # queued again.
+        standing = study_standing(ledger)
+        assert (standing.tally.failed, standing.tally.diverged) == (1, 1)
+        assert standing.retry_line() is None

@@ -31,6 +31,7 @@ from kraby_study.store.rows import has_store, reading
 from kraby_study.store.store import Store, opened, study_exists
 
 INTERRUPTED = failure(Failure.INTERRUPTED, "its command stopped")
+ERRORED = failure(Failure.ERROR, "a package is missing")
 EPYC = {"hostname": "vm", "cpu": "AMD EPYC", "torch": "2.13.0+cpu"}
 XEON = {"hostname": "vm2", "cpu": "Intel Xeon", "torch": "2.13.0+cpu"}
 
@@ -53,7 +54,7 @@ def add_states_sweep(store: Store) -> None:
     values = [0.1, 0.2, 0.3]
     runs = [Run(value=v, seed=s, final_score=-0.1 * i - 0.01 * s, wall_time=10.0 + i + s)
             for i, v in enumerate(values) for s in range(4)]
-    runs[3].outcome, runs[3].failure = Outcome.FAILED, DIVERGED
+    runs[3].outcome, runs[3].failure = Outcome.FAILED, ERRORED
     for index in (7, 10, 11):
         runs[index].outcome = Outcome.PENDING  # queued, not run
     ledger = add_sweep(store, "states", "ppo.gamma", values, runs)
@@ -175,9 +176,10 @@ def test_rows_give_the_standings_optunas_trials_give(store_url: str, workdir: Pa
     by_name = {s.name: s for s in got}
     # Every state is there, and each study selects what its rule picks.
     states = by_name["states"].tally
-    # 8 complete + 1 rerun; diverged + the later attempt of v2-s4 (its complete one is
-    # superseded); pending: running, requeued and waiting, given back by a heartbeat.
+    # 8 complete + 1 rerun; an error + the later attempt of v2-s4, diverged (its complete one
+    # is superseded); pending: running, requeued and waiting, given back by a heartbeat.
     assert (states.complete, states.failed, states.pruned, states.running) == (9, 2, 1, 1)
+    assert states.diverged == 1
     assert states.pending == 3
     search = by_name["search"].tally
     assert search.running == 1 and search.pending == 2 and search.pruned > 0
@@ -199,7 +201,8 @@ def test_rows_give_the_standings_optunas_trials_give(store_url: str, workdir: Pa
     retries = [line for line in (s.retry_line() for s in expected) if line]
     assert out == "".join(f"{line}\n" for line in [
         *standings_table([study_info(s) for s in expected]), *retries])
-    assert "states: 2 failed run(s); to run them again" in out
+    # Only the error is offered again: a diverged run is a result of its settings.
+    assert "states: 1 run(s) failed with an error; to run them again" in out
     assert "ran on" in out.splitlines()[0] and "3 nodes, 2 CPU models" in out
 
 

@@ -40,16 +40,17 @@ class StudyStanding:
     trial of it started."""
 
     def retry_line(self) -> str | None:
-        """How many counted runs failed and how to run them again, or None when none did."""
-        failed = self.tally.failed
-        if not failed:
+        """How many counted runs failed with an error and how to run them again, or None when
+        none did (a diverged run is a result of its settings, not retried)."""
+        errors = self.tally.failed - self.tally.diverged
+        if not errors:
             return None
         command = self.command or ""
         if command and "--retry-failed" not in command.split():
             command += " --retry-failed"
         how = f"`{command}`" if command else "its command with --retry-failed"
-        return (f"{self.name}: {failed} failed run(s); to run them again with the same seeds "
-                f"and settings: {how}")
+        return (f"{self.name}: {errors} run(s) failed with an error; to run them again with the "
+                f"same seeds and settings: {how}")
 
 
 def study_standing(ledger: StudyLedger) -> StudyStanding:

@@ -402,8 +402,9 @@ class KrabyConfig:
     db_retry_seconds: int = 60
     """How long a command keeps retrying a database it lost before it gives up."""
     retry_failed: bool = False
-    """Queue the study's failed runs again (same key, seed and settings) before running:
-    ``--retry-failed`` on run, optuna and confirm. Complete runs are left alone."""
+    """Queue the study's runs that failed with an error again (same key, seed and settings)
+    before running: ``--retry-failed`` on run, optuna and confirm. Complete runs are left
+    alone, and so are diverged ones (a divergence is a result of its settings)."""
     seed: int = 0
     """Seed of the first training run; run n of a study uses seed + n (a confirm's seeds are
     confirm.seed's)."""

@@ -158,6 +158,13 @@ def outcome(trial: StoredTrial) -> Outcome:
     return Outcome.PENDING
 
 
+def is_diverged(trial: StoredTrial) -> bool:
+    """A failed trial whose training diverged: a result of its settings (its seed would
+    diverge again), not an error to run again."""
+    return (trial.state.name == "FAIL"
+            and failure_kind(trial.user_attrs.get("failure")) == Failure.DIVERGED)
+
+
 def is_interrupted(trial: StoredTrial) -> bool:
     """A trial given back unfinished: its run is queued again, it is no result."""
     return trial.state.name == "FAIL" and outcome(trial) == Outcome.PENDING
@@ -214,6 +221,9 @@ class Tally:
     pending: int = 0
     running: int = field(default=0, compare=False)
     """Of the pending ones, those running now (here or on another machine)."""
+    diverged: int = field(default=0, compare=False)
+    """Of the failed ones, those whose training diverged: results of their settings, which
+    ``--retry-failed`` leaves alone (the others failed with an error)."""
     planned: int = field(default=0, compare=False)
     """Runs planned (sweeps) or the trial total (searches); never fewer than the trials
     counted."""
@@ -245,15 +255,15 @@ def tally(trials: Iterable[StoredTrial], planned: int | None = None) -> Tally:
     """Outcome counts of the given (counted) trials, against ``planned`` runs (None: as many
     as there are trials)."""
     counts = {o: 0 for o in Outcome}
-    running = 0
-    total = 0
+    running = diverged = total = 0
     for trial in trials:
         counts[outcome(trial)] += 1
         running += trial.state.name == "RUNNING"
+        diverged += is_diverged(trial)
         total += 1
     return Tally(complete=counts[Outcome.COMPLETE], failed=counts[Outcome.FAILED],
                  pruned=counts[Outcome.PRUNED], pending=counts[Outcome.PENDING],
-                 running=running, planned=max(planned or 0, total))
+                 running=running, diverged=diverged, planned=max(planned or 0, total))
 
 
 def trial_seeds(trial: StoredTrial, per_trial: int = 1) -> list[int]:

@@ -9,7 +9,7 @@ from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.records.attributes import TrialResult
-from kraby_study.records.stored import counted, spent_cpu
+from kraby_study.records.stored import counted, spent_cpu, tally
 from kraby_study.run.provenance import command_facts
 from kraby_study.store.ledger import StudyLedger
 
@@ -112,4 +112,8 @@ def retry_failed(ledger: StudyLedger, stream: TextIO) -> int:
     if numbers:
         print(f"{len(numbers)} failed trial(s) of {ledger.name} queued again with the same seeds "
               f"and settings: {', '.join(map(str, numbers))}", file=stream, flush=True)
+    diverged = tally(counted(ledger.trials())).diverged
+    if diverged:
+        print(f"{diverged} diverged run(s) of {ledger.name} not queued again: a divergence is a "
+              "result of its settings", file=stream, flush=True)
     return len(numbers)

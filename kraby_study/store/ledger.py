@@ -25,7 +25,7 @@ from kraby_study.records.attributes import (
     provenance_key,
     retry_facts,
 )
-from kraby_study.records.stored import Failure, Outcome, counted, failure, outcome
+from kraby_study.records.stored import Failure, Outcome, counted, failure, is_diverged, outcome
 from kraby_study.store.attempts import queue_attempt, requeue_stale
 from kraby_study.store.backend import LOCK_BASE, Backend
 from kraby_study.store.tables import curve_points, read_curves
@@ -219,13 +219,14 @@ class StudyLedger:
             requeue_stale(self._study, self._storage.get_trial(trial_id))
 
     def retry_failed(self) -> list[int]:
-        """Queue a new attempt of every counted run that failed (a divergence or an error),
-        with its key, seed and parameters, saying on it how the earlier attempt failed;
-        complete, pruned and pending runs are left alone, and so is a trial without a key (a
-        sampled configuration refused before it ran). Returns the failed trials' numbers."""
+        """Queue a new attempt of every counted run that failed with an error, with its key,
+        seed and parameters, saying on it how the earlier attempt failed. A diverged run is a
+        result of its settings and stays; complete, pruned and pending runs are left alone,
+        and so is a trial without a key (a sampled configuration refused before it ran).
+        Returns the numbers of the trials queued again."""
         with self.plan_lock():
             failed = [t for t in counted(self.trials()) if outcome(t) == Outcome.FAILED
-                      and t.user_attrs.get("key") is not None]
+                      and not is_diverged(t) and t.user_attrs.get("key") is not None]
             for trial in failed:
                 queue_attempt(self._study, trial, str(trial.user_attrs.get("failure")))
         return [t.number for t in failed]
