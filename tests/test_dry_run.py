@@ -86,6 +86,21 @@ def test_optuna_and_confirm_dry_runs(workdir: Path, finished: Path,
             "steps each, 12,288 in all") in out
     assert "x 2 workers, measured over 4 trials" in out
     assert "\n  sampler tpe (search.seed 0; its model from trial 5 on), pruner median\n" in out
+    # A CPU budget ends a search long before its trials would: the plan leads with it, and
+    # the estimate times its CPU seconds at the CPU s per second the store's workers used.
+    for racing in ([], ["--racing"]):
+        assert run_cli("optuna", *racing, "--trials", "100000", "budget=smoke",
+                       "budget.steps=1024", "budget.seeds=4", "search.cpu_budget=30",
+                       "--storage", url, "--workers", "2", "--dry-run") == 0
+        out = capsys.readouterr().out
+        assert "ppo_search: until its 30 CPU s (search.cpu_budget) are used, at most " in out
+        assert "\n  30 CPU s left to spend (the sampler's included)" in out
+        line = next(x for x in out.splitlines() if x.startswith("ppo_search: "))
+        assert "in all" not in line, line  # no count of env steps a budget never trains
+        estimate = out.strip().splitlines()[-1]
+        assert estimate.startswith("about ") and ": 30 CPU s at " in estimate, estimate
+        assert estimate.endswith("CPU s/s per worker x 2 workers, measured over 4 trials of "
+                                 "this store"), estimate
     # The pruner named is the one the search would use: none by default with the gp sampler.
     assert run_cli("optuna", "--trials", "6", "budget=smoke", "--storage", url,
                    "--sampler", "gp", "--seed", "3", "--dry-run") == 0
@@ -136,3 +151,11 @@ def test_the_estimate_reads_as_documented() -> None:
         "about 12 min at 5,100 env steps/s per worker x 2 workers, measured over 80 trials of "
         "this store")
     assert estimate_line(100, Measured(), 2).startswith("no estimate:")
+    # A CPU-budgeted search: 1,560 CPU s at 0.65 CPU s per second of each of 2 workers.
+    timed = Measured(trials=80, env_steps=5_100 * 1_000, wall_time=1_000.0, cpu_wall=1_000.0,
+                     cpu_time=650.0)
+    assert estimate_line(0, timed, 2, cpu_left=1_560.0) == (
+        "about 20 min: 1,560 CPU s at 0.65 CPU s/s per worker x 2 workers, measured over 80 "
+        "trials of this store")
+    assert estimate_line(0, measured, 2, cpu_left=1_560.0) == (
+        "no estimate: this store has no complete trial that stored its CPU seconds")

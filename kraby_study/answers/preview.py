@@ -3,7 +3,9 @@
 
 The rate is measured on the store itself: env steps over wall time of its complete trials (one
 worker each). Trials do not record the machine they ran on, so the rate is this store's, not
-necessarily this machine's.
+necessarily this machine's. A search with a CPU budget is timed by its CPU seconds instead, at
+the CPU seconds a worker used per second of wall time in the store's trials: how many env steps
+they train depends on the settings the search asks for.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from kraby_study.plan.spec import fingerprint
 from kraby_study.plan.sweep import expand_study
 from kraby_study.records.attributes import StudyAttrs
 from kraby_study.records.definition import SEEDING_TEXT, seed_text, stored_seeding
-from kraby_study.records.stored import Outcome, Tally, counted, outcome, tally
+from kraby_study.records.stored import Outcome, Tally, counted, outcome, spent_cpu, tally
 from kraby_study.store.rows import has_store, reading
 from kraby_study.store.url import shown_url
 
@@ -32,11 +34,20 @@ class Measured:
     trials: int = 0
     env_steps: int = 0
     wall_time: float = 0.0
+    cpu_wall: float = 0.0
+    """Wall time of the complete trials that stored their CPU seconds."""
+    cpu_time: float = 0.0
+    """Their CPU seconds (user + system, worker and env processes)."""
 
     @property
     def rate(self) -> float | None:
         """Env steps per second of one worker; None with nothing measured."""
         return self.env_steps / self.wall_time if self.trials and self.wall_time > 0 else None
+
+    @property
+    def cpu_rate(self) -> float | None:
+        """CPU seconds one worker uses per second of wall time; None with nothing measured."""
+        return self.cpu_time / self.cpu_wall if self.cpu_wall > 0 and self.cpu_time > 0 else None
 
 
 @dataclass(frozen=True)
@@ -46,6 +57,15 @@ class StoredSoFar:
     tallies: dict[str, Tally] = field(default_factory=dict)
     """Counted outcomes of the named studies that are stored (missing ones are absent)."""
     measured: Measured = field(default_factory=Measured)
+    spent: dict[str, float] = field(default_factory=dict)
+    """CPU seconds each stored named study has used, every attempt counted (as its CPU
+    budget counts them)."""
+
+    def cpu_left(self, count: Count) -> float:
+        """CPU seconds a CPU-budgeted search has still to spend (0 without a budget)."""
+        if count.cpu_budget is None:
+            return 0.0
+        return max(count.cpu_budget - self.spent.get(count.study, 0.0), 0.0)
 
 
 def read_stored(url: str, counts: Sequence[Count]) -> StoredSoFar:
@@ -62,21 +82,28 @@ def read_stored(url: str, counts: Sequence[Count]) -> StoredSoFar:
     planned = {c.study: c.trials for c in counts}
     definitions = {c.study: c.definition for c in counts}
     tallies: dict[str, Tally] = {}
-    trials, steps, seconds = 0, 0, 0.0
+    spent: dict[str, float] = {}
+    trials, steps, seconds, cpu_wall, cpu = 0, 0, 0.0, 0.0, 0.0
     with reading(url) as reader:
         for study in reader.studies():
             kept = counted(study.trials)
             if study.name in planned:
                 check_definition(url, study.name, study.attrs, definitions.get(study.name))
                 tallies[study.name] = tally(kept, planned[study.name])
+                spent[study.name] = spent_cpu(study.trials)
             for trial in kept:
                 attrs = trial.user_attrs
-                if (outcome(trial) is Outcome.COMPLETE and attrs.get("env_steps")
-                        and attrs.get("wall_time")):
-                    trials += 1
-                    steps += int(attrs["env_steps"])
-                    seconds += float(attrs["wall_time"])
-    return StoredSoFar(tallies=tallies, measured=Measured(trials, steps, seconds))
+                if (outcome(trial) is not Outcome.COMPLETE or not attrs.get("env_steps")
+                        or not attrs.get("wall_time")):
+                    continue
+                trials += 1
+                steps += int(attrs["env_steps"])
+                seconds += float(attrs["wall_time"])
+                if attrs.get("cpu_time"):
+                    cpu_wall += float(attrs["wall_time"])
+                    cpu += float(attrs["cpu_time"])
+    return StoredSoFar(tallies=tallies, measured=Measured(trials, steps, seconds, cpu_wall, cpu),
+                       spent=spent)
 
 
 def check_definition(url: str, name: str, stored: StudyAttrs,
@@ -91,23 +118,46 @@ def check_definition(url: str, name: str, stored: StudyAttrs,
                           StudyAttrs(definition=definition, fingerprint=fingerprint(definition)))
 
 
-def count_lines(count: Count, stored: Tally | None) -> list[str]:
-    """A study's plan: its trials and env steps, and how many the store already holds."""
-    most = "at most " if count.at_most else ""
-    lines = [f"{count.study}: {most}{count.trials} trials ({count.shape}), "
-             f"{count.steps_per_trial:,} env steps each, {most}{count.env_steps:,} in all"
-             + (" (raced: a value or configuration shown worse stops early)"
-                if count.at_most else "")]
+def count_lines(count: Count, stored: Tally | None, found: StoredSoFar | None = None
+                ) -> list[str]:
+    """A study's plan: its trials and env steps, and how many the store already holds; a
+    CPU-budgeted search's, led by its budget and the CPU seconds it has left (read from
+    ``found``)."""
+    found = found or StoredSoFar()
+    most = "at most " if count.at_most or count.cpu_budget is not None else ""
+    raced = " (raced: a value or configuration shown worse stops early)" if count.at_most else ""
+    if count.cpu_budget is None:
+        lines = [f"{count.study}: {most}{count.trials} trials ({count.shape}), "
+                 f"{count.steps_per_trial:,} env steps each, {most}{count.env_steps:,} in all"
+                 + raced]
+    else:
+        lines = [f"{count.study}: until its {count.cpu_budget:,.0f} CPU s (search.cpu_budget) "
+                 f"are used, at most {count.trials} trials ({count.shape}), "
+                 f"{count.steps_per_trial:,} env steps each{raced}",
+                 f"  {budget_text(count, found)}"]
     if count.definition is not None:
         lines.append(f"  seeding {SEEDING_TEXT[stored_seeding(count.definition)]}")
         if isinstance(count.definition.get("seeds"), list):
             lines.append(f"  seeds {seed_text(count.definition['seeds'])}")
+    left = ("none" if count.cpu_budget is not None and not found.cpu_left(count)
+            else f"{most}{remaining_trials(count, stored)}")
     if stored is None:
-        lines.append(f"  not in the store yet: 0 complete, {most}{count.trials} to run")
+        lines.append(f"  not in the store yet: 0 complete, {left} to run")
     else:
         lines.append(f"  in the store: {stored.complete} complete, {stored.failed} failed, "
-                     f"{stored.pruned} pruned; {most}{remaining_trials(count, stored)} to run")
+                     f"{stored.pruned} pruned; {left} to run")
     return lines
+
+
+def budget_text(count: Count, found: StoredSoFar) -> str:
+    """A CPU-budgeted search's CPU seconds still to spend, and what ends it."""
+    left = found.cpu_left(count)
+    if not left:
+        return (f"it has used {found.spent.get(count.study, 0.0):,.0f} CPU s, its budget: it "
+                "asks for no more trials")
+    return (f"{left:,.0f} CPU s left to spend (the sampler's included); how many trials they "
+            "run depends on the settings asked for, and the trials running when they are used "
+            "finish")
 
 
 def remaining_trials(count: Count, stored: Tally | None) -> int:
@@ -116,26 +166,40 @@ def remaining_trials(count: Count, stored: Tally | None) -> int:
 
 
 def remaining_steps(counts: Sequence[Count], found: StoredSoFar) -> int:
-    """Env steps still to train over every counted study."""
+    """Env steps still to train over every counted study but a CPU-budgeted search (timed by
+    its CPU seconds left: [`StoredSoFar.cpu_left`][StoredSoFar.cpu_left])."""
     return sum(remaining_trials(c, found.tallies.get(c.study)) * c.steps_per_trial
-               for c in counts)
+               for c in counts if c.cpu_budget is None)
 
 
-def estimate_line(steps: int, measured: Measured, workers: int | None) -> str:
+def estimate_line(steps: int, measured: Measured, workers: int | None, cpu_left: float = 0.0
+                  ) -> str:
     """``about 12 min at 5,100 env steps/s per worker x 2 workers, measured over 80 trials of
-    this store``, or why there is no estimate. ``workers`` None: not known before the command
-    runs (a Ray cluster's CPUs), the estimate is one worker's."""
-    rate = measured.rate
+    this store``, or why there is no estimate; a CPU-budgeted search's ``cpu_left`` seconds
+    are timed at the CPU seconds a worker uses per second (``about 21 min: 1,592 CPU s at
+    0.65 CPU s/s per worker x 2 workers, ...``). ``workers`` None: not known before the
+    command runs (a Ray cluster's CPUs), the estimate is one worker's."""
+    rate, cpu_rate = measured.rate, measured.cpu_rate
     if rate is None:
         return "no estimate: this store has no complete trial to measure steps/s from"
-    if steps == 0:
+    if cpu_left > 0 and cpu_rate is None:
+        return "no estimate: this store has no complete trial that stored its CPU seconds"
+    if steps == 0 and cpu_left <= 0:
         return "nothing left to run"
     many = workers or 1
     shown = (f"{many} worker{'s' if many != 1 else ''}" if workers
              else "1 worker (the cluster's workers are not known before it is reached)")
-    return (f"about {duration(steps / (rate * many))} at {rate:,.0f} env steps/s per worker "
-            f"x {shown}, measured over {measured.trials} trial"
-            f"{'s' if measured.trials != 1 else ''} of this store")
+    seconds, rates = 0.0, []
+    if steps:
+        seconds += steps / (rate * many)
+        rates.append(f"{steps:,} env steps at {rate:,.0f} env steps/s")
+    if cpu_left > 0 and cpu_rate is not None:
+        seconds += cpu_left / (cpu_rate * many)
+        rates.append(f"{cpu_left:,.0f} CPU s at {cpu_rate:.2f} CPU s/s")
+    at = (f" at {rate:,.0f} env steps/s" if not cpu_left
+          else ": " + " and ".join(rates))
+    return (f"about {duration(seconds)}{at} per worker x {shown}, measured over "
+            f"{measured.trials} trial{'s' if measured.trials != 1 else ''} of this store")
 
 
 def duration(seconds: float) -> str:
@@ -196,10 +260,11 @@ def preview_lines(url: str, counts: Sequence[Count], workers: int | None,
     found = read_stored(url, counts)
     lines = ["plan (dry run: nothing is trained or written):"]
     for count in counts:
-        lines += count_lines(count, found.tallies.get(count.study))
+        lines += count_lines(count, found.tallies.get(count.study), found)
         lines += [f"  {note}" for note in (notes or {}).get(count.study, [])]
     if len(counts) > 1:
         lines.append(f"in all: {sum(c.trials for c in counts)} trials, "
                      f"{sum(c.env_steps for c in counts):,} env steps")
-    lines.append(estimate_line(remaining_steps(counts, found), found.measured, workers))
+    lines.append(estimate_line(remaining_steps(counts, found), found.measured, workers,
+                               sum(found.cpu_left(c) for c in counts)))
     return lines

@@ -39,6 +39,9 @@ class Count:
     definition: dict[str, Any] | None = None
     """The definition the command would store (and check against a stored study of the same
     name); None when not known yet (a campaign stage waiting for earlier winners)."""
+    cpu_budget: float | None = None
+    """A search's CPU seconds (``search.cpu_budget``): it ends once they are used, usually
+    long before its trials do; None without one."""
 
     @property
     def env_steps(self) -> int:
@@ -70,22 +73,23 @@ def search_count(cfg: DictConfig) -> Count:
     search's: at most ``search.trials`` configurations of up to ``budget.seeds`` runs each."""
     seeds = int(cfg.budget.seeds)
     rules = search_race_rules(cfg)
+    budget = search_cpu_budget(cfg)
+    cpu = None if budget is None else float(budget)
     if rules is not None:
         return Count(study=str(cfg.search.name), trials=int(cfg.search.trials) * seeds,
                      steps_per_trial=int(cfg.budget.steps), at_most=True,
                      shape=f"search.trials configurations, each raced on {rules.min_seeds} to "
                            f"{seeds} seeds (runs) of {int(cfg.budget.steps):,} env steps"
-                           + _budget_part(cfg), definition=search_definition(cfg))
+                           + _recheck_part(cfg), definition=search_definition(cfg),
+                     cpu_budget=cpu)
     return Count(study=str(cfg.search.name), trials=int(cfg.search.trials),
                  steps_per_trial=seeds * int(cfg.budget.steps),
                  shape=f"search.trials, each {seeds} seeds x {int(cfg.budget.steps):,} env "
-                       "steps" + _budget_part(cfg), definition=search_definition(cfg))
+                       "steps" + _recheck_part(cfg), definition=search_definition(cfg),
+                 cpu_budget=cpu)
 
 
-def _budget_part(cfg: DictConfig) -> str:
-    """A search's CPU budget and rechecks as the plan names them: fewer trials may run."""
-    budget = search_cpu_budget(cfg)
-    text = "" if budget is None else (f"; fewer if its {float(budget):,.0f} CPU s "
-                                      "(search.cpu_budget) are used first")
+def _recheck_part(cfg: DictConfig) -> str:
+    """A search's rechecks as the plan names them."""
     rechecks = recheck_text(cfg)
-    return text + (f"; {rechecks} (search.recheck)" if rechecks else "")
+    return f"; {rechecks} (search.recheck)" if rechecks else ""
