@@ -43,11 +43,14 @@ Resumable: each step reads the store first. A repetition whose confirm is finish
 otherwise its tuning command runs again (a finished search or campaign starts nothing, a killed
 one continues where it stopped), then its confirm (likewise). After each confirm the CSV
 ``--out`` is written again from the store: one row per method and repetition (CPU s of the
-tuning, its runs, the pick and its settings, its search score, the confirmed IQM with its 95 %
-Tukey-McLaughlin trimmed-t interval, failed runs and seeds, CPU s per confirm run).
+tuning, the configurations it trained and its env steps, the pick and its settings, its search
+score, the confirmed IQM with its 95 % Tukey-McLaughlin trimmed-t interval, failed runs and
+seeds, CPU s per confirm run).
 
-``--table`` prints one markdown table: per method and repetition, the tuning's CPU s and runs,
-the pick, its confirmed IQM [interval] and its answer against the campaign's pick of the same
+``--table`` prints one markdown table: per method and repetition, the tuning's CPU s, the
+configurations it trained (a campaign's values over its stages, a search's trials, a racing
+search's configurations whatever their seeds) and its env steps (every attempt's), the pick,
+its confirmed IQM [interval] and its answer against the campaign's pick of the same
 repetition (``ks.compare`` on the two picks' confirmed seed scores at ``--margin``, default
 ``compare.margin`` 0.2, and ``--alpha``: better, equivalent, worse or undecided), then per
 method the mean CPU s and the answers counted, losses included. Then the planned test, fixed
@@ -116,7 +119,8 @@ SHORT = [("env", "observation", "obs"), ("ppo", "n_steps", "n_steps"),
          ("ppo", "learning_rate", "lr"), ("ppo", "gae_lambda", "lambda"),
          ("ppo", "ent_coef", "ent")]
 """The settings the search space and the campaign vary, as a pick's short form writes them."""
-COLUMNS = ["method", "repetition", "budget_steps", "tuning", "cpu_s", "runs", "pick",
+COLUMNS = ["method", "repetition", "budget_steps", "tuning", "cpu_s", "configurations",
+           "env_steps", "pick",
            "settings", "search_score", "confirm", "seeds", "confirmed_iqm", "iqm_low",
            "iqm_high", "interval", "failed_runs", "failed_seeds", "confirm_cpu_per_run"]
 
@@ -290,17 +294,35 @@ def finished(info: ks.StudyInfo | None) -> bool:
             and info.complete + info.failed + info.pruned >= info.planned)
 
 
-def tuning_cost(url: str, studies: Sequence[str]) -> tuple[float, int]:
-    """CPU seconds the tuning used (every attempt's, and asking the sampler) and its counted
-    runs (a search's trials, each of budget.seeds seeds; a sweep's value x seed runs)."""
-    cpu, runs = 0.0, 0
+@dataclass(frozen=True)
+class Cost:
+    """What a tuning spent."""
+
+    cpu: float
+    """CPU seconds, every attempt's, and asking the sampler."""
+    configurations: int
+    """Distinct settings it trained, summed over its studies (a sweep's values, a search's
+    trials, a racing search's configurations whatever their seeds)."""
+    env_steps: int
+    """Env steps every attempt trained (a pruned trial's up to where it stopped)."""
+    runs: int
+    """Counted trials (a sweep's value x seed runs, a search's trials, a racing search's
+    runs)."""
+
+
+def tuning_cost(url: str, studies: Sequence[str]) -> Cost:
+    """What the tuning's studies spent, read from the store."""
+    cpu, configurations, steps, runs = 0.0, 0, 0, 0
     for name in studies:
         study = optuna.load_study(study_name=name, storage=url)
         every = [t for t in study.get_trials(deepcopy=False)
                  if t.state != optuna.trial.TrialState.WAITING]
         cpu += spent_cpu(every)
-        runs += len(counted(every))
-    return cpu, runs
+        kept = counted(every)
+        runs += len(kept)
+        configurations += len({json.dumps(t.params, sort_keys=True, default=str) for t in kept})
+        steps += sum(int(t.user_attrs.get("env_steps") or 0) for t in every)
+    return Cost(cpu, configurations, steps, runs)
 
 
 @dataclass
@@ -361,9 +383,13 @@ class Result:
     """One repetition's tuning and its confirmed pick."""
 
     arm: Arm
-    cpu: float
-    runs: int
+    cost: Cost
     confirmed: Confirmed
+
+    @property
+    def cpu(self) -> float:
+        """The tuning's CPU seconds."""
+        return self.cost.cpu
 
 
 def check_fresh_seeds(results: Sequence[Result]) -> None:
@@ -378,11 +404,11 @@ def check_fresh_seeds(results: Sequence[Result]) -> None:
 
 def read_result(ctx: Context, arm: Arm) -> Result:
     """One repetition's tuning cost and confirmed pick, checked."""
-    cpu, runs = tuning_cost(ctx.storage, arm.studies)
+    cost = tuning_cost(ctx.storage, arm.studies)
     confirmed = read_confirm(ctx.storage, arm.confirm)
     if arm.method == "campaign":
         check_campaign_pick(ctx, arm, confirmed)
-    return Result(arm, cpu, runs, confirmed)
+    return Result(arm, cost, confirmed)
 
 
 def check_campaign_pick(ctx: Context, arm: Arm, confirmed: Confirmed) -> None:
@@ -452,7 +478,8 @@ def write_csv(path: Path, rows: Sequence[Result], full: Sequence[Result]) -> Non
             writer.writerow([
                 result.arm.method, result.arm.repetition, c.steps,
                 result.arm.tuning if tuned else "", f"{result.cpu:.1f}" if tuned else "",
-                result.runs if tuned else "", c.label, short_settings(c.settings),
+                result.cost.configurations if tuned else "",
+                result.cost.env_steps if tuned else "", c.label, short_settings(c.settings),
                 f"{c.source_score:.6g}", c.name, len(c.scores), f"{c.iqm:.6g}",
                 f"{c.low:.6g}", f"{c.high:.6g}", iqm_interval_name(), c.failed_runs,
                 c.failed_seeds, f"{c.cpu_per_run:.2f}"])
@@ -498,9 +525,10 @@ def print_table(rows: Sequence[Result], full: Sequence[Result], margin: float,
     print(f"\nEach pick retrained on {seeds} fresh seeds ({TEST_SEED} on) at the tuning budget; "
           f"IQM with its {iqm_interval_name()}. Against the campaign: ks.compare of the two "
           f"picks' seed scores, margin {margin:g} of the best's |IQM|, alpha {alpha:g}.")
-    print("| method | repetition | CPU s | runs | pick | search score | confirmed IQM [95 % CI] "
-          "| failed runs | failed seeds | against the campaign's pick (same repetition) |")
-    print("|---|---:|---:|---:|---|---:|---|---:|---:|---|")
+    print("| method | repetition | CPU s | configurations | env steps (M) | pick | search score "
+          "| confirmed IQM [95 % CI] | failed runs | failed seeds | against the campaign's pick "
+          "(same repetition) |")
+    print("|---|---:|---:|---:|---:|---|---:|---|---:|---:|---|")
     for method in METHODS:
         mine = [r for r in rows if r.arm.method == method]
         if not mine:
@@ -514,12 +542,14 @@ def print_table(rows: Sequence[Result], full: Sequence[Result], margin: float,
                 answer = ("no campaign pick" if reference is None
                           else against(c.scores, reference, margin, alpha))
                 answers.append(answer)
-            print(f"| {method} | {r.arm.repetition} | {r.cpu:,.0f} | {r.runs} | {c.label}: "
+            print(f"| {method} | {r.arm.repetition} | {r.cpu:,.0f} | {r.cost.configurations} "
+                  f"| {r.cost.env_steps / 1e6:.2f} | {c.label}: "
                   f"{short_settings(c.settings)} | {c.source_score:.4g} | {interval_text(c)} "
                   f"| {c.failed_runs} | {c.failed_seeds} | {answer} |")
         tally = ", ".join(f"{answers.count(a)} {a}" for a in dict.fromkeys(answers))
         print(f"| **{method}** | **{len(mine)}** | **{statistics.fmean(r.cpu for r in mine):,.0f}**"
-              f" | {statistics.fmean(r.runs for r in mine):.0f} | | | mean IQM "
+              f" | {statistics.fmean(r.cost.configurations for r in mine):.0f}"
+              f" | {statistics.fmean(r.cost.env_steps for r in mine) / 1e6:.2f} | | | mean IQM "
               f"{statistics.fmean(r.confirmed.iqm for r in mine):.4g} | | | {tally or '-'} |")
     if full:
         print_full(full, margin, alpha)
@@ -606,7 +636,7 @@ def print_plan(ctx: Context, arms: Sequence[Arm], sets: dict[str, list[str]],
     first = next((a for a in arms if a.method == "campaign"), Arm("campaign", 0, ctx.tag, stages))
     measured = None
     if finished(known.get(first.studies[-1])):
-        measured, _ = tuning_cost(ctx.storage, first.studies)
+        measured = tuning_cost(ctx.storage, first.studies).cpu
     budget = cpu_budget if cpu_budget is not None else measured
     if budget is None:
         raise ConfigError("--plan needs --cpu-budget B, or the campaign's first repetition in "
@@ -789,9 +819,9 @@ def run(args: argparse.Namespace) -> int:
             write_csv(args.out, *stored(ctx, stages))
     if args.campaign_cpu:
         for arm in arms:
-            cpu, count = tuning_cost(ctx.storage, arm.studies)
-            print(f"campaign r{arm.repetition}: {cpu:,.1f} CPU s over {count} runs")
-        first, _ = tuning_cost(ctx.storage, arms[0].studies)
+            cost = tuning_cost(ctx.storage, arm.studies)
+            print(f"campaign r{arm.repetition}: {cost.cpu:,.1f} CPU s over {cost.runs} runs")
+        first = tuning_cost(ctx.storage, arms[0].studies).cpu
         print(f"bench_methods: the campaign's first repetition used {first:,.1f} CPU s: "
               f"--cpu-budget {first:.0f}")
         return 0
