@@ -57,7 +57,11 @@ method the mean CPU s and the answers counted, losses included. Then the planned
 before the first run: racing against random search, paired by repetition, the exact one-sided
 Wilcoxon signed-rank test (scipy, ``alternative='greater'``, zero differences dropped) on the
 confirmed IQMs, alpha 0.05, n the complete pairs; and the same test of each other search
-method against random search where pairs exist, labelled exploratory.
+method against random search where pairs exist, labelled exploratory. Last, the plan's second
+test: the search method with the highest mean confirmed IQM against the campaign, paired by
+repetition, one-sided Student t (scipy ``ttest_1samp``, ``alternative='greater'``) that the
+mean IQM difference is above ``-margin x |the campaign's mean confirmed IQM|``
+(non-inferiority), with both methods' mean CPU s.
 
 ``--full-budget M1 M2`` (its own invocation, after the reduced-budget runs) retrains the picks
 of two methods at the full budget (``budget=full`` then the invocation's overrides: 250,000
@@ -570,7 +574,61 @@ def print_table(rows: Sequence[Result], full: Sequence[Result], margin: float,
         print(f"- {line}")
         if kind == "planned":
             last = line
+    print_against_campaign(rows, margin)
     print(f"bench_methods: {last}")
+
+
+def against_campaign(rows: Sequence[Result], margin: float
+                     ) -> tuple[str, list[float], float, float, float] | None:
+    """The plan's second goal: the search method with the highest mean confirmed IQM, its
+    IQMs minus the campaign's of the same repetitions, the shift it must stay above
+    (``-margin x |the campaign's mean confirmed IQM|``) and the one-sided Student t test's p
+    that the mean difference is above it (scipy ``ttest_1samp``, ``alternative='greater'``);
+    None without the campaign or a search method paired with it."""
+    from scipy import stats
+
+    by = {(r.arm.method, r.arm.repetition): r for r in rows}
+    campaign = [r for r in rows if r.arm.method == "campaign"]
+    means = {m: statistics.fmean(r.confirmed.iqm for r in rows if r.arm.method == m)
+             for m in SEARCHES if any(r.arm.method == m for r in rows)}
+    if not campaign or not means:
+        return None
+    best = max(means, key=lambda m: means[m])
+    reps = sorted(r.arm.repetition for r in campaign if (best, r.arm.repetition) in by)
+    if not reps:
+        return None
+    differences = [by[(best, rep)].confirmed.iqm - by[("campaign", rep)].confirmed.iqm
+                   for rep in reps]
+    shift = -margin * abs(statistics.fmean(r.confirmed.iqm for r in campaign))
+    p = (float(stats.ttest_1samp(differences, shift, alternative="greater").pvalue)
+         if len(differences) >= 2 else math.nan)
+    return best, differences, shift, p, means[best]
+
+
+def print_against_campaign(rows: Sequence[Result], margin: float) -> None:
+    """The second goal's test, planned: the best search method's pick non-inferior to the
+    campaign's, at what CPU."""
+    found = against_campaign(rows, margin)
+    if found is None:
+        print("- the best search method against the campaign: no pair yet (planned)")
+        return
+    best, differences, shift, p, mean = found
+    campaign = [r for r in rows if r.arm.method == "campaign"]
+    cpu = statistics.fmean(r.cpu for r in rows if r.arm.method == best)
+    campaign_cpu = statistics.fmean(r.cpu for r in campaign)
+    verdict = ("not tested (one pair)" if math.isnan(p) else
+               "non-inferior shown" if p < PLANNED_ALPHA else "non-inferiority not shown")
+    print(f"\nThe best search method (highest mean confirmed IQM, {mean:.4g}) is {best}; the "
+          f"campaign's mean confirmed IQM is "
+          f"{statistics.fmean(r.confirmed.iqm for r in campaign):.4g}. Non-inferiority of "
+          f"{best}'s pick to the campaign's (one-sided Student t on the paired IQM "
+          f"differences, scipy ttest_1samp, alternative 'greater', against a shift of "
+          f"{shift:.4g} = -{margin:g} x |the campaign's mean confirmed IQM|):")
+    p_text = "-" if math.isnan(p) else f"{p:.3g}"
+    print(f"- {best} - campaign confirmed IQM: mean difference "
+          f"{statistics.fmean(differences):.4g}, n = {len(differences)} pairs, p = {p_text} at "
+          f"alpha {PLANNED_ALPHA:g}: {verdict} (planned); mean CPU s {cpu:,.0f} against the "
+          f"campaign's {campaign_cpu:,.0f} ({cpu / campaign_cpu:.2f} x)")
 
 
 def print_full(full: Sequence[Result], margin: float, alpha: float) -> None:

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import datetime
 import importlib.util
+import math
 import re
+import statistics
 import sys
 from pathlib import Path
 from typing import Any
@@ -12,6 +14,7 @@ from typing import Any
 import optuna
 import pytest
 from optuna.trial import TrialState
+from scipy import stats as scipy_stats
 
 from kraby_study.records.stored import spent_cpu
 
@@ -733,3 +736,35 @@ def test_tie_breaks_picks_among_the_trials_tied_at_the_top_by_each_rule(
                  {"t0": [500.0]})
     with pytest.raises(SystemExit, match="c-s0-ties has no complete run of t1"):
         breaks.main(["--storage", url, "--arms", "c", "--seeds", "0"])  # type: ignore[attr-defined]
+
+
+def test_the_method_comparison_tests_the_best_search_against_the_campaign_at_a_shift() -> None:
+    """bench_methods' second planned test: the search method with the highest mean confirmed
+    IQM, paired with the campaign by repetition, one-sided Student t against a shift of
+    -margin x |the campaign's mean IQM| (checked against the t statistic written out)."""
+    bench: Any = _benchmark("bench_methods")
+
+    def result(method: str, repetition: int, iqm: float, cpu: float = 100.0) -> Any:
+        confirmed = bench.Confirmed(name=f"{method}{repetition}", label="c", settings={},
+                                    source_score=iqm, steps=1024, seeds=[1000], scores=[iqm],
+                                    iqm=iqm, low=iqm, high=iqm, failed_runs=0,
+                                    failed_seeds="0/1", cpu_per_run=1.0)
+        return bench.Result(bench.Arm(method, repetition, "t", ()),
+                            bench.Cost(cpu, 1, 1, 1), confirmed)
+
+    campaign = [-1.0, -1.2, -0.8, -1.0]
+    random_iqms = [-1.05, -1.1, -0.95, -1.3]  # mean -1.1: the best search method
+    tpe = [-1.5, -1.4, -1.6]  # mean -1.5
+    rows = ([result("campaign", r, v) for r, v in enumerate(campaign)]
+            + [result("random", r, v) for r, v in enumerate(random_iqms)]
+            + [result("tpe", r, v) for r, v in enumerate(tpe)])
+    best, differences, shift, p, mean = bench.against_campaign(rows, 0.2)
+    assert best == "random" and math.isclose(mean, -1.1)
+    assert differences == pytest.approx([-0.05, 0.1, -0.15, -0.3])
+    assert shift == pytest.approx(-0.2)  # -0.2 x |mean(-1, -1.2, -0.8, -1)|
+    shifted = [d - shift for d in differences]
+    t = statistics.fmean(shifted) / (statistics.stdev(shifted) / math.sqrt(len(shifted)))
+    assert p == pytest.approx(float(scipy_stats.t.sf(t, len(shifted) - 1)))
+    # Without the campaign, or with one pair, there is no test.
+    assert bench.against_campaign(rows[4:], 0.2) is None
+    assert math.isnan(bench.against_campaign([rows[0], rows[4]], 0.2)[3])
