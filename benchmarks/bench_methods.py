@@ -466,7 +466,8 @@ def stored(ctx: Context, stages: tuple[str, ...]) -> tuple[list[Result], list[Re
     full = []
     for arm in every:
         if finished(known.get(arm.full)):
-            full.append(Result(arm, math.nan, 0, read_confirm(ctx.storage, arm.full)))
+            untuned = Cost(math.nan, 0, 0, 0)  # a full-budget retrain tunes nothing
+            full.append(Result(arm, untuned, read_confirm(ctx.storage, arm.full)))
     check_fresh_seeds([*rows, *full])
     return rows, full
 

@@ -123,6 +123,30 @@ def test_benchmark_runs_at_smoke_size(script: str, args: list[str],
         assert line in result.stdout, output[-3000:]
 
 
+@slow
+def test_bench_methods_retrains_two_methods_picks_at_the_full_budget(tmp_path: Path) -> None:
+    """--full-budget after a smoke comparison: each pick written as a ppo config, retrained,
+    and answered against the campaign's in the table's full-budget part (at smoke size here:
+    the invocation's budget overrides replace budget=full's)."""
+    script = [sys.executable, str(BENCHMARKS / "bench_methods.py"), "--seeds", "campaign=0",
+              "random=0"]
+    done = subprocess.run([*script, *METHODS_SMOKE], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=900)
+    assert done.returncode == 0, (done.stdout + done.stderr)[-3000:]
+    full = subprocess.run([*script, "--full-budget", "random", "campaign", *METHODS_SMOKE],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    output = full.stdout + full.stderr
+    assert full.returncode == 0, output[-3000:]
+    assert "At the full budget (1,024 steps a run), the same picks on 2 fresh seeds:" \
+        in full.stdout, output[-3000:]
+    rows = [line for line in full.stdout.splitlines() if line.startswith(("| random | 0 | ",
+                                                                           "| campaign | 0 | "))]
+    assert len(rows) == 4, output[-3000:]  # each pick at the tuning budget and at the full one
+    assert (tmp_path / "conf" / "ppo" / "pick_random_r0.yaml").exists()
+    with open(tmp_path / "methods.csv") as handle:
+        assert sum(1 for line in handle) == 1 + 4  # a header, two tuned rows and two full ones
+
+
 def test_every_benchmark_is_smoke_tested_and_documented() -> None:
     scripts = {path.name for path in BENCHMARKS.glob("*.py")}
     # bench_racing_sampler needs a store of measured runs: its own test writes one.
