@@ -48,8 +48,9 @@ score, the confirmed IQM with its 95 % Tukey-McLaughlin trimmed-t interval, fail
 seeds, CPU s per confirm run).
 
 ``--table`` prints one markdown table: per method and repetition, the tuning's CPU s, the
-configurations it trained (a campaign's values over its stages, a search's trials, a racing
-search's configurations whatever their seeds) and its env steps (every attempt's), the pick,
+configurations it trained (distinct settings: a campaign's values over its stages, each
+stage's earlier winner once; a search's trials; a racing search's configurations whatever
+their seeds) and its env steps (every attempt's), the pick,
 its confirmed IQM [interval] and its answer against the campaign's pick of the same
 repetition (``ks.compare`` on the two picks' confirmed seed scores at ``--margin``, default
 ``compare.margin`` 0.2, and ``--alpha``: better, equivalent, worse or undecided), then per
@@ -61,7 +62,9 @@ method against random search where pairs exist, labelled exploratory. Last, the 
 test: the search method with the highest mean confirmed IQM against the campaign, paired by
 repetition, one-sided Student t (scipy ``ttest_1samp``, ``alternative='greater'``) that the
 mean IQM difference is above ``-margin x |the campaign's mean confirmed IQM|``
-(non-inferiority), with both methods' mean CPU s.
+(non-inferiority), with both methods' mean CPU s. ``--asked SETTING=VALUE`` (with
+``--table``) adds per method and repetition how many configurations had that setting, of all
+the tuning trained, and the mean CPU s of a run with it and with other values.
 
 ``--full-budget M1 M2`` (its own invocation, after the reduced-budget runs) retrains the picks
 of two methods at the full budget (``budget=full`` then the invocation's overrides: 250,000
@@ -305,8 +308,9 @@ class Cost:
     cpu: float
     """CPU seconds, every attempt's, and asking the sampler."""
     configurations: int
-    """Distinct settings it trained, summed over its studies (a sweep's values, a search's
-    trials, a racing search's configurations whatever their seeds)."""
+    """Distinct settings it trained (a campaign's values over its stages, each stage's
+    earlier winner counted once; a search's trials; a racing search's configurations whatever
+    their seeds)."""
     env_steps: int
     """Env steps every attempt trained (a pruned trial's up to where it stopped)."""
     runs: int
@@ -316,7 +320,8 @@ class Cost:
 
 def tuning_cost(url: str, studies: Sequence[str]) -> Cost:
     """What the tuning's studies spent, read from the store."""
-    cpu, configurations, steps, runs = 0.0, 0, 0, 0
+    cpu, steps, runs = 0.0, 0, 0
+    configurations: set[str] = set()
     for name in studies:
         study = optuna.load_study(study_name=name, storage=url)
         every = [t for t in study.get_trials(deepcopy=False)
@@ -324,9 +329,10 @@ def tuning_cost(url: str, studies: Sequence[str]) -> Cost:
         cpu += spent_cpu(every)
         kept = counted(every)
         runs += len(kept)
-        configurations += len({json.dumps(t.params, sort_keys=True, default=str) for t in kept})
+        configurations |= {json.dumps(t.user_attrs.get("settings") or [name, t.params],
+                                      sort_keys=True, default=str) for t in kept}
         steps += sum(int(t.user_attrs.get("env_steps") or 0) for t in every)
-    return Cost(cpu, configurations, steps, runs)
+    return Cost(cpu, len(configurations), steps, runs)
 
 
 @dataclass
@@ -632,6 +638,68 @@ def print_against_campaign(rows: Sequence[Result], margin: float) -> None:
           f"campaign's {campaign_cpu:,.0f} ({cpu / campaign_cpu:.2f} x)")
 
 
+def parse_asked(text: str) -> tuple[str, str, str]:
+    """``ppo.n_steps=32`` as (``ppo``, ``n_steps``, ``32``)."""
+    path, sep, value = text.partition("=")
+    root, dot, key = path.partition(".")
+    if not sep or not dot or root not in ("env", "ppo") or not key or not value:
+        raise ConfigError(f"--asked takes env.KEY=VALUE or ppo.KEY=VALUE, got {text!r}")
+    return root, key, value
+
+
+@dataclass(frozen=True)
+class Asked:
+    """How often a tuning trained a setting, and what its runs cost."""
+
+    matching: int
+    """Configurations trained with the setting."""
+    configurations: int
+    cpu_matching: float
+    """CPU s per run (budget.steps env steps) of the complete trials with it; NaN for none."""
+    cpu_others: float
+
+
+def asked_in(url: str, studies: Sequence[str], root: str, key: str, value: str) -> Asked:
+    """Distinct configurations (by their resolved settings) a tuning's studies trained, those
+    with ``root.key == value``, and the CPU s per run of each group's complete trials
+    (``cpu_time`` over ``env_steps`` times the trial's ``steps`` a run)."""
+    seen: dict[str, bool] = {}
+    cpu: dict[bool, list[float]] = {True: [], False: []}
+    for name in studies:
+        study = optuna.load_study(study_name=name, storage=url)
+        for trial in counted(study.get_trials(deepcopy=False)):
+            settings = trial.user_attrs.get("settings") or {}
+            if not settings:
+                continue
+            matches = str(settings.get(root, {}).get(key)) == value
+            seen[json.dumps(settings, sort_keys=True, default=str)] = matches
+            attrs = trial.user_attrs
+            if (trial.state == optuna.trial.TrialState.COMPLETE and attrs.get("cpu_time")
+                    and attrs.get("env_steps") and attrs.get("steps")):
+                cpu[matches].append(float(attrs["cpu_time"]) / int(attrs["env_steps"])
+                                    * int(attrs["steps"]))
+    return Asked(matching=sum(seen.values()), configurations=len(seen),
+                 cpu_matching=statistics.fmean(cpu[True]) if cpu[True] else math.nan,
+                 cpu_others=statistics.fmean(cpu[False]) if cpu[False] else math.nan)
+
+
+def print_asked(url: str, rows: Sequence[Result], root: str, key: str, value: str) -> None:
+    """Per method and repetition, how often its tuning trained ``root.key=value``."""
+    setting = f"{root}.{key}={value}"
+    print(f"\nConfigurations each tuning trained with {setting}, of all it trained, and the "
+          "mean CPU s of a run (a complete trial's CPU s per env step times its steps a run) "
+          "with it and with any other value:")
+    print(f"| method | repetition | with {setting} | configurations | CPU s a run, with | CPU s "
+          "a run, others |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for r in rows:
+        a = asked_in(url, r.arm.studies, root, key, value)
+        with_cpu = "-" if math.isnan(a.cpu_matching) else f"{a.cpu_matching:,.1f}"
+        other_cpu = "-" if math.isnan(a.cpu_others) else f"{a.cpu_others:,.1f}"
+        print(f"| {r.arm.method} | {r.arm.repetition} | {a.matching} | {a.configurations} "
+              f"| {with_cpu} | {other_cpu} |")
+
+
 def print_full(full: Sequence[Result], margin: float, alpha: float) -> None:
     """The picks retrained at the full budget, each answered against the campaign's pick of
     the same repetition there (or, without the campaign, against the last method's)."""
@@ -809,6 +877,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--plan", action="store_true",
                         help="print every command a run (or --full-budget) would start and "
                              "the CPU it is expected to use; run none")
+    parser.add_argument("--asked", metavar="SETTING=VALUE", default=None,
+                        help="with --table: how many configurations each tuning trained with "
+                             "this setting (e.g. ppo.n_steps=32), and the CPU s a run of them "
+                             "and of the others")
     parser.add_argument("--full-repetitions", type=int, nargs="+", default=None,
                         help="with --full-budget: these repetitions only (default: every one "
                              "confirmed)")
@@ -849,8 +921,14 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--full-budget names two of {', '.join(METHODS)}")
     full = [a for m in (args.full_budget or []) for a in arms if a.method == m
             and (args.full_repetitions is None or a.repetition in args.full_repetitions)]
+    asked = parse_asked(args.asked) if args.asked is not None else None
+    if asked is not None and not args.table:
+        raise ConfigError("--asked goes with --table")
     if args.table:
-        print_table(*stored(ctx, stages), margin, args.alpha)
+        rows, full = stored(ctx, stages)
+        print_table(rows, full, margin, args.alpha)
+        if asked is not None:
+            print_asked(ctx.storage, rows, *asked)
         return 0
     if args.plan:
         print_plan(ctx, [] if args.full_budget else arms, sets, args.cpu_budget,

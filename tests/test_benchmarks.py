@@ -145,6 +145,21 @@ def test_bench_methods_retrains_two_methods_picks_at_the_full_budget(tmp_path: P
     assert (tmp_path / "conf" / "ppo" / "pick_random_r0.yaml").exists()
     with open(tmp_path / "methods.csv") as handle:
         assert sum(1 for line in handle) == 1 + 4  # a header, two tuned rows and two full ones
+    # --asked counts the configurations with a setting: none with a gamma nobody tried, every
+    # one with the episode length all share; each out of the table's configurations.
+    tuned = {line.split(" | ")[0]: int(line.split(" | ")[3]) for line in rows[:2]}
+    for setting, share in (("ppo.gamma=0.123456", 0), ("env.max_episode_steps=32", 1)):
+        table = subprocess.run([*script, "--table", "--asked", setting, *METHODS_SMOKE],
+                               cwd=tmp_path, capture_output=True, text=True, timeout=600)
+        assert table.returncode == 0, (table.stdout + table.stderr)[-3000:]
+        asked = table.stdout.split(f"| with {setting} |")[1].splitlines()[2:4]
+        for line in asked:
+            method, _, matching, configurations = line.split(" | ")[:4]
+            assert int(configurations) == tuned[method], line
+            assert int(matching) == share * int(configurations), line
+    bad = subprocess.run([*script, "--table", "--asked", "n_steps=32", *METHODS_SMOKE],
+                         cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert bad.returncode != 0 and "--asked takes env.KEY=VALUE" in bad.stderr
 
 
 def test_every_benchmark_is_smoke_tested_and_documented() -> None:
