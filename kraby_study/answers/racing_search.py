@@ -22,10 +22,9 @@ from kraby_study.decision.robust import iqm
 from kraby_study.plan.spec import RaceRules
 from kraby_study.records.attributes import StudyKind, TrialAttrs
 from kraby_study.records.stored import (
-    Failure,
     Outcome,
     StoredTrial,
-    failure_kind,
+    is_diverged,
     latest_by_key,
     outcome,
     parse_racing_key,
@@ -191,7 +190,7 @@ def racing_search(definition: Mapping[str, Any], trials: Sequence[StoredTrial]
         else:
             continue
         cpu = math.nan if attrs.cpu_time is None else float(attrs.cpu_time)
-        diverged = failure_kind(attrs.failure) == Failure.DIVERGED
+        diverged = is_diverged(trial)
         ends.append(((attrs.race_order if attrs.race_order is not None else 1 << 62, trial.number),
                      RunEnd(config, index, value, cpu, diverged=diverged)))
     order = sorted(params)

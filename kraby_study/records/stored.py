@@ -314,8 +314,6 @@ def diverged_runs(latest: Mapping[str, StoredTrial], seeds: list[int]) -> dict[i
     found: dict[int, set[int]] = {}
     for key, trial in latest.items():
         where = place(key, seeds)
-        if where is None or outcome(trial) != Outcome.FAILED:
-            continue
-        if failure_kind(trial.user_attrs.get("failure")) == Failure.DIVERGED:
+        if where is not None and is_diverged(trial):
             found.setdefault(where[0], set()).add(where[1])
     return found

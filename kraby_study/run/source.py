@@ -9,7 +9,7 @@ from optuna.trial import FrozenTrial, TrialState
 
 from kraby_study.plan.spec import TrialSpec
 from kraby_study.records.attributes import TrialResult
-from kraby_study.records.stored import counted, spent_cpu, tally
+from kraby_study.records.stored import counted, spent_cpu
 from kraby_study.run.provenance import command_facts
 from kraby_study.store.ledger import StudyLedger
 
@@ -108,11 +108,10 @@ def requeue_orphans(ledger: StudyLedger, stream: TextIO) -> None:
 def retry_failed(ledger: StudyLedger, stream: TextIO) -> int:
     """Queue the study's failed runs again with their seeds and settings, and say so; returns
     how many."""
-    numbers = ledger.retry_failed()
+    numbers, diverged = ledger.retry_failed()
     if numbers:
         print(f"{len(numbers)} failed trial(s) of {ledger.name} queued again with the same seeds "
               f"and settings: {', '.join(map(str, numbers))}", file=stream, flush=True)
-    diverged = tally(counted(ledger.trials())).diverged
     if diverged:
         print(f"{diverged} diverged run(s) of {ledger.name} not queued again: a divergence is a "
               "result of its settings", file=stream, flush=True)

@@ -218,18 +218,19 @@ class StudyLedger:
         if failed:
             requeue_stale(self._study, self._storage.get_trial(trial_id))
 
-    def retry_failed(self) -> list[int]:
+    def retry_failed(self) -> tuple[list[int], int]:
         """Queue a new attempt of every counted run that failed with an error, with its key,
         seed and parameters, saying on it how the earlier attempt failed. A diverged run is a
         result of its settings and stays; complete, pruned and pending runs are left alone,
         and so is a trial without a key (a sampled configuration refused before it ran).
-        Returns the numbers of the trials queued again."""
+        Returns the numbers of the trials queued again, and how many counted runs diverged."""
         with self.plan_lock():
-            failed = [t for t in counted(self.trials()) if outcome(t) == Outcome.FAILED
+            kept = counted(self.trials())
+            failed = [t for t in kept if outcome(t) == Outcome.FAILED
                       and not is_diverged(t) and t.user_attrs.get("key") is not None]
             for trial in failed:
                 queue_attempt(self._study, trial, str(trial.user_attrs.get("failure")))
-        return [t.number for t in failed]
+        return [t.number for t in failed], sum(map(is_diverged, kept))
 
     def requeue_orphans(self) -> int:
         """Queue again the trials a stopped command left running; returns how many.
