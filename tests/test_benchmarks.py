@@ -24,6 +24,8 @@ BENCHMARKS = ROOT / "benchmarks"
 SERVER = os.environ.get("KRABY_TEST_POSTGRES_URL")
 
 slow = pytest.mark.slow
+# The Ray benchmarks run on test_ray.py's xdist worker, in turn: its tests count the Ray processes.
+ray_group = pytest.mark.xdist_group("ray")
 postgres = [pytest.mark.postgres,
             pytest.mark.skipif(not SERVER, reason="KRABY_TEST_POSTGRES_URL is not set")]
 
@@ -87,12 +89,12 @@ SMOKE = [
                  "| SQLite file | stub pool |", marks=slow, id="bench_head"),
     pytest.param("bench_postgres.py", ["--smoke"], "| 2 |", marks=[slow, *postgres],
                  id="bench_postgres"),
-    pytest.param("bench_ray.py", ["--rounds", "1", "--steps", "1024"], "| ray |", marks=slow,
-                 id="bench_ray"),
-    pytest.param("bench_actor_start.py", ["--actors", "1"], "started: median", marks=slow,
-                 id="bench_actor_start"),
+    pytest.param("bench_ray.py", ["--rounds", "1", "--steps", "1024"], "| ray |",
+                 marks=[slow, ray_group], id="bench_ray"),
+    pytest.param("bench_actor_start.py", ["--actors", "1"], "started: median",
+                 marks=[slow, ray_group], id="bench_actor_start"),
     pytest.param("bench_ray_fault.py", ["--steps", "1024", "--seeds", "1", "--after", "2"],
-                 "node lost at", marks=slow, id="bench_ray_fault"),
+                 "node lost at", marks=[slow, ray_group], id="bench_ray_fault"),
     # A string condition is evaluated when the test runs, not when the module is collected.
     pytest.param("bench_methods.py", ["--seeds", "random=0", "racing=0", "--set",
                                       "racing:budget.seeds=4", *METHODS_SMOKE],

@@ -375,6 +375,7 @@ def test_a_gym_sweep_search_confirm_and_report_end_to_end(
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # beside test_ray.py, which counts the Ray processes
 def test_a_gym_campaign_race_train_and_ray_run(workdir: Path) -> None:
     cart = ["env=gym", "env.id=CartPole-v1", "budget=smoke", "budget.steps=1024",
             "budget.curve_every=256", "ppo.n_envs=2", "ppo.n_steps=32", "ppo.n_epochs=2",

@@ -430,6 +430,7 @@ def test_a_killed_racing_search_continues_where_it_stopped(workdir: Path) -> Non
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # beside test_ray.py, which counts the Ray processes
 def test_a_racing_search_on_ray_races_as_on_local_workers(workdir: Path) -> None:
     pytest.importorskip("ray")
     racing_cfg(workdir)

@@ -36,6 +36,8 @@ from kraby_study.store.rows import reading
 from kraby_study.store.store import opened
 
 pytest.importorskip("ray")
+# One xdist worker runs every Ray test in turn: they count the machine's Ray processes.
+pytestmark = pytest.mark.xdist_group("ray")
 
 RAY = str(Path(sys.executable).with_name("ray"))
 # Test clusters live on loopback, for one test each: no token to share between the nodes.
