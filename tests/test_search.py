@@ -15,7 +15,7 @@ from kraby_study.config.compose import compose_config
 from kraby_study.errors import ConfigError
 from kraby_study.plan.space import validate_search
 from kraby_study.records.attributes import StudyAttrs, TrialResult
-from kraby_study.records.stored import Outcome
+from kraby_study.records.stored import Outcome, spent_cpu
 from kraby_study.run.sampling import make_pruner, sampler_seed
 from kraby_study.run.search_source import (
     SearchSource,
@@ -180,8 +180,7 @@ def test_a_cpu_budget_stops_the_search_before_its_trial_total(
     assert shown is not None and "ETA" not in line, line
     assert abs(int(shown.group(1).replace(",", "")) - spent) <= 1
     # The summary counts what asking the sampler cost too (suggest_cpu), every stored trial's.
-    used = sum(float(t.user_attrs.get("cpu_time") or 0.0)
-               + float(t.user_attrs.get("suggest_cpu") or 0.0) for t in load(db, "tiny").trials)
+    used = spent_cpu(load(db, "tiny").trials)
     assert spent <= used < spent + 1
     assert f"{used:,.0f} of its 0 CPU s used, 1 of 4 trials (stopped by the CPU budget)" in out
     # Its plan ended at the budget: list counts the trial it ran and the queued one.
