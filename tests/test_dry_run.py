@@ -32,7 +32,7 @@ def test_a_study_with_no_store_prints_its_config_and_plan_and_creates_nothing(
     out = capsys.readouterr().out
     assert "\nstudy:\n" in out and "parameter: ppo.clip_range" in out
     assert "clip_range: 4 trials (2 values x 2 seeds), 512 env steps each, 2,048 in all" in out
-    assert "0 complete, 4 to run" in out
+    assert "0 trials complete, 4 to run" in out
     assert "no estimate: this store has no complete trial to measure steps/s from" in out
     _nothing_written(workdir)
 
@@ -42,7 +42,7 @@ def test_an_empty_store_file_reads_as_no_store(workdir: Path,
     empty = workdir / "empty.db"
     empty.touch()
     assert run_cli("run", *SWEEP, "--storage", sqlite_url(empty), "--dry-run") == 0
-    assert "not in the store yet: 0 complete, 4 to run" in capsys.readouterr().out
+    assert "not in the store yet: 0 trials complete, 4 to run" in capsys.readouterr().out
     assert empty.stat().st_size == 0
 
 
@@ -53,7 +53,7 @@ def test_a_finished_study_counts_its_stored_runs_and_estimates_from_them(
     capsys.readouterr()
     assert run_cli("run", *SWEEP, "--storage", url, "--dry-run") == 0
     out = capsys.readouterr().out
-    assert "in the store: 4 complete, 0 failed, 0 pruned; 0 to run" in out
+    assert "in the store: 4 trials complete, 0 failed, 0 pruned; 0 to run" in out
     assert "nothing left to run" in out
     # A wider sweep of the same store: the rest estimated from the 4 measured trials.
     assert run_cli("run", "study=gamma", *TINY, "budget.seeds=2", "workers=1", "--storage", url,

@@ -347,7 +347,8 @@ def test_dry_run_says_what_the_racing_search_would_do_and_writes_nothing(
     racing_cfg(workdir)
     assert run_cli("optuna", "--racing", "--dry-run", *TINY_RACE, "--cpu-budget", "60") == 0
     out = capsys.readouterr().out
-    assert "search.trials configurations, each raced on 4 to 4 seeds" in out
+    assert "at most 8 runs (2 configurations (search.trials), each raced on 4 to 4 seeds)" in out
+    assert "not in the store yet: 0 runs complete, at most 8 to run" in out
     assert "60 CPU s (search.cpu_budget)" in out
     assert "racing search: random sampler" in out and "compare.margin 0.2" in out
     assert "alpha 0.05 spent over 1 looks" in out and "up to 4 (budget.seeds)" in out

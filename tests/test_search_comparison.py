@@ -337,7 +337,7 @@ def test_a_dry_run_shows_each_searchs_plan_and_stores_nothing(
             in out)
     assert "up to 8 (budget.seeds)" in out
     assert ("mountaincarcontinuous-random-s0: until its 1,200 CPU s (search.cpu_budget) are "
-            "used, at most 100000 trials (search.trials, each 2 seeds") in out
+            "used, at most 100,000 trials (search.trials, each 2 seeds") in out
     assert out.strip().splitlines()[-1] == ("bench_search: dry run of 2 searches; each pick "
                                             "would be confirmed on 5 fresh seeds")
     assert list(tmp_path.iterdir()) == []

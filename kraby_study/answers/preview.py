@@ -127,12 +127,12 @@ def count_lines(count: Count, stored: Tally | None, found: StoredSoFar | None = 
     most = "at most " if count.at_most or count.cpu_budget is not None else ""
     raced = " (raced: a value or configuration shown worse stops early)" if count.at_most else ""
     if count.cpu_budget is None:
-        lines = [f"{count.study}: {most}{count.trials} trials ({count.shape}), "
+        lines = [f"{count.study}: {most}{count.trials} {count.unit} ({count.shape}), "
                  f"{count.steps_per_trial:,} env steps each, {most}{count.env_steps:,} in all"
                  + raced]
     else:
         lines = [f"{count.study}: until its {count.cpu_budget:,.0f} CPU s (search.cpu_budget) "
-                 f"are used, at most {count.trials} trials ({count.shape}), "
+                 f"are used, at most {count.trials:,} {count.unit} ({count.shape}), "
                  f"{count.steps_per_trial:,} env steps each{raced}",
                  f"  {budget_text(count, found)}"]
     if count.definition is not None:
@@ -142,10 +142,10 @@ def count_lines(count: Count, stored: Tally | None, found: StoredSoFar | None = 
     left = ("none" if count.cpu_budget is not None and not found.cpu_left(count)
             else f"{most}{remaining_trials(count, stored)}")
     if stored is None:
-        lines.append(f"  not in the store yet: 0 complete, {left} to run")
+        lines.append(f"  not in the store yet: 0 {count.unit} complete, {left} to run")
     else:
-        lines.append(f"  in the store: {stored.complete} complete, {stored.failed} failed, "
-                     f"{stored.pruned} pruned; {left} to run")
+        lines.append(f"  in the store: {stored.complete} {count.unit} complete, "
+                     f"{stored.failed} failed, {stored.pruned} pruned; {left} to run")
     return lines
 
 
@@ -154,10 +154,10 @@ def budget_text(count: Count, found: StoredSoFar) -> str:
     left = found.cpu_left(count)
     if not left:
         return (f"it has used {found.spent.get(count.study, 0.0):,.0f} CPU s, its budget: it "
-                "asks for no more trials")
-    return (f"{left:,.0f} CPU s left to spend (the sampler's included); how many trials they "
-            "run depends on the settings asked for, and the trials running when they are used "
-            "finish")
+                f"asks for no more {count.unit}")
+    return (f"{left:,.0f} CPU s left to spend (the sampler's included); how many {count.unit} "
+            f"they run depends on the settings asked for, and the {count.unit} running when "
+            "they are used finish")
 
 
 def remaining_trials(count: Count, stored: Tally | None) -> int:

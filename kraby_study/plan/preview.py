@@ -42,6 +42,9 @@ class Count:
     cpu_budget: float | None = None
     """A search's CPU seconds (``search.cpu_budget``): it ends once they are used, usually
     long before its trials do; None without one."""
+    unit: str = "trials"
+    """What one counted trial is, as the plan names it: ``trials``, or ``runs`` for a racing
+    search (a trial per seed of a configuration)."""
 
     @property
     def env_steps(self) -> int:
@@ -78,10 +81,10 @@ def search_count(cfg: DictConfig) -> Count:
     if rules is not None:
         return Count(study=str(cfg.search.name), trials=int(cfg.search.trials) * seeds,
                      steps_per_trial=int(cfg.budget.steps), at_most=True,
-                     shape=f"search.trials configurations, each raced on {rules.min_seeds} to "
-                           f"{seeds} seeds (runs) of {int(cfg.budget.steps):,} env steps"
+                     shape=f"{int(cfg.search.trials):,} configurations (search.trials), each "
+                           f"raced on {rules.min_seeds} to {seeds} seeds"
                            + _recheck_part(cfg), definition=search_definition(cfg),
-                     cpu_budget=cpu)
+                     cpu_budget=cpu, unit="runs")
     return Count(study=str(cfg.search.name), trials=int(cfg.search.trials),
                  steps_per_trial=seeds * int(cfg.budget.steps),
                  shape=f"search.trials, each {seeds} seeds x {int(cfg.budget.steps):,} env "
