@@ -90,6 +90,24 @@ def test_an_equivalent_challenger_replaces_only_when_cheaper(cpu: float, replace
         assert state.standings[1].left == Left.EQUIVALENT and state.standings[1].seeds == 4
 
 
+def test_a_cheaper_challenger_whose_iqm_trims_a_failure_does_not_replace_as_equivalent(
+        ) -> None:
+    # MountainCarContinuous-v0, a racing search's pair 8: rl-zoo3's settings on 8 seeds, none
+    # failed, against a cheaper challenger that failed 1 of its first 4 seeds. Its IQM (92.9)
+    # trims the failure, so the incumbent is within the margin of the challenger; the
+    # challenger is not shown within the margin of the incumbent, and races on.
+    incumbent = [93.97, 91.05, 87.19, 94.03, 92.17, 93.43, 91.0, 90.9]
+    failing = [91.83, 95.26, -0.02, 94.0]
+    ends = runs(0, 0.0, 8, cpu=57.0, noise=incumbent) + runs(1, 0.0, 4, cpu=43.0, noise=failing)
+    state = intensify([0, 1], ends, RULES)
+    assert state.incumbent == 0 and state.standings[1].left == Left.RACING
+    # Without the failure the same challenger is within the margin, and replaces it.
+    steady = runs(1, 0.0, 4, cpu=43.0, noise=[91.83, 95.26, 93.1, 94.0])
+    state = intensify([0, 1], runs(0, 0.0, 8, cpu=57.0, noise=incumbent) + steady, RULES)
+    assert state.incumbent == 1 and state.standings[1].cheaper
+    assert 0 < state.standings[0].p < RULES.look_alpha
+
+
 @pytest.mark.parametrize(("shift", "replaces"), [(0.05, True), (-0.05, False)])
 def test_undecided_at_the_incumbents_seeds_the_higher_iqm_on_common_seeds_wins(
         shift: float, replaces: bool) -> None:

@@ -52,8 +52,15 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
-from kraby_study.decision.comparison import Answer, Comparison, compare, holm, p_text
-from kraby_study.decision.robust import iqm
+from kraby_study.decision.comparison import (
+    Answer,
+    Comparison,
+    compare,
+    holm,
+    margin_weights,
+    p_text,
+)
+from kraby_study.decision.robust import iqm, iqm_pairs
 from kraby_study.plan.spec import RaceRules
 
 K = TypeVar("K", bound=Hashable)
@@ -423,6 +430,37 @@ def challenge(incumbent: Sequence[float], challenger: Sequence[float], rules: Ra
     return ch, inc, p
 
 
+def within_margin(incumbent: Sequence[float], challenger: Sequence[float], rules: RaceRules
+                  ) -> float:
+    """The p of "the challenger's IQM is within the margin of the incumbent's" (one-sided:
+    above the incumbent's IQM less ``rules.margin`` x its |IQM|), by the comparison's own
+    tests ([`iqm_pairs`][kraby_study.decision.robust.iqm_pairs]: the larger p of the
+    percentile bootstrap and Yuen's test; with ``rules.paired`` on the common seeds). 1 where
+    either side has too few seeds to test, or at margin 0.
+
+    [`challenge`][kraby_study.decision.race.challenge] tests only the lower IQM against the
+    higher: when the challenger's IQM is the higher, "the incumbent is within the margin of
+    the challenger" says nothing of how far below the incumbent the challenger may be (a
+    challenger whose one failure in four seeds its IQM trims, say). A cheaper challenger
+    replaces the incumbent as equivalent only with this test too."""
+    if rules.margin <= 0:
+        return 1.0
+    if rules.paired:
+        n = min(len(incumbent), len(challenger))
+        samples = [np.asarray(incumbent[:n], dtype=float), np.asarray(challenger[:n], dtype=float)]
+    else:
+        samples = [np.asarray([v for v in x if not math.isnan(v)], dtype=float)
+                   for x in (incumbent, challenger)]
+    locations = np.array([float(iqm(x[~np.isnan(x)])) if np.any(~np.isnan(x)) else math.nan
+                          for x in samples])
+    if not np.all(np.isfinite(locations)):
+        return 1.0
+    tests = iqm_pairs(samples, margin_weights(locations, rules.margin), rules.look_alpha,
+                      paired=rules.paired)
+    p = float(tests.less[0, 1])
+    return p if math.isfinite(p) else 1.0
+
+
 def _iqm(scores: Sequence[float]) -> float:
     """The IQM of the complete scores; -inf with none (it never beats anything)."""
     clean = np.asarray([s for s in scores if not math.isnan(s)], dtype=float)
@@ -489,15 +527,19 @@ def _look(state: Intensification[K], config: K) -> None:
     inc_scores = [state.scores[inc][i] for i in range(m)]
     ch, inc_answer, p = challenge(inc_scores, ch_scores, state.rules)
     cheaper = _mean(state.cpu[config]) < _mean(state.cpu[inc])
+    if cheaper and inc_answer == Answer.EQUIVALENT:
+        # The challenger has the higher IQM and the incumbent is within the margin of it; to
+        # replace the incumbent the challenger must be within the margin of the incumbent.
+        p = within_margin(inc_scores, ch_scores, state.rules)
+        ch = Answer.EQUIVALENT if p < state.rules.look_alpha else Answer.UNDECIDED
     if ch == Answer.WORSE:
         state.standings[config] = Standing(Left.WORSE, seeds=k, p=p, by=inc)
     elif inc_answer == Answer.WORSE:
         _replace(state, config, p)
-    elif Answer.EQUIVALENT in (ch, inc_answer):
-        if cheaper:
-            _replace(state, config, p, cheaper=True)
-        else:
-            state.standings[config] = Standing(Left.EQUIVALENT, seeds=k, p=p, by=inc)
+    elif cheaper and ch == Answer.EQUIVALENT:
+        _replace(state, config, p, cheaper=True)
+    elif Answer.EQUIVALENT in (ch, inc_answer) and not cheaper:
+        state.standings[config] = Standing(Left.EQUIVALENT, seeds=k, p=p, by=inc)
     elif k >= m or state.rules.below == "look":
         n = min(k, m)
         if _iqm(ch_scores[:n]) <= _iqm(inc_scores[:n]):
