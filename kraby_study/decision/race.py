@@ -414,12 +414,7 @@ def challenge(incumbent: Sequence[float], challenger: Sequence[float], rules: Ra
         best, undecided where no answer holds), and the p of the answer that decides (NaN when
         undecided). With ``rules.paired`` both are read on their common seed indices.
     """
-    if rules.paired:
-        n = min(len(incumbent), len(challenger))
-        scores = {0: list(incumbent[:n]), 1: list(challenger[:n])}
-    else:
-        scores = {0: list(incumbent), 1: list(challenger)}
-    look = take_look(scores, rules)
+    look = take_look(_look_scores(incumbent, challenger, rules), rules)
     ch = look.answers.get(1, Answer.UNDECIDED)
     inc = look.answers.get(0, Answer.UNDECIDED)
     loser = 1 if ch in (Answer.WORSE, Answer.EQUIVALENT) else 0
@@ -428,6 +423,16 @@ def challenge(incumbent: Sequence[float], challenger: Sequence[float], rules: Ra
          else look.p_equivalent.get(loser, math.nan) if answer == Answer.EQUIVALENT
          else math.nan)
     return ch, inc, p
+
+
+def _look_scores(incumbent: Sequence[float], challenger: Sequence[float], rules: RaceRules
+                 ) -> dict[int, list[float]]:
+    """A look's samples, the incumbent's as 0 and the challenger's as 1: with
+    ``rules.paired`` their common seed indices only."""
+    if rules.paired:
+        n = min(len(incumbent), len(challenger))
+        return {0: list(incumbent[:n]), 1: list(challenger[:n])}
+    return {0: list(incumbent), 1: list(challenger)}
 
 
 def within_margin(incumbent: Sequence[float], challenger: Sequence[float], rules: RaceRules
@@ -445,14 +450,11 @@ def within_margin(incumbent: Sequence[float], challenger: Sequence[float], rules
     replaces the incumbent as equivalent only with this test too."""
     if rules.margin <= 0:
         return 1.0
-    if rules.paired:
-        n = min(len(incumbent), len(challenger))
-        samples = [np.asarray(incumbent[:n], dtype=float), np.asarray(challenger[:n], dtype=float)]
-    else:
-        samples = [np.asarray([v for v in x if not math.isnan(v)], dtype=float)
-                   for x in (incumbent, challenger)]
-    locations = np.array([float(iqm(x[~np.isnan(x)])) if np.any(~np.isnan(x)) else math.nan
-                          for x in samples])
+    scores = _look_scores(incumbent, challenger, rules)
+    samples = [np.asarray(scores[i], dtype=float) for i in (0, 1)]
+    if not rules.paired:
+        samples = [x[~np.isnan(x)] for x in samples]
+    locations = np.array([_iqm(x) for x in samples])
     if not np.all(np.isfinite(locations)):
         return 1.0
     tests = iqm_pairs(samples, margin_weights(locations, rules.margin), rules.look_alpha,
