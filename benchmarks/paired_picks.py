@@ -2,14 +2,15 @@
 
 Run: python benchmarks/paired_picks.py --seeds 0 1 2 3 4
          (--first NAME | --first-means M ...) (--second NAME | --second-means M ...)
-         [--storage URL] [--alternative greater|less]
+         [--storage URL] [--alternative greater|less] [--decimals D]
 
 Each arm is either the stored confirms of ``bench_search.py`` (``--first mccnp-tpe`` reads
 the studies ``mccnp-tpe-s0-confirm``, ``mccnp-tpe-s1-confirm``, ... in ``--storage``: the mean
 of each pick's fresh seeds) or a list of confirmed means as published, one per sampler seed
 (``--first-means 73.2 49.4 64.7``), for an arm whose store is gone. A mean read from a store is
 taken to 0.1, the precision the results publish, so two searches that picked the same setting
-differ by exactly 0 whichever way their means were obtained.
+differ by exactly 0 whichever way their means were obtained; ``--decimals D`` sets that
+precision for scores on another scale (the leg's IQMs are published to 4 decimals).
 
 Per sampler seed, the first arm's mean minus the second's; then the differences' median, mean
 with its 95 % Student-t interval over the sampler seeds, and the exact one-sided Wilcoxon
@@ -44,8 +45,8 @@ import optuna  # noqa: E402
 from bench_search import read_confirm, signed_rank, t_interval  # noqa: E402
 
 
-def arm_means(storage: str, name: str, seeds: list[int]) -> list[float]:
-    """The confirmed mean of arm NAME's pick at each sampler seed, to 0.1."""
+def arm_means(storage: str, name: str, seeds: list[int], decimals: int = 1) -> list[float]:
+    """The confirmed mean of arm NAME's pick at each sampler seed, to ``decimals``."""
     means = []
     for seed in seeds:
         confirm = f"{name}-s{seed}-confirm"
@@ -55,7 +56,7 @@ def arm_means(storage: str, name: str, seeds: list[int]) -> list[float]:
             raise SystemExit(f"paired_picks: no study {confirm!r} in {storage}") from None
         if not scores:
             raise SystemExit(f"paired_picks: {confirm} has no complete run")
-        means.append(round(statistics.fmean(scores), 1))
+        means.append(round(statistics.fmean(scores), decimals))
     return means
 
 
@@ -133,10 +134,10 @@ def print_work_rates(rows: list[tuple[int, float, float]]) -> None:
           f"({min(ratios):.2f} to {max(ratios):.2f}, {len(rows)} pair{'s' * (len(rows) > 1)})")
 
 
-def signed(value: float) -> str:
-    """A difference to 0.1 with its sign; 0 when it rounds to none."""
-    text = f"{value:+.1f}"
-    return "0" if text in ("+0.0", "-0.0") else text
+def signed(value: float, decimals: int = 1) -> str:
+    """A difference to ``decimals`` with its sign; 0 when it rounds to none."""
+    text = f"{value:+.{decimals}f}"
+    return "0" if float(text) == 0 else text
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -152,6 +153,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="greater: the first arm does better; less: worse")
     parser.add_argument("--margin", type=float, default=None,
                         help="also test: the first arm not worse by more than this")
+    parser.add_argument("--decimals", type=int, default=1,
+                        help="the precision of the means and their differences (default 1)")
     args = parser.parse_args(argv)
     if len(set(args.seeds)) != len(args.seeds):
         parser.error("--seeds must not repeat a seed")
@@ -161,14 +164,17 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"--{arm}-means needs one mean per seed ({len(args.seeds)})")
     if args.margin is not None and not args.margin > 0:
         parser.error("--margin must be positive")
-    first = args.first_means or arm_means(args.storage, args.first, args.seeds)
-    second = args.second_means or arm_means(args.storage, args.second, args.seeds)
-    differences = [round(a - b, 1) for a, b in zip(first, second, strict=True)]
+    if not 0 <= args.decimals <= 12:
+        parser.error("--decimals must be between 0 and 12")
+    places = args.decimals
+    first = args.first_means or arm_means(args.storage, args.first, args.seeds, places)
+    second = args.second_means or arm_means(args.storage, args.second, args.seeds, places)
+    differences = [round(a - b, places) for a, b in zip(first, second, strict=True)]
 
     print("| sampler seed | first | second | first - second |")
     print("|---:|---:|---:|---:|")
     for seed, a, b, d in zip(args.seeds, first, second, differences, strict=True):
-        print(f"| {seed} | {a:.1f} | {b:.1f} | {signed(d)} |")
+        print(f"| {seed} | {a:.{places}f} | {b:.{places}f} | {signed(d, places)} |")
     if args.first and args.second:
         print_work_rates(work_rates(args.storage, args.first, args.second, args.seeds))
         print_costs(args.seeds, arm_costs(args.storage, args.first, args.seeds),
@@ -180,8 +186,8 @@ def main(argv: list[str] | None = None) -> int:
     p, n = signed_rank(differences, args.alternative)
     low, high = t_interval(differences)
     mean, median = statistics.fmean(differences), statistics.median(differences)
-    interval = "n/a" if math.isnan(low) else f"[{low:.1f}, {high:.1f}]"
-    print(f"paired_picks: first - second {signed(mean)} (median {signed(median)}"
+    interval = "n/a" if math.isnan(low) else f"[{low:.{places}f}, {high:.{places}f}]"
+    print(f"paired_picks: first - second {signed(mean, places)} (median {signed(median, places)}"
           f"; 95 % t CI {interval}); Wilcoxon p {p:.3g} ({args.alternative}, n {n}, "
           f"{len(differences) - n} zero)")
     return 0

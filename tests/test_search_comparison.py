@@ -469,6 +469,24 @@ def test_paired_picks_tests_the_published_differences_with_the_tie_dropped(
         "Wilcoxon p 0.0195 (greater, n 9, 1 zero)")
 
 
+def test_paired_picks_keeps_the_leg_iqms_to_the_decimals_asked(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    paired = _benchmark("paired_picks")
+    # The leg's confirmed IQMs (docs/benchmarks/methods.md, repetitions 0-1 and a tie): at the
+    # default 0.1 every difference would round to 0 and leave nothing to test.
+    args = ["--seeds", "0", "1", "2", "--first-means", "-0.0440", "-0.0449", "-0.0300",
+            "--second-means", "-0.0201", "-0.0278", "-0.0300"]
+    assert paired.main([*args, "--decimals", "4"]) == 0  # type: ignore[attr-defined]
+    out = capsys.readouterr().out
+    assert "| 0 | -0.0440 | -0.0201 | -0.0239 |" in out and "| 2 | -0.0300 | -0.0300 | 0 |" in out
+    assert out.strip().splitlines()[-1].endswith("Wilcoxon p 1 (greater, n 2, 1 zero)")
+    assert paired.main(args) == 0  # type: ignore[attr-defined]
+    assert capsys.readouterr().out.strip().splitlines()[-1].endswith("(greater, n 0, 3 zero)")
+    with pytest.raises(SystemExit) as stop:
+        paired.main([*args, "--decimals", "-1"])  # type: ignore[attr-defined]
+    assert stop.value.code == 2 and "--decimals must be between 0 and 12" in capsys.readouterr().err
+
+
 def test_paired_picks_reads_stored_confirms_to_the_published_precision(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     url = f"sqlite:///{tmp_path / 'p.db'}"
