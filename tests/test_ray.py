@@ -142,9 +142,16 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
     assert not made.client_servers()  # nothing of the cluster outlives the test
 
 
-def local_ray_processes(before: set[int]) -> set[int]:
-    """Ray processes started since ``before`` (a command's own local Ray instance)."""
-    return {p for p in ray_processes("ray/") if p not in before}
+def local_ray_processes(before: set[int], patience: float = 30.0) -> set[int]:
+    """Ray processes started since ``before`` (a command's own local Ray instance) that are
+    still there after up to ``patience`` seconds: ray.shutdown kills the raylet and the GCS
+    without waiting, and their workers and agents exit on their own a moment later."""
+    deadline = time.monotonic() + patience
+    while True:
+        left = {p for p in ray_processes("ray/") if p not in before}
+        if not left or time.monotonic() >= deadline:
+            return left
+        time.sleep(0.2)
 
 
 def test_a_ray_sweep_gives_the_local_executors_exact_scores(workdir: Path) -> None:
