@@ -756,8 +756,10 @@ def print_plan(ctx: Context, arms: Sequence[Arm], sets: dict[str, list[str]],
                cpu_budget: float | None, campaign: tuple[tuple[str, ...], int],
                full: Sequence[Arm]) -> None:
     """Every command a run would start, with the CPU it is expected to use: B a search, the
-    campaign's measured CPU (or B) a repetition, and per run of a confirm the campaign's CPU
-    over its runs (a run at the same budget), times the steps' ratio at the full budget."""
+    campaign's measured CPU (or B) a repetition, per run of a confirm the campaign's CPU over
+    its runs (a run at the same budget), and per run of a full-budget confirm the pick's own
+    CPU a run in its confirm (the campaign's, before that confirm ends) times the steps'
+    ratio: a pick's settings can make its runs several times dearer than the average run."""
     stages, runs = campaign
     known = standings(ctx.storage)
     first = next((a for a in arms if a.method == "campaign"), Arm("campaign", 0, ctx.tag, stages))
@@ -798,14 +800,20 @@ def print_plan(ctx: Context, arms: Sequence[Arm], sets: dict[str, list[str]],
     if full:
         full_steps = int(ks.compose(["budget=full", *ctx.given], command="confirm")
                          .cfg.budget.steps)
-        each = ctx.confirm_seeds * per_run * full_steps / steps
         for arm in full:
             done = finished(known.get(arm.full))
+            a_run, at, source = per_run, steps, "the campaign's"
+            if finished(known.get(arm.confirm)):
+                own = read_confirm(ctx.storage, arm.confirm)
+                if math.isfinite(own.cpu_per_run):
+                    a_run, at, source = own.cpu_per_run, own.steps, "its confirm's"
+            each = ctx.confirm_seeds * a_run * full_steps / at
             if not done:
                 total += each
             print(f"$ kraby-study {shlex.join(full_args(ctx, arm))}"
                   + ("  # done" if done else f"  # {ctx.confirm_seeds} runs x {full_steps:,} "
-                     f"steps, ~{each:,.0f} CPU s"))
+                     f"steps, ~{each:,.0f} CPU s ({source} {a_run:,.1f} CPU s a run at "
+                     f"{at:,} steps)"))
     print(f"bench_methods plan: ~{total:,.0f} CPU s left, about {total / ctx.workers / 3600:.1f} "
           f"hours on {ctx.workers} workers (one core each)")
 

@@ -135,6 +135,20 @@ def test_bench_methods_retrains_two_methods_picks_at_the_full_budget(tmp_path: P
                  "tpe - random confirmed IQM: mean difference",
                  " - campaign confirmed IQM: mean difference"):
         assert line in done.stdout, (done.stdout + done.stderr)[-3000:]
+    # --plan prices each pick's retraining by its own confirm's CPU a run, not the average run.
+    sys.path.insert(0, str(BENCHMARKS))
+    import bench_methods as bm
+
+    url = f"sqlite:///{tmp_path / 'bench_methods.db'}"
+    own = bm.read_confirm(url, "leg-random-r0-confirm")
+    plan = subprocess.run([*script, "--full-budget", "random", "campaign", "--plan",
+                           *METHODS_SMOKE], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=600)
+    assert plan.returncode == 0, (plan.stdout + plan.stderr)[-3000:]
+    priced = next(line for line in plan.stdout.splitlines()
+                  if "confirm.name=leg-full-random-r0" in line)
+    assert priced.endswith(f"~{2 * own.cpu_per_run:,.0f} CPU s (its confirm's "
+                           f"{own.cpu_per_run:,.1f} CPU s a run at 1,024 steps)"), priced
     full = subprocess.run([*script, "--full-budget", "random", "campaign", *METHODS_SMOKE],
                           cwd=tmp_path, capture_output=True, text=True, timeout=900)
     output = full.stdout + full.stderr
